@@ -1,0 +1,1 @@
+"""Plots of the paper's figures and tables from run files (see higbench.figures.registry)."""

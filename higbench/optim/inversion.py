@@ -1,0 +1,109 @@
+"""The "Jacobian power" inversion shared by HIG, Gauss-Newton and gradient descent.
+
+Paper eq. 6 and 22: with the thin SVD J = U diag(s) V^T,
+
+    J^<beta, kappa> g = max(s)^beta * V diag(s^kappa) U^T g
+
+with singular values below the cutoff dropped (set to zero, never clamped). HIG is
+kappa = -1/2, Gauss-Newton kappa = -1, gradient descent kappa = 1 (all beta = 0).
+
+Two equivalent routes:
+
+* ``jacobian_power``: SVD of the materialised J (the reference; needed when tau is so
+  small that tau^2 is near float64 precision).
+* ``gram_coefficients``: eigen-decomposition of the Gram matrix K = J J^T = U diag(s^2) U^T.
+  Since V diag(s^kappa) U^T = J^T U diag(s^(kappa-1)) U^T, the direction is J^T c with
+  c = max(s)^beta U diag(s^(kappa-1)) U^T g: one vector-Jacobian product, no SVD of J.
+"""
+
+from __future__ import annotations
+
+import torch
+
+TRUNCATION_MODES = ("relative", "absolute")
+
+
+def _keep_mask(s: torch.Tensor, tau: float, truncation: str) -> torch.Tensor:
+    """Singular values that survive truncation (relative: s >= tau * max(s))."""
+    if truncation not in TRUNCATION_MODES:
+        raise ValueError(f"truncation={truncation!r}: expected one of {TRUNCATION_MODES}")
+    if s.numel() == 0:
+        return torch.zeros_like(s, dtype=torch.bool)
+    cutoff = tau * s.max() if truncation == "relative" else torch.as_tensor(tau, dtype=s.dtype)
+    # Exact zeros are dropped too, whatever tau is (0^kappa is undefined for kappa < 0).
+    return (s >= cutoff) & (s > 0)
+
+
+def _powered(s: torch.Tensor, keep: torch.Tensor, exponent: float) -> torch.Tensor:
+    """s**exponent on kept entries, 0 elsewhere (safe for s = 0)."""
+    safe = torch.where(keep, s, torch.ones_like(s))
+    return torch.where(keep, safe**exponent, torch.zeros_like(s))
+
+
+def _prefactor(s: torch.Tensor, beta: float) -> torch.Tensor:
+    if beta == 0.0 or s.numel() == 0:
+        return torch.ones((), dtype=s.dtype, device=s.device)
+    return s.max() ** beta
+
+
+def jacobian_power(
+    J: torch.Tensor,
+    g: torch.Tensor,
+    kappa: float,
+    beta: float = 0.0,
+    tau: float = 1e-6,
+    truncation: str = "relative",
+) -> torch.Tensor:
+    """Direction ``max(s)^beta V diag(s^kappa) U^T g`` via the SVD of J.
+
+    J: (rows, params) stacked per-sample Jacobians; g: (rows,) stacked loss gradients.
+    Returns (params,). No minus sign and no learning rate: the caller applies
+    ``theta -= lr * direction``. Computed in the dtype of J (use float64 for small tau).
+    """
+    if J.ndim != 2 or g.ndim != 1 or J.shape[0] != g.shape[0]:
+        raise ValueError(f"expected J (rows, params) and g (rows,), got {tuple(J.shape)} and {tuple(g.shape)}")
+    U, s, Vh = torch.linalg.svd(J, full_matrices=False)
+    keep = _keep_mask(s, tau, truncation)
+    coeff = _powered(s, keep, kappa) * (U.T @ g.to(J.dtype))
+    return _prefactor(s, beta) * (Vh.T @ coeff)
+
+
+def gram_coefficients(
+    K: torch.Tensor,
+    g: torch.Tensor,
+    kappa: float,
+    beta: float = 0.0,
+    tau: float = 1e-6,
+    truncation: str = "relative",
+) -> torch.Tensor:
+    """Output-space coefficients c with ``J^T c = jacobian_power(J, g, ...)``.
+
+    K: (rows, rows) Gram matrix J J^T; g: (rows,). Uses eigh(K): eigenvalues s^2, so the
+    relative cutoff on s is a cutoff tau^2 on s^2 -- reliable only while tau^2 is well above
+    the precision of K (see ``gram_is_accurate``).
+    """
+    if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
+        raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
+    K = 0.5 * (K + K.T)  # exact symmetry for eigh
+    lam, U = torch.linalg.eigh(K)
+    s = lam.clamp_min(0).sqrt()  # round-off can make tiny eigenvalues negative
+    if truncation == "relative":
+        # Eigenvalues below n*eps*max are round-off, whatever tau says.
+        floor = K.shape[0] * torch.finfo(K.dtype).eps * lam.abs().max()
+        s = torch.where(lam > floor, s, torch.zeros_like(s))
+    keep = _keep_mask(s, tau, truncation)
+    coeff = _powered(s, keep, kappa - 1.0) * (U.T @ g.to(K.dtype))
+    return _prefactor(s, beta) * (U @ coeff)
+
+
+def gram_is_accurate(tau: float, dtype: torch.dtype = torch.float64, truncation: str = "relative") -> bool:
+    """Whether the Gram route resolves the relative cutoff tau.
+
+    eigh(K) is backward stable: eigenvalues carry an absolute error of order
+    eps * max(s)^2, so a singular value s = tau * max(s) comes out with a relative error of
+    about eps / tau^2. Requiring tau^2 > 100 * eps keeps it below 1% at the cutoff and far
+    smaller above it; below that, ``auto`` falls back to the SVD of J.
+    """
+    if truncation != "relative":
+        return True  # absolute mode: the caller owns the scale; the SVD stays available
+    return tau * tau > 100 * torch.finfo(dtype).eps

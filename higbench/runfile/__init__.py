@@ -1,0 +1,6 @@
+"""The HDF5 run file: one per run, the single source of truth for figures and tables."""
+
+from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
+from higbench.runfile.writer import FORMAT_VERSION, STATUSES, RunFileExists, RunFileWriter
+
+__all__ = ["RunFileWriter", "RunFileExists", "FORMAT_VERSION", "STATUSES", "load_run", "load_updates", "load_logs", "load_weights"]

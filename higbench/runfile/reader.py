@@ -1,0 +1,69 @@
+"""Reading run files back: metadata, curves, per-update timings, logs and weights."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import yaml
+
+
+def _attr(value):
+    return value.decode() if isinstance(value, bytes) else (value.item() if isinstance(value, np.generic) else value)
+
+
+def read_meta(f: h5py.File) -> dict:
+    meta = {k: _attr(v) for k, v in f.attrs.items()}
+    meta["config"] = yaml.safe_load(meta.get("config", "{}")) or {}
+    meta["overrides"] = json.loads(meta.get("overrides", "[]"))
+    meta["env"] = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
+    meta["memory"] = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
+    return meta
+
+
+def _table(f: h5py.File, group: str) -> pd.DataFrame:
+    if group not in f:
+        return pd.DataFrame()
+    cols = {name: ds[()] for name, ds in f[group].items() if ds.ndim == 1}
+    if not cols:
+        return pd.DataFrame()
+    n = min(len(v) for v in cols.values())  # a killed writer may leave columns one row apart
+    df = pd.DataFrame({k: v[:n] for k, v in cols.items()})
+    for col in ("step", "epoch"):
+        if col in df:
+            df[col] = df[col].astype("int64")
+    return df
+
+
+def load_run(path: str | Path) -> tuple[dict, pd.DataFrame]:
+    """(meta, curves) of one run file.
+
+    meta: dict with ``status``, ``config`` (resolved, as a dict), ``overrides``, ``env``,
+    ``memory`` and the other root attributes. curves: one row per evaluation with at least
+    ``step``, ``epoch``, ``wall_time``, ``train_loss``, ``test_loss`` (+ extra metrics).
+    """
+    with h5py.File(path, "r") as f:
+        return read_meta(f), _table(f, "curves")
+
+
+def load_updates(path: str | Path) -> pd.DataFrame:
+    """Per-update table: step, wall_time, loss, jacobian_s, inversion_s, apply_s, update_s."""
+    with h5py.File(path, "r") as f:
+        return _table(f, "updates")
+
+
+def load_logs(path: str | Path) -> dict[str, np.ndarray]:
+    """Per-evaluation arrays, e.g. neuron_mean (n_evals, hidden), probe_output (n_evals, 2)."""
+    with h5py.File(path, "r") as f:
+        return {name: ds[()] for name, ds in f["logs"].items()} if "logs" in f else {}
+
+
+def load_weights(path: str | Path) -> dict[str, np.ndarray]:
+    """Final weights as {state_dict name: array}."""
+    with h5py.File(path, "r") as f:
+        if "weights" not in f:
+            raise KeyError(f"{path}: no final weights stored (status {_attr(f.attrs.get('status', '?'))})")
+        return {name: ds[()] for name, ds in f["weights"].items()}

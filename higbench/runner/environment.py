@@ -1,0 +1,93 @@
+"""Where a run ran: versions, revision, host, threads, device; and its memory use."""
+
+from __future__ import annotations
+
+import os
+import platform
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+
+import higbench
+
+
+def git_revision() -> str:
+    """The checkout's revision (with '-dirty' if modified), or '' when not in a git checkout."""
+    root = Path(higbench.__file__).resolve().parent.parent
+    try:
+        rev = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5)
+        if rev.returncode != 0:
+            return ""
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True, timeout=5)
+        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device='cuda': CUDA is not available on this machine (use cpu or auto)")
+    return torch.device(name)
+
+
+def environment(device: torch.device) -> dict:
+    env = {
+        "higbench_version": higbench.__version__,
+        "torch_version": str(torch.__version__),
+        "numpy_version": np.__version__,
+        "h5py_version": h5py.__version__,
+        "python_version": sys.version.split()[0],
+        "platform": platform.platform(),
+        "hostname": socket.gethostname(),
+        "git_revision": git_revision(),
+        "torch_threads": torch.get_num_threads(),
+        "cpu_count": os.cpu_count() or 0,
+        "device": str(device),
+        "device_name": torch.cuda.get_device_name(device) if device.type == "cuda" else platform.processor() or platform.machine(),
+        "slurm_job_id": os.environ.get("SLURM_JOB_ID", ""),
+    }
+    return env
+
+
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+def current_rss_mb() -> float:
+    """Resident set size now (Linux /proc; falls back to ru_maxrss elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * _PAGE / 2**20
+    except OSError:
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+class MemoryMonitor:
+    """Peak RSS sampled over the run (ru_maxrss cannot be reset per run) and CUDA peak."""
+
+    def __init__(self, device: torch.device):
+        self.device = device
+        self.baseline_mb = current_rss_mb()
+        self.peak_rss_mb = self.baseline_mb
+        if device.type == "cuda":
+            torch.cuda.reset_peak_memory_stats(device)
+
+    def sample(self) -> float:
+        rss = current_rss_mb()
+        self.peak_rss_mb = max(self.peak_rss_mb, rss)
+        return rss
+
+    def cuda_peak_mb(self) -> float:
+        return torch.cuda.max_memory_allocated(self.device) / 2**20 if self.device.type == "cuda" else 0.0
+
+    def summary(self) -> dict:
+        self.sample()
+        return {"peak_rss_mb": self.peak_rss_mb, "baseline_rss_mb": self.baseline_mb, "cuda_peak_mb": self.cuda_peak_mb()}
