@@ -1,0 +1,89 @@
+"""Quantum dipole control (paper 3.3, appendix B.4).
+
+Schroedinger equation i dPsi/dt = (-Laplace + u(t) x) Psi in an infinite well on [0, 2]
+(14 interior points), Crank-Nicolson with dt = 0.05 for 384 steps. The network sees the
+target state (real and imaginary parts, 28 values) and outputs one u per step; the physics
+evolves the ground state under u. Targets are real superpositions a*phi_2 + b*phi_3.
+Loss: 1 - |<Psi, Psi_target>|^2; extra curves: the low- and high-energy losses of
+figure 4c. Solver: ``higbench.physics.dipole.simulate`` (re-exported here).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from higbench.physics.dipole import N, eigenstate, energy_overlap_loss, fidelity_loss, simulate
+from higbench.problems.base import Batch, FixedDataProblem, register
+from higbench.problems.networks import ACTIVATIONS, mlp
+
+__all__ = ["simulate", "eigenstate", "Dipole", "DipoleCNN"]
+
+MODELS = ("mlp", "cnn")
+
+
+class DipoleCNN(nn.Module):
+    """Six valid 1-D convolutions over the 14 points (14 -> 2), then dense 40 -> steps."""
+
+    def __init__(self, channels: int = 20, layers: int = 6, kernel: int = 3, steps: int = 384, activation: str = "tanh"):
+        super().__init__()
+        convs: list[nn.Module] = []
+        for i in range(layers):
+            convs += [nn.Conv1d(2 if i == 0 else channels, channels, kernel), ACTIVATIONS[activation]()]
+        self.convs = nn.Sequential(*convs)
+        width = N - layers * (kernel - 1)
+        if width < 1:
+            raise ValueError(f"problem.cnn_layers={layers}: {layers} valid convolutions of kernel {kernel} do not fit 14 points")
+        self.out = nn.Linear(channels * width, steps)
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        # z: (b, 28) laid out as (14, 2) -> channels (re, im) over the 14 points.
+        h = self.convs(z.reshape(-1, N, 2).transpose(1, 2))
+        return self.out(h.flatten(1))
+
+
+@register("dipole")
+class Dipole(FixedDataProblem):
+    def __init__(self, cfg, dtype, device, seed):
+        super().__init__(cfg, dtype, device, seed)
+        if cfg.model not in MODELS:
+            raise ValueError(f"problem.model={cfg.model!r}: expected one of {MODELS}")
+        self.psi0 = eigenstate(1, dtype=dtype, device=device)
+        gen = torch.Generator().manual_seed(int(cfg.data_seed))
+        self.train = self._sample(int(cfg.train_size), gen)
+        self.test = self._sample(int(cfg.test_size), gen)
+
+    def _sample(self, n: int, gen: torch.Generator) -> Batch:
+        ab = torch.randn(n, 2, generator=gen, dtype=torch.float64)
+        ab = ab / ab.norm(dim=1, keepdim=True)
+        target = ab[:, :1, None] * eigenstate(2) + ab[:, 1:, None] * eigenstate(3)  # (n, 14, 2)
+        target = target.to(self.device, self.dtype)
+        flat = target.reshape(n, -1)
+        return Batch(net_inputs=flat, inputs=flat, targets=flat)
+
+    def make_model(self) -> nn.Module:
+        steps = int(self.cfg.steps)
+        if self.cfg.model == "cnn":
+            return DipoleCNN(int(self.cfg.cnn_channels), int(self.cfg.cnn_layers), 3, steps, self.cfg.activation)
+        return mlp([2 * N, *self.cfg.hidden, steps], activation=self.cfg.activation)
+
+    def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        psi0 = self.psi0.expand(u.shape[0], N, 2)
+        return simulate(psi0, u, dt=self.cfg.dt).reshape(u.shape[0], -1)
+
+    def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        return fidelity_loss(y.reshape(-1, N, 2), targets.reshape(-1, N, 2))
+
+    def metrics(self, y: torch.Tensor, batch: Batch) -> dict[str, torch.Tensor]:
+        psi, target = y.reshape(-1, N, 2), batch.targets.reshape(-1, N, 2)
+        return {
+            "low_energy_loss": energy_overlap_loss(psi, target, 2),
+            "high_energy_loss": energy_overlap_loss(psi, target, 3),
+        }
+
+    def trajectory(self, model: nn.Module, batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+        """States (b, steps+1, 14, 2) and controls (b, steps) under the network (figure 4a)."""
+        with torch.no_grad():
+            u = model(batch.net_inputs)
+            states = simulate(self.psi0.expand(u.shape[0], N, 2), u, dt=self.cfg.dt, return_trajectory=True)
+        return states, u

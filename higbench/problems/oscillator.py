@@ -1,0 +1,48 @@
+"""Control of two coupled nonlinear oscillators (paper 3.1, appendix B.2).
+
+The network sees the target state (= the initial state) and outputs one control value u
+per RK4 step; the physics integrates the chain from that initial state, and the loss is
+the squared distance of the final state to the target (sum over the 4 components).
+The solver itself is ``higbench.physics.oscillator.simulate`` (re-exported here).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from higbench.physics.oscillator import energy, simulate
+from higbench.problems.base import Batch, FixedDataProblem, register
+from higbench.problems.networks import mlp
+
+__all__ = ["simulate", "energy", "Oscillator"]
+
+
+@register("oscillator")
+class Oscillator(FixedDataProblem):
+    def __init__(self, cfg, dtype, device, seed):
+        super().__init__(cfg, dtype, device, seed)
+        gen = torch.Generator().manual_seed(int(cfg.data_seed))
+        self.train = self._sample(int(cfg.train_size), gen)
+        self.test = self._sample(int(cfg.test_size), gen)
+
+    def _sample(self, n: int, gen: torch.Generator) -> Batch:
+        # Initial states uniform in [0, 1)^4; the target is the initial state itself.
+        x0 = torch.rand(n, 4, generator=gen, dtype=torch.float64).to(self.device, self.dtype)
+        return Batch(net_inputs=x0, inputs=x0, targets=x0)
+
+    def make_model(self) -> nn.Module:
+        return mlp([4, *self.cfg.hidden, int(self.cfg.steps)], activation=self.cfg.activation)
+
+    def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        return simulate(inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control))
+
+    def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        return ((y - targets) ** 2).sum(dim=1)
+
+    def trajectory(self, model: nn.Module, batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+        """States (b, steps+1, 4) and controls (b, steps) under the network (figure 2a)."""
+        with torch.no_grad():
+            u = model(batch.net_inputs)
+            states = simulate(batch.inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control), return_trajectory=True)
+        return states, u

@@ -1,0 +1,58 @@
+"""Poisson problem (paper 3.2, appendix B.3): infer the potential phi from a source rho.
+
+8x8 grid on [0, 8]^2, spacing 1, phi = 0 on all four sides, 5-point Laplacian. The
+network maps rho (64) to phi (64); the physics applies the Laplacian to the predicted phi
+and the loss is 1/2 ||Laplace(phi_pred) - rho||^2. Data are sampled on the fly: smooth
+random potentials phi_gt (``higbench.physics.poisson.sample_potential``, spectrum in its
+docstring) and rho = Laplace(phi_gt). Training batches are always fresh samples; the
+curves use a fixed evaluation set drawn from a separate seeded stream (also unseen).
+"""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import torch
+from torch import nn
+
+from higbench.physics.poisson import laplace, laplace_matrix, sample_potential
+from higbench.problems.base import Batch, Problem, register
+from higbench.problems.networks import mlp
+
+__all__ = ["laplace", "laplace_matrix", "sample_potential", "Poisson"]
+
+
+@register("poisson")
+class Poisson(Problem):
+    def __init__(self, cfg, dtype, device, seed):
+        super().__init__(cfg, dtype, device, seed)
+        self.n = int(cfg.grid)
+        # The evaluation set comes from data_seed; training samples from the run seed.
+        self.test = self._sample(int(cfg.test_size), torch.Generator().manual_seed(int(cfg.data_seed)))
+
+    def _sample(self, n: int, gen: torch.Generator) -> Batch:
+        phi = sample_potential(n, gen, n=self.n, modes=int(self.cfg.modes), dtype=torch.float64)
+        rho = laplace(phi).reshape(n, -1).to(self.device, self.dtype)
+        return Batch(net_inputs=rho, inputs=rho, targets=rho)
+
+    def make_model(self) -> nn.Module:
+        cells = self.n * self.n
+        return mlp([cells, *self.cfg.hidden, cells], activation=self.cfg.activation)
+
+    def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        b = u.shape[0]
+        return laplace(u.reshape(b, self.n, self.n)).reshape(b, -1)
+
+    def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        return 0.5 * ((y - targets) ** 2).sum(dim=1)
+
+    def train_size(self) -> None:
+        return None  # infinite: sampled on the fly
+
+    def epoch(self, batch_size: int, generator: torch.Generator) -> Iterator[Batch]:
+        """``epoch_size`` fresh samples in batches (an epoch is a bookkeeping unit here)."""
+        for _ in range(int(self.cfg.epoch_size) // batch_size):
+            yield self._sample(batch_size, generator)
+
+    def test_set(self) -> Batch:
+        return self.test
