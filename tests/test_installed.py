@@ -1,0 +1,39 @@
+"""The console script finds conf/ from a non-editable install (wheel), not only a checkout."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+from conftest import ROOT
+
+
+def test_wheel_install_finds_packaged_configs(tmp_path):
+    wheels = tmp_path / "wheels"
+    build = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels), str(ROOT)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert build.returncode == 0, build.stderr
+    (wheel,) = wheels.glob("higbench-*.whl")
+    # A venv that sees this environment's torch/hydra but holds its own (non-editable) higbench.
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
+    py = venv / "bin" / "python"
+    install = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall", str(wheel)], capture_output=True, text=True, timeout=300)
+    assert install.returncode == 0, install.stderr
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    where = subprocess.run([str(py), "-c", "import higbench.cli as c; print(c.config_dir())"], cwd=elsewhere, capture_output=True, text=True, timeout=120)
+    conf = Path(where.stdout.strip())
+    assert "site-packages" in str(conf) and (conf / "config.yaml").is_file() and (conf / "problem" / "dipole_cnn.yaml").is_file()
+    job = subprocess.run([str(venv / "bin" / "higbench"), "problem=oscillator", "optimizer=adam", "--cfg", "job"], cwd=elsewhere, capture_output=True, text=True, timeout=120)
+    assert job.returncode == 0, job.stderr
+    assert "name: oscillator" in job.stdout and "lr: 0.0003" in job.stdout  # the (problem, optimizer) specialisation
+
+
+def test_every_subpackage_is_listed_in_pyproject():
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "higbench").rglob("__init__.py")}
+    assert found <= listed, f"add {sorted(found - listed)} to [tool.setuptools] packages"
