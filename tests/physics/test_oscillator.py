@@ -91,7 +91,10 @@ def numpy_rk4(x0, u, dt, k=1.0, c=(0.0, 3.0)):
     """Plain transcription of the classic RK4 tableau, one sample: x0 (4,), u (steps,) -> (steps+1, 4)."""
     ys = [np.asarray(x0, dtype=float)]
     for ut in u:
-        f = lambda z: np.array(rhs(0.0, z, float(ut), k, c))  # noqa: E731, B023
+
+        def f(z, ut=float(ut)):
+            return np.array(rhs(0.0, z, ut, k, c))
+
         y = ys[-1]
         k1 = f(y)
         k2 = f(y + dt / 2 * k1)
