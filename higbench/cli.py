@@ -2,22 +2,45 @@
 
     higbench problem=oscillator optimizer=hig
     higbench -m problem=toy optimizer=adam,hig        # one run file per job
+    higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
+
+Bad input never gets as far as Hydra's run directory. Before Hydra runs the job, ``main``
+composes the same config(s) with Hydra's compose API (every job of a basic-sweeper
+multirun) and checks them: unknown keys, types and ranges (``higbench.config``), then the
+checks that need the network (``train.preflight``: ``init_from`` weights that fit, the
+GN/HIG memory guard), an existing run file in ``hydra.run.dir``, and what ``resume=``
+points at. Any problem is one line on stderr, ``higbench: error: <key>=<value>: <why>``,
+and exit code 2, with nothing written. The job itself checks again (sweepers whose jobs
+cannot be listed in advance, e.g. Optuna); a job that fails there removes the files
+Hydra made for it and exits 2.
+
+Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
+why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
+status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import math
+import signal
 import sys
+import time
 from importlib import resources
 from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import ConfigError, validate
+from higbench.config import ConfigError, to_plain, validate
 
 RUN_FILE_NAME = "run.h5"
+EXIT_BAD_INPUT = 2
+MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 
 
 def config_dir() -> str:
@@ -28,31 +51,316 @@ def config_dir() -> str:
     return str(resources.files("higbench") / "conf")
 
 
-@hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
-def main(cfg: DictConfig) -> float:
-    try:
-        validate(cfg)
-    except ConfigError as exc:
-        print(f"higbench: error: {exc}", file=sys.stderr)
-        sys.exit(2)
-    from higbench.runner.train import train  # torch import after the cheap checks
+def fail(exc: BaseException | str) -> None:
+    message = " ".join(str(exc).split())  # one line, whatever the cause
+    print(f"higbench: error: {message}", file=sys.stderr, flush=True)
+    sys.exit(EXIT_BAD_INPUT)
+
+
+# -- checks before Hydra creates anything ---------------------------------------------------
+
+_SKIP_FLAGS = (
+    "help",
+    "hydra_help",
+    "version",
+    "cfg",
+    "info",
+    "shell_completion",
+    "experimental_rerun",
+    "config_path",
+    "config_dir",
+)
+
+
+def _parse_args(argv: list[str]):
+    from hydra._internal.utils import get_args_parser
+
+    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            return get_args_parser().parse_args(argv)
+        except SystemExit:
+            return None  # Hydra will report the bad flag itself
+
+
+def _composition_error(exc: Exception, overrides: list[str], config_name: str) -> ConfigError:
+    """A one-line ConfigError from Hydra's composition errors (unknown key, group, syntax)."""
+    from hydra import compose
+
+    cause = exc.__cause__
+    text = str(exc)
+    full_key = getattr(cause, "full_key", None)
+    if full_key and "Could not override" in text:
+        value = next((o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+~") == full_key and "=" in o), "?")
+        parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
+        others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
+        try:
+            base = OmegaConf.to_container(compose(config_name, overrides=others), resolve=False)
+            node = OmegaConf.select(OmegaConf.create(base), parent) if parent else base
+            valid = sorted(node.keys()) if hasattr(node, "keys") else []
+        except Exception:  # noqa: BLE001
+            valid = []
+        where = f" under {parent}" if parent else ""
+        return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
+    if "Could not find" in text and "Available options in" in text:
+        lines = [ln.strip() for ln in text.splitlines()]
+        group_path = text.split("Could not find '", 1)[1].split("'", 1)[0]
+        group, _, choice = group_path.rpartition("/")
+        start = next(i for i, ln in enumerate(lines) if ln.startswith("Available options"))
+        options = [ln for ln in lines[start + 1 :] if ln and not ln.startswith("Config search path")]
+        options = options[: next((i for i, ln in enumerate(options) if "provider=" in ln), len(options))]
+        return ConfigError(group or "config", choice, f"no such config; valid choices: {', '.join(options)}")
+    first = text.strip().splitlines()[0] if text.strip() else type(exc).__name__
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    for line in overrides:  # name the override that does not parse, if one does not
+        try:
+            OverridesParser.create().parse_overrides([line])
+        except Exception:  # noqa: BLE001
+            key, _, value = line.partition("=")
+            return ConfigError(key, value, f"cannot parse this override ({first})")
+    return ConfigError("overrides", " ".join(overrides), first)
+
+
+def _job_overrides(overrides: list[str], sweeper_params: dict | None) -> tuple[list[list[str]], bool]:
+    """Override lists of the jobs a basic-sweeper multirun launches (and whether all are listed)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    lines = [f"{k}={v}" for k, v in (sweeper_params or {}).items()] + list(overrides)
+    parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
+    parsed = parser.parse_overrides(lines)
+    complete = True
+    discrete = []
+    for o in parsed:
+        if o.is_sweep_override() and not o.is_discrete_sweep():
+            complete = False  # interval sweeps (Optuna): checked in-job
+            continue
+        discrete.append(o)
+    jobs = BasicSweeper.split_arguments(discrete, None)[0]
+    if len(jobs) > MAX_PRECHECK_JOBS:
+        jobs, complete = jobs[:MAX_PRECHECK_JOBS], False
+    return jobs, complete
+
+
+def _explicit(overrides: list[str], key: str) -> str | None:
+    for o in overrides:
+        k, sep, v = o.partition("=")
+        if sep and k.lstrip("+") == key:
+            return v
+    return None
+
+
+def precheck(argv: list[str]) -> list[str]:
+    """Check what ``argv`` would run before Hydra writes anything; return the argv to run.
+
+    Raises ConfigError. For ``resume=<run>`` the returned argv also points Hydra's run
+    directory at the run's own directory (its Hydra files go to ``.hydra/resume-<time>``).
+    """
+    args = _parse_args(argv)
+    if args is None or any(getattr(args, flag, None) for flag in _SKIP_FLAGS):
+        return argv
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = list(args.overrides)
+    config_name = args.config_name or "config"
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3", job_name="higbench"):
+        first_job = overrides
+        try:
+            jobs = [overrides]
+            if args.multirun:
+                # The hydra node of the first job tells which sweeper runs and its params.
+                jobs, _complete = _job_overrides(overrides, None)
+                jobs = jobs or [[]]
+                first_job = jobs[0]
+                first = compose(config_name, overrides=first_job, return_hydra_config=True)
+                if "BasicSweeper" in str(OmegaConf.select(first, "hydra.sweeper._target_", default="")):
+                    params = OmegaConf.select(first, "hydra.sweeper.params", default=None)
+                    params = OmegaConf.to_container(params, resolve=False) if params is not None else {}
+                    jobs, _complete = _job_overrides(overrides, params)  # type: ignore[arg-type]
+                else:
+                    jobs = jobs[:1]
+        except (HydraException, OmegaConfBaseException) as exc:
+            raise _composition_error(exc, first_job, config_name) from None
+        configs = []
+        for job in jobs:
+            try:
+                cfg = compose(config_name, overrides=job, return_hydra_config=True)
+            except (HydraException, OmegaConfBaseException) as exc:
+                raise _composition_error(exc, job, config_name) from None
+            task = to_plain(cfg)
+            validate(task)
+            configs.append((job, cfg, task))
+
+        from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
+
+        if args.multirun:
+            if any(task.get("resume") for _, _, task in configs):
+                return argv  # which jobs resume is known only in their directories: checked in-job
+            seen = set()
+            for _job, _cfg, task in configs:
+                sizing = {
+                    k: task.get(k)
+                    for k in ("problem", "optimizer", "batch_size", "dtype", "device", "init_from", "memory_limit_mb")
+                }
+                sizing["optimizer"] = {k: v for k, v in task["optimizer"].items() if k != "lr"}
+                key = OmegaConf.to_yaml(sizing)
+                if key not in seen:
+                    seen.add(key)
+                    preflight(OmegaConf.create(task))
+            return argv
+
+        (job, cfg, task) = configs[0]
+        run_dir = str(cfg.hydra.run.dir) if _explicit(overrides, "hydra.run.dir") is not None else None
+        if task.get("resume"):
+            from higbench.runner import checkpoint
+
+            run_file = checkpoint.run_file_of(task["resume"], run_dir)
+            _status, stored_yaml = checkpoint.inspect_run(run_file, task["resume"])
+            merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
+            validate(merged)
+            merged["init_from"] = None  # the weights come from the checkpoint
+            preflight(OmegaConf.create(merged))
+            checkpoint.load(run_file)  # readable, and of this format
+            extra = []
+            if run_dir is None:
+                extra.append(f"hydra.run.dir={run_file.parent}")
+            subdir = OmegaConf.select(cfg, "hydra.output_subdir")
+            if subdir is not None and _explicit(overrides, "hydra.output_subdir") is None:
+                extra.append(f"hydra.output_subdir={subdir}/resume-{time.strftime('%Y%m%d-%H%M%S')}")
+            return argv + extra
+        out = Path(str(cfg.hydra.run.dir))
+        if (out / RUN_FILE_NAME).exists():
+            raise ConfigError(
+                "hydra.run.dir",
+                str(out),
+                f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it "
+                f"(resume={out} continues it, or pick a new hydra.run.dir)",
+            )
+        preflight(OmegaConf.create(task))
+    return argv
+
+
+# -- the job ---------------------------------------------------------------------------------
+
+
+def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
+    """Undo what Hydra made for a job refused before it wrote anything (no run file there).
+
+    Removes Hydra's saved configs and the job's log file, then the directory and its empty
+    parents below the working directory. A directory holding any other file is kept.
+    """
+    output_dir = Path(output_dir).resolve()
+    if any(output_dir.glob("*.h5")):
+        return
+    for handler_owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
+        for h in list(getattr(handler_owner, "handlers", [])):
+            filename = getattr(h, "baseFilename", None)
+            if filename and Path(filename).resolve().parent == output_dir:
+                handler_owner.removeHandler(h)
+                h.close()
+                Path(filename).unlink(missing_ok=True)
+    if output_subdir is not None:
+        sub = output_dir / output_subdir
+        for name in ("config.yaml", "hydra.yaml", "overrides.yaml"):
+            (sub / name).unlink(missing_ok=True)
+        for d in (sub, *sub.parents):
+            if d == output_dir or output_dir not in d.parents:
+                break
+            with contextlib.suppress(OSError):
+                d.rmdir()
+    cwd = Path.cwd().resolve()
+    with contextlib.suppress(OSError):
+        output_dir.rmdir()
+        for parent in output_dir.parents:
+            if parent == cwd or cwd not in parent.parents:
+                break
+            parent.rmdir()
+
+
+def _run_job(cfg: DictConfig) -> float:
+    from higbench.runfile.writer import RunFileBusy, RunFileExists
+    from higbench.runner import checkpoint
+    from higbench.runner.train import train
 
     hydra_cfg = HydraConfig.get()
-    run_path = Path(hydra_cfg.runtime.output_dir) / RUN_FILE_NAME
+    output_dir = Path(hydra_cfg.runtime.output_dir)
+    overrides = list(hydra_cfg.overrides.task)
+    multirun = hydra_cfg.mode == RunMode.MULTIRUN
+    resume = False
+    run_path = output_dir / RUN_FILE_NAME
+    if cfg.get("resume"):
+        run_path = checkpoint.run_file_of(cfg.resume, output_dir)
+        if multirun and not run_path.exists():
+            cfg.resume = None  # a job of a resumed sweep that never started: start it
+        else:
+            try:
+                status, stored_yaml = checkpoint.inspect_run(run_path, cfg.resume)
+            except ConfigError:
+                if multirun and run_path.exists():
+                    print(f"higbench: {run_path} is not resumable, skipped", file=sys.stderr)
+                    return math.inf
+                raise
+            merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), to_plain(cfg), overrides)
+            validate(merged)
+            cfg = OmegaConf.create(merged)
+            resume = True
+    if not resume and run_path.exists():
+        raise ConfigError(
+            "hydra.run.dir", str(output_dir), f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it"
+        )
     try:
-        summary = train(cfg, run_path, overrides=list(hydra_cfg.overrides.task))
-    except ValueError as exc:  # a problem or optimizer refusing its arguments
-        print(f"higbench: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        summary = train(cfg, run_path, overrides=overrides, resume=resume)
+    except RunFileExists as exc:
+        raise ConfigError("hydra.run.dir", str(output_dir), str(exc)) from None
+    except RunFileBusy as exc:
+        raise ConfigError("resume", str(run_path), str(exc)) from None
     print(
         f"{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in "
         f"{summary.wall_time:.1f}s, final test loss {summary.final_test_loss:.4e}"
         + (f" ({summary.reason})" if summary.reason else "")
     )
     print(f"run file: {summary.path}")
+    if summary.status == "interrupted":
+        print(f"resume with: higbench resume={summary.path.parent}", file=sys.stderr)
+        signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
+        sys.stdout.flush()
+        sys.exit(128 + int(signum))
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
+
+
+@hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
+def _hydra_main(cfg: DictConfig) -> float:
+    hydra_cfg = HydraConfig.get()
+    output_dir = Path(hydra_cfg.runtime.output_dir)
+    try:
+        validate(cfg)
+        return _run_job(cfg)
+    except ValueError as exc:  # ConfigError, or a problem/optimizer refusing its arguments
+        if not isinstance(exc, ConfigError) and any(output_dir.glob("*.h5")):
+            raise  # not bad input: the run had started (its file says failed)
+        remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
+        fail(exc)
+        raise  # unreachable: fail() exits
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry: check, then hand over to Hydra (which reads ``sys.argv``)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    from hydra.core.global_hydra import GlobalHydra
+
+    try:
+        argv = precheck(argv)
+    except ConfigError as exc:
+        fail(exc)
+    finally:
+        GlobalHydra.instance().clear()
+    sys.argv = [sys.argv[0], *argv]
+    _hydra_main()
 
 
 if __name__ == "__main__":

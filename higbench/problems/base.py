@@ -86,6 +86,16 @@ class Problem(abc.ABC):
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
         return {}
 
+    @classmethod
+    def config_rules(cls) -> dict:
+        """Schema of this problem's config keys, ``{key: higbench.config.Check}``.
+
+        Used by ``higbench.config.validate`` for a problem without a table in
+        ``higbench.config.PROBLEM_RULES``: keys outside it are refused, each value checked.
+        Empty (the default): the problem's keys are not checked.
+        """
+        return {}
+
 
 class FixedDataProblem(Problem):
     """A problem with finite train and test tensors built once from the seed."""

@@ -1,4 +1,8 @@
-"""Reading run files back: metadata, curves, per-update timings, logs and weights."""
+"""Reading run files back: metadata, curves, per-update timings, logs and weights.
+
+Files are opened with ``locking=False``: a run that is still going (or whose writer was
+killed) can be read up to its last flush; its ``status`` is then ``running``.
+"""
 
 from __future__ import annotations
 
@@ -15,10 +19,15 @@ def _attr(value):
     return value.decode() if isinstance(value, bytes) else (value.item() if isinstance(value, np.generic) else value)
 
 
+def _open(path: str | Path) -> h5py.File:
+    return h5py.File(path, "r", locking=False)
+
+
 def read_meta(f: h5py.File) -> dict:
     meta = {k: _attr(v) for k, v in f.attrs.items()}
     meta["config"] = yaml.safe_load(meta.get("config", "{}")) or {}
     meta["overrides"] = json.loads(meta.get("overrides", "[]"))
+    meta["resumes"] = json.loads(meta.get("resumes", "[]"))
     meta["env"] = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
     meta["memory"] = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
     return meta
@@ -45,25 +54,25 @@ def load_run(path: str | Path) -> tuple[dict, pd.DataFrame]:
     ``memory`` and the other root attributes. curves: one row per evaluation with at least
     ``step``, ``epoch``, ``wall_time``, ``train_loss``, ``test_loss`` (+ extra metrics).
     """
-    with h5py.File(path, "r") as f:
+    with _open(path) as f:
         return read_meta(f), _table(f, "curves")
 
 
 def load_updates(path: str | Path) -> pd.DataFrame:
     """Per-update table: step, wall_time, loss, jacobian_s, inversion_s, apply_s, update_s."""
-    with h5py.File(path, "r") as f:
+    with _open(path) as f:
         return _table(f, "updates")
 
 
 def load_logs(path: str | Path) -> dict[str, np.ndarray]:
     """Per-evaluation arrays, e.g. neuron_mean (n_evals, hidden), probe_output (n_evals, 2)."""
-    with h5py.File(path, "r") as f:
+    with _open(path) as f:
         return {name: ds[()] for name, ds in f["logs"].items()} if "logs" in f else {}
 
 
 def load_weights(path: str | Path) -> dict[str, np.ndarray]:
     """Final weights as {state_dict name: array}."""
-    with h5py.File(path, "r") as f:
+    with _open(path) as f:
         if "weights" not in f:
             raise KeyError(f"{path}: no final weights stored (status {_attr(f.attrs.get('status', '?'))})")
         return {name: ds[()] for name, ds in f["weights"].items()}

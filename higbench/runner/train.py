@@ -2,7 +2,25 @@
 
 Clock semantics (as in the paper, appendix B): ``wall_time`` is the training clock. It
 starts once the data set exists, before the network and optimizer are built, so framework
-warm-up and the first (slow) updates count; evaluations of the test loss are excluded.
+warm-up and the first (slow) updates count; evaluations of the test loss, checkpoints and
+the creation of the run file are excluded. A resumed run continues the clock of its
+checkpoint. (Through the CLI, the pre-flight check has already built the problem and an
+optimizer on the CPU, so one-off Python imports are paid before the clock starts.)
+
+Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
+
+* Before the run file exists: the checks that need the network (``init_from`` weights
+  that fit it, the GN/HIG memory guard) raise ``ConfigError``; nothing is written.
+* Divergence: a non-finite loss, gradient, Jacobian or update direction, a failed
+  inversion (``UpdateResult.finite`` is False), a linear-algebra error, or a non-finite
+  test loss ends the run as ``diverged`` with the step and reason; everything logged so
+  far stays, and the run returns normally (exit code 0: a sweep goes on).
+* SIGINT/SIGTERM: the first one stops the run after the current update: pending rows are
+  written, a checkpoint is saved, the file is closed with status ``interrupted``. A second
+  one stops it at once (the last checkpoint stays valid). Further signals are ignored
+  while the file is being closed.
+* ``checkpoint_every`` (seconds of training clock; null: off): periodic checkpoints, so a
+  run killed with SIGKILL loses at most that much work; ``resume=...`` continues it.
 """
 
 from __future__ import annotations
@@ -10,6 +28,7 @@ from __future__ import annotations
 import math
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,17 +37,21 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from higbench.config import ConfigError, init_from_path
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
+from higbench.runner import checkpoint, memory_guard
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
-from higbench.runner.updates import build_update
+from higbench.runner.updates import JacobianPowerUpdate, build_update
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_UPDATE_COLUMNS = ("step", "wall_time", "loss", "jacobian_s", "inversion_s", "apply_s", "update_s")
 
 
 class Interrupted(Exception):
-    """Raised by the SIGTERM handler so the loop can close the run file cleanly."""
+    """The run was asked to stop (SIGINT/SIGTERM)."""
 
 
 @dataclass
@@ -42,15 +65,16 @@ class RunSummary:
 
 
 class TrainingClock:
-    """Wall clock that can be paused (evaluations do not count)."""
+    """Wall clock that can be paused (evaluations do not count), starting at ``offset``."""
 
-    def __init__(self):
-        self._start = time.perf_counter()
+    def __init__(self, offset: float = 0.0):
+        self._start = time.perf_counter() - offset
         self._paused_total = 0.0
         self._paused_at: float | None = None
 
     def pause(self) -> None:
-        self._paused_at = time.perf_counter()
+        if self._paused_at is None:
+            self._paused_at = time.perf_counter()
 
     def resume(self) -> None:
         if self._paused_at is not None:
@@ -60,6 +84,41 @@ class TrainingClock:
     def __call__(self) -> float:
         now = self._paused_at if self._paused_at is not None else time.perf_counter()
         return now - self._start - self._paused_total
+
+
+class StopSignals:
+    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._previous: dict[int, object] = {}
+
+    def _handler(self, signum, frame):
+        if self.signum is None:
+            self.signum = signum
+            return
+        raise Interrupted(f"{signal.Signals(signum).name} (second signal, stopped mid-update)")
+
+    def install(self) -> StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for s in STOP_SIGNALS:
+                self._previous[s] = signal.signal(s, self._handler)
+        return self
+
+    def ignore(self) -> None:
+        """While the file is closed: no signal may cut that short."""
+        if self._previous:
+            for s in STOP_SIGNALS:
+                signal.signal(s, signal.SIG_IGN)
+
+    def restore(self) -> None:
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+        self._previous.clear()
+
+    def check(self) -> None:
+        if self.signum is not None:
+            raise Interrupted(signal.Signals(self.signum).name)
 
 
 @torch.no_grad()
@@ -76,33 +135,112 @@ def evaluate(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int 
     return {k: v / len(batch) for k, v in sums.items()}
 
 
-def load_initial_weights(model: torch.nn.Module, path: str, problem_name: str) -> None:
-    """Start from another run's final weights; refuse if the networks do not match."""
-    from higbench.runfile.reader import load_run
+# -- checks that need the network; run before the run file exists ---------------------------
 
-    meta, _ = load_run(path)
-    other = meta["config"].get("problem", {})
-    if other.get("name") != problem_name:
-        raise ValueError(f"init_from={path}: run is of problem {other.get('name')!r}, not {problem_name!r}")
-    weights = load_weights(path)
+
+def check_init_from(model: torch.nn.Module, path: str, problem_name: str) -> dict[str, np.ndarray]:
+    """The weights of run ``path`` if they fit ``model``; ConfigError otherwise."""
+    from higbench.config import check_init_from_file
+
+    check_init_from_file(path, problem_name)
+    weights = load_weights(init_from_path(path))
     state = model.state_dict()
     if set(weights) != set(state) or any(tuple(weights[k].shape) != tuple(state[k].shape) for k in state):
         theirs = {k: tuple(v.shape) for k, v in weights.items()}
         ours = {k: tuple(v.shape) for k, v in state.items()}
-        raise ValueError(f"init_from={path}: network does not match (run has {theirs}, this model {ours})")
+        raise ConfigError("init_from", path, f"network does not match (run has {theirs}, this config builds {ours})")
+    return weights
+
+
+def load_initial_weights(model: torch.nn.Module, path: str, problem_name: str) -> None:
+    """Start from another run's final weights; refuse (ConfigError) if the networks differ."""
+    weights = check_init_from(model, path, problem_name)
     model.load_state_dict({k: torch.as_tensor(v) for k, v in weights.items()})
+
+
+def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
+    """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
+    if not isinstance(update, JacobianPowerUpdate):
+        return None
+    with torch.no_grad():
+        y = problem.outputs(model, problem.test_set()[:1])
+    output_size = int(y[0].numel())
+    n_params = sum(p.numel() for p in model.parameters() if p.requires_grad)
+    rows = int(cfg.batch_size) * output_size
+    opt = update.optimizer
+    solver = opt.group["solver"]
+    if solver == "auto" and rows < n_params and opt.resolved_solver(rows, n_params) == "svd":
+        solver = "svd"  # tau too small for the Gram route: SVD at every batch size
+    return memory_guard.check(
+        int(cfg.batch_size),
+        output_size,
+        n_params,
+        dtype=cfg.dtype,
+        solver=solver,
+        precision=str(opt.group["precision"]),
+        device=str(problem.device),
+        limit_mb=cfg.get("memory_limit_mb"),
+        jacobian="structured" if getattr(update, "structured", False) else "naive",
+    )
+
+
+def _setup(cfg: DictConfig, device: torch.device | None = None):
+    device = resolve_device(cfg.device) if device is None else device
+    dtype = DTYPES[cfg.dtype]
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
+    torch.manual_seed(cfg.seed)
+    problem = build_problem(cfg.problem, dtype=dtype, device=device, seed=cfg.seed)
+    return device, problem
+
+
+def preflight(cfg: DictConfig) -> None:
+    """Build the problem and network once and run the checks that need them (no file written).
+
+    Raises ConfigError for an ``init_from`` run whose weights do not fit this network and
+    for a GN/HIG batch size that cannot fit in memory. Problems and optimizers refusing
+    their arguments (ValueError) are reported as ConfigError too.
+
+    Everything is built on the CPU, so no GPU context exists before the run's clock starts
+    (CUDA start-up stays part of the measured warm-up); for a CUDA run the memory guard
+    runs in ``train`` instead, on the device, before the run file is created. Python-level
+    imports triggered here (the first torch.optim optimizer imports torch._dynamo) are then
+    no longer inside the run's training clock.
+    """
+    target = resolve_device(cfg.device)
+    try:
+        _device, problem = _setup(cfg, device=torch.device("cpu"))
+        model = problem.build_model()
+        update = build_update(problem, model, cfg.optimizer)
+    except ConfigError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
+    if cfg.get("init_from"):
+        check_init_from(model, cfg.init_from, cfg.problem.name)
+    if target.type == "cpu":
+        check_memory(cfg, problem, model, update)
+
+
+# -- progress --------------------------------------------------------------------------------
 
 
 class Progress:
     """tqdm on a terminal, one plain line per evaluation otherwise."""
 
-    def __init__(self, enabled: bool, budget_s: float | None):
+    def __init__(self, enabled: bool, budget_s: float | None, start: float = 0.0):
         self.tty = enabled and sys.stderr.isatty()
         self.bar = None
         if self.tty:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=budget_s, unit="s", bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt}s {postfix}", file=sys.stderr)
+            self.bar = tqdm(
+                total=budget_s,
+                initial=start,
+                unit="s",
+                bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt}s {postfix}",
+                file=sys.stderr,
+            )
         self.enabled = enabled
 
     def update(self, step: int, wall: float, train_loss: float, test_loss: float | None) -> None:
@@ -110,7 +248,9 @@ class Progress:
             return
         if self.bar is not None:
             self.bar.n = min(wall, self.bar.total or wall)
-            self.bar.set_postfix_str(f"step {step} loss {train_loss:.3e}" + (f" test {test_loss:.3e}" if test_loss is not None else ""))
+            self.bar.set_postfix_str(
+                f"step {step} loss {train_loss:.3e}" + (f" test {test_loss:.3e}" if test_loss is not None else "")
+            )
         elif test_loss is not None:
             print(f"step {step:7d}  t {wall:8.2f}s  train {train_loss:.4e}  test {test_loss:.4e}", file=sys.stderr, flush=True)
 
@@ -119,44 +259,93 @@ class Progress:
             self.bar.close()
 
 
-def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None) -> RunSummary:
-    """Run one experiment described by a validated config; write ``run_path``."""
-    device = resolve_device(cfg.device)
-    dtype = DTYPES[cfg.dtype]
-    if cfg.get("threads"):
-        torch.set_num_threads(int(cfg.threads))
-    torch.manual_seed(cfg.seed)
-    problem = build_problem(cfg.problem, dtype=dtype, device=device, seed=cfg.seed)
+# -- the loop --------------------------------------------------------------------------------
+
+
+def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *, resume: bool = False) -> RunSummary:
+    """Run one experiment described by a validated config; write ``run_path``.
+
+    resume: continue the run file ``run_path`` from its checkpoint (``cfg`` is then the
+    run's stored config, see ``checkpoint.resume_config``) instead of creating it.
+    """
+    run_path = Path(run_path)
+    state = checkpoint.load(run_path) if resume else None
+    device, problem = _setup(cfg)
     test = problem.test_set()
 
-    writer = RunFileWriter(
-        run_path,
-        config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-        overrides=overrides or [],
-        env=environment(device),
-        meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
-    )
+    clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
+    model = problem.build_model()
+    if cfg.get("init_from") and not resume:
+        load_initial_weights(model, cfg.init_from, cfg.problem.name)
+    update = build_update(problem, model, cfg.optimizer)
+    check_memory(cfg, problem, model, update)
+    shuffle = torch.Generator().manual_seed(cfg.seed)
+
+    clock.pause()  # creating/reopening the file is not training
+    config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+    if state is None:
+        writer = RunFileWriter(
+            run_path,
+            config_yaml=config_yaml,
+            overrides=overrides or [],
+            env=environment(device),
+            meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
+        )
+    else:
+        writer = RunFileWriter.reopen(
+            run_path,
+            rows=state["rows"],
+            resume_info={
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "from_step": state["step"],
+                "wall_time": state["wall_time"],
+                "overrides": list(overrides or []),
+            },
+            config_yaml=config_yaml,
+        )
     memory = MemoryMonitor(device)
-    clock = TrainingClock()
     budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
     max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
     by_updates = cfg.get("eval_unit", "seconds") == "updates"
+    ckpt_every = cfg.get("checkpoint_every")
 
-    model = problem.build_model()
-    if cfg.get("init_from"):
-        load_initial_weights(model, cfg.init_from, cfg.problem.name)
-    update = build_update(problem, model, cfg.optimizer)
-    shuffle = torch.Generator().manual_seed(cfg.seed)
-    progress = Progress(cfg.get("progress", True), cfg.budget.seconds)
-
-    step, epoch = 0, 0
+    step, epoch, position = 0, 0, 0
     batch_losses: list[float] = []
-    pending: dict[str, list[float]] = {k: [] for k in ("step", "wall_time", "loss", "jacobian_s", "inversion_s", "apply_s", "update_s")}
+    pending: dict[str, list[float]] = {k: [] for k in _UPDATE_COLUMNS}
     next_eval = 0.0
+    last_eval_step = -1
+    epoch_iter = None
+    epoch_start_rng = shuffle.get_state()
+    if state is not None:
+        model.load_state_dict(state["model"])
+        update.optimizer.load_state_dict(state["optimizer"])
+        step, epoch, position = state["step"], state["epoch"], state["position"]
+        next_eval, batch_losses = state["next_eval"], list(state["batch_losses"])
+        last_eval_step = state["last_eval_step"]
+        memory.peak_rss_mb = max(memory.peak_rss_mb, state.get("peak_rss_mb", 0.0))
+        # Replay the epoch's first `position` batches: the data order is the original one.
+        epoch_start_rng = state["shuffle_epoch_start"]
+        shuffle.set_state(epoch_start_rng)
+        epoch_iter = iter(problem.epoch(cfg.batch_size, shuffle))
+        for _ in range(position):
+            next(epoch_iter)
+        torch.set_rng_state(state["torch_rng"])
+        if device.type == "cuda" and state.get("cuda_rng") is not None:
+            torch.cuda.set_rng_state(state["cuda_rng"], device)
+    progress = Progress(cfg.get("progress", True), cfg.budget.seconds, start=clock())
+    last_ckpt = clock()
+    clock.resume()
     status, reason = "completed", ""
 
+    def flush_pending() -> None:
+        writer.append_rows("updates", pending)
+        for values in pending.values():
+            values.clear()
+
     def record_evaluation() -> float:
+        nonlocal last_eval_step
         clock.pause()
+        last_eval_step = step
         model.eval()
         metrics = evaluate(problem, model, test)
         model.train()
@@ -166,70 +355,116 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None) -
         writer.append_row("curves", row)
         for name, value in problem.eval_logs(model).items():
             writer.append_row("logs", {name: value})
-        writer.append_rows("updates", pending)
-        for values in pending.values():
-            values.clear()
+        flush_pending()
         writer.flush()
         progress.update(step, row["wall_time"], train_loss, metrics["test_loss"])
         clock.resume()
         return metrics["test_loss"]
 
-    def on_sigterm(signum, frame):
-        raise Interrupted(f"signal {signum}")
+    def save_checkpoint() -> None:
+        nonlocal last_ckpt
+        clock.pause()
+        flush_pending()
+        writer.flush()  # the file holds at least the rows the checkpoint records
+        checkpoint.save(
+            run_path,
+            {
+                "step": step,
+                "epoch": epoch,
+                "position": position,
+                "wall_time": clock(),
+                "next_eval": next_eval,
+                "last_eval_step": last_eval_step,
+                "batch_losses": list(batch_losses),
+                "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+                "optimizer": update.optimizer.state_dict(),
+                "shuffle_epoch_start": epoch_start_rng,
+                "torch_rng": torch.get_rng_state(),
+                "cuda_rng": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
+                "rows": writer.row_counts(),
+                "peak_rss_mb": memory.peak_rss_mb,
+            },
+        )
+        last_ckpt = clock()
+        clock.resume()
 
-    previous_handler = signal.signal(signal.SIGTERM, on_sigterm) if _main_thread() else None
+    signals = StopSignals().install()
     final_test = math.nan
     try:
-        final_test = record_evaluation()
-        next_eval = cfg.eval_every
+        if state is None:
+            final_test = record_evaluation()
+            next_eval = cfg.eval_every
         done = step >= max_updates or clock() >= budget_s
         while not done:
-            for batch in problem.epoch(cfg.batch_size, shuffle):
+            signals.check()
+            if epoch_iter is None:
+                epoch_start_rng = shuffle.get_state()
+                epoch_iter = iter(problem.epoch(cfg.batch_size, shuffle))
+                position = 0
+            batch = next(epoch_iter, None)
+            if batch is None:
+                if position == 0:
+                    raise ConfigError("batch_size", cfg.batch_size, "the problem's epoch yields no batch of this size")
+                epoch, epoch_iter = epoch + 1, None
+                continue
+            position += 1
+            try:
                 result = update(batch)
+            except torch.linalg.LinAlgError as exc:  # a solver or inversion that failed outright
                 step += 1
-                if not result.finite or not math.isfinite(result.loss):
-                    status, reason = "diverged", result.reason or "non-finite loss"
-                    done = True
+                status, reason = "diverged", f"linear algebra failed: {exc}"
+                break
+            step += 1
+            if not result.finite or not math.isfinite(result.loss):
+                status, reason = "diverged", result.reason or "non-finite loss"
+                break
+            batch_losses.append(result.loss)
+            t = result.timings
+            for k, v in (
+                ("step", step),
+                ("wall_time", clock()),
+                ("loss", result.loss),
+                ("update_s", sum(t.values())),
+                *t.items(),
+            ):
+                pending[k].append(v)
+            memory.sample()
+            if step >= max_updates or clock() >= budget_s:
+                break
+            if (step if by_updates else clock()) >= next_eval:
+                final_test = record_evaluation()
+                next_eval += cfg.eval_every
+                if not math.isfinite(final_test):
+                    status, reason = "diverged", "non-finite test loss"
                     break
-                batch_losses.append(result.loss)
-                t = result.timings
-                for k, v in (("step", step), ("wall_time", clock()), ("loss", result.loss), ("update_s", sum(t.values())), *t.items()):
-                    pending[k].append(v)
-                memory.sample()
-                done = step >= max_updates or clock() >= budget_s
-                if done:
-                    break
-                if (step if by_updates else clock()) >= next_eval:
-                    final_test = record_evaluation()
-                    next_eval += cfg.eval_every
-                    if not math.isfinite(final_test):
-                        status, reason, done = "diverged", "non-finite test loss", True
-                        break
-            else:
-                epoch += 1
-        final_test = record_evaluation()
+            if ckpt_every is not None and clock() - last_ckpt >= ckpt_every:
+                save_checkpoint()
+        signals.ignore()
+        if step != last_eval_step:  # one curve row per step: no second row after a diverged evaluation
+            final_test = record_evaluation()
         if status == "completed" and not math.isfinite(final_test):
             status, reason = "diverged", "non-finite test loss"
-    except (KeyboardInterrupt, Interrupted) as exc:
-        status, reason = "interrupted", str(exc) or "KeyboardInterrupt"
-        writer.append_rows("updates", pending)
+    except Interrupted as exc:
+        signals.ignore()
+        status, reason = "interrupted", str(exc)
+        if signals.signum is not None and "second signal" not in reason:
+            save_checkpoint()  # a clean stop between updates: resumable from exactly here
+        else:
+            flush_pending()
     except BaseException as exc:
-        writer.append_rows("updates", pending)
+        signals.ignore()
+        flush_pending()
         writer.close("failed", f"{type(exc).__name__}: {exc}", step)
-        raise
-    finally:
         progress.close()
-        if previous_handler is not None:
-            signal.signal(signal.SIGTERM, previous_handler)
+        signals.restore()
+        raise
+    progress.close()
     writer.set_attrs("memory", memory.summary())
     writer.write_weights({k: v.detach().cpu().numpy() for k, v in model.state_dict().items()}, step)
     writer.f.attrs["steps"] = step
     writer.f.attrs["wall_time"] = clock()
     writer.close(status, reason, step)
-    return RunSummary(status, step, clock(), final_test, Path(run_path), reason)
-
-
-def _main_thread() -> bool:
-    import threading
-
-    return threading.current_thread() is threading.main_thread()
+    if status in ("completed", "diverged"):
+        checkpoint.remove(run_path)  # nothing left to resume
+    signals.restore()
+    return RunSummary(status, step, clock(), final_test, run_path, reason)

@@ -17,7 +17,9 @@ from omegaconf import DictConfig, OmegaConf
 from torch import nn
 
 from higbench.optim.hig import JacobianPower
+from higbench.optim.inversion import gram_coefficients
 from higbench.optim.jacobians import per_sample_jacobian
+from higbench.optim.structured import StructuredJacobian, network_jacobian, solver_jacobian
 from higbench.problems.base import Batch, Problem
 
 # Config keys that describe the optimizer but are not constructor arguments.
@@ -64,27 +66,79 @@ class FirstOrderUpdate:
 
 
 class JacobianPowerUpdate:
-    """GN / HIG: stacked per-sample Jacobian, inversion, plain SGD application."""
+    """GN / HIG: structured (or naive) Jacobian, inversion, plain SGD application.
+
+    Structured (``optimizer.jacobian: structured``, the default): u = f(z; theta), then the
+    solver Jacobians A_i = dy_i/du_i by |y| batched reverse passes through the physics, then
+    the network part (per-layer factors for MLPs, torch.func for other networks), and on
+    the Gram route K = J J^T and one J^T c product without forming J
+    (``higbench.optim.structured``). Naive (``optimizer.jacobian: naive``): torch.func
+    Jacobian of network + physics per sample, materialised J (``per_sample_jacobian``).
+
+    Phases: ``jacobian_s`` all derivatives (A, network factors or J, and K), ``inversion_s``
+    eigh/SVD and the product mapping the coefficients back to parameters, ``apply_s`` the
+    parameter update.
+    """
 
     def __init__(self, problem: Problem, model: nn.Module, optimizer: JacobianPower):
         self.problem, self.model, self.optimizer = problem, model, optimizer
 
+    @property
+    def structured(self) -> bool:
+        if self.optimizer.group.get("jacobian", "structured") != "structured":
+            return False
+        # The structured path assumes outputs = physics(inputs, model(net_inputs)).
+        return type(self.problem).outputs is Problem.outputs
+
+    def derivatives(self, batch: Batch):
+        """(loss, g, J): the batch-mean loss, g = d loss / d y (rows,), J (structured or a tensor)."""
+        opt = self.optimizer
+        if self.structured:
+            with torch.no_grad():
+                u = self.model(batch.net_inputs)
+            y, A = solver_jacobian(self.problem.physics, batch.inputs, u)
+            y = y.requires_grad_(True)
+            loss = self.problem.loss(y, batch.targets).mean()  # g is the gradient of the batch mean
+            (grad_y,) = torch.autograd.grad(loss, y)
+            if not torch.isfinite(loss) or not torch.isfinite(A).all():
+                return loss, grad_y, None
+            J = network_jacobian(self.model, opt.params, batch.net_inputs, A, opt.group["precision"])
+            return loss, grad_y, J
+        y = self.problem.outputs(self.model, batch)
+        loss = self.problem.loss(y, batch.targets).mean()
+        (grad_y,) = torch.autograd.grad(loss, y)
+        if not torch.isfinite(loss):
+            return loss, grad_y, None
+        J = per_sample_jacobian(self.model, self.problem.physics, batch.inputs, batch.net_inputs)
+        return loss, grad_y, J
+
     def __call__(self, batch: Batch) -> UpdateResult:
         dev = self.problem.device
         t0 = time.perf_counter()
-        y = self.problem.outputs(self.model, batch)
-        loss = self.problem.loss(y, batch.targets).mean()  # g is the gradient of the batch mean
-        (grad_y,) = torch.autograd.grad(loss, y)
+        loss, grad_y, J = self.derivatives(batch)
         value = loss.item()
         if not torch.isfinite(loss):
             return UpdateResult(value, finite=False, reason="non-finite loss")
-        J = per_sample_jacobian(self.model, self.problem.physics, batch.inputs, batch.net_inputs)
+        if J is None:
+            return UpdateResult(value, finite=False, reason="non-finite Jacobian")
+        if self.structured and self.optimizer.resolved_solver(J.rows, J.n_params) == "gram":
+            try:
+                K = J.gram()
+            except torch.linalg.LinAlgError as exc:
+                return UpdateResult(value, finite=False, reason=f"Gram matrix failed: {exc}")
+            finite = bool(torch.isfinite(K).all())
+            direction_of = lambda: J.transpose_apply(gram_coefficients(K, grad_y.reshape(-1).to(K.dtype), **self.optimizer._opts()))  # noqa: E731
+        else:
+            if isinstance(J, StructuredJacobian):
+                J = J.matrix()
+            finite = bool(torch.isfinite(J).all())
+            direction_of = lambda: self.optimizer.direction(J, grad_y)  # noqa: E731
         _sync(dev)
         t1 = time.perf_counter()
-        if not torch.isfinite(J).all():
+        if not finite:
             return UpdateResult(value, finite=False, reason="non-finite Jacobian")
         try:
-            direction = self.optimizer.direction(J, grad_y)
+            direction = direction_of()
         except torch.linalg.LinAlgError as exc:  # e.g. SVD failed to converge
             return UpdateResult(value, finite=False, reason=f"inversion failed: {exc}")
         _sync(dev)

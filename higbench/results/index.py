@@ -1,0 +1,337 @@
+"""The results index: every run file under a root as one pandas table.
+
+    runs = load_runs("outputs")                       # one row per run file
+    runs, curves = load_runs("outputs", curves=True)  # + one row per (run, evaluation)
+    best_runs(runs, by="optimizer.name")              # table-2 selection
+
+``runs`` has the flattened config (``problem.name``, ``optimizer.lr``, ``batch_size``, ...),
+``path``, ``status``, ``overrides``, ``steps``, ``wall_time``, ``final_test_loss``,
+``best_test_loss``, ``time_to_<threshold>`` (training clock at the first evaluation whose
+test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``.
+
+A file that cannot be read never stops the index; it becomes a row with a ``status`` of
+``running`` (another process holds it open for writing, or the writer died with the file
+open; see ``error``) or ``corrupt`` (truncated, not an HDF5 run file), and ``error`` says why.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import math
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import yaml
+
+try:  # libyaml's parser: the config YAML of every run is parsed, pure Python is slow
+    _YamlLoader = yaml.CSafeLoader
+except AttributeError:  # pragma: no cover
+    _YamlLoader = yaml.SafeLoader
+
+DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
+RUN_STATUSES_DONE = ("completed",)
+
+# Columns the index computes; a config key of the same name is stored as "config.<key>".
+_OWN_COLUMNS = {
+    "path", "status", "status_reason", "status_step", "error", "problem", "optimizer", "overrides",
+    "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
+    "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
+    "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
+}  # fmt: skip
+
+
+def threshold_column(threshold: float) -> str:
+    """Column name of a threshold: 1e-2 -> 'time_to_1e-2', 3e-4 -> 'time_to_3e-4'."""
+    mantissa, exponent = f"{threshold:e}".split("e")
+    mantissa = mantissa.rstrip("0").rstrip(".")
+    return f"time_to_{mantissa}e{int(exponent)}"
+
+
+def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") -> list[Path]:
+    """Run files under ``root`` (a directory, a file, or several of them), sorted."""
+    roots = [root] if isinstance(root, (str, os.PathLike)) else list(root)
+    found: set[Path] = set()
+    for r in roots:
+        r = Path(r)
+        if r.is_file():
+            found.add(r)
+        elif r.is_dir():
+            found.update(p for p in r.rglob(pattern) if p.is_file())
+        else:
+            raise FileNotFoundError(f"{r}: no such file or directory")
+    return sorted(found)
+
+
+# -- reading one file ------------------------------------------------------------------------
+
+
+def _attr(value):
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _flatten(d: dict, prefix: str = "", out: dict | None = None) -> dict:
+    out = {} if out is None else out
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            if v:
+                _flatten(v, key + ".", out)
+            else:
+                out[key] = None
+        elif isinstance(v, list):
+            out[key] = tuple(v)
+        else:
+            out[key] = v
+    return out
+
+
+def _columns(f: h5py.File, group: str, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """1-D datasets of a group, cut to a common length (a killed writer may leave them ragged)."""
+    if group not in f:
+        return {}
+    g = f[group]
+    keys = [k for k in (names if names is not None else g.keys()) if k in g]
+    cols = {}
+    for k in keys:
+        ds = g[k]
+        if ds.ndim == 1:
+            cols[k] = ds[()]
+    if cols:
+        n = min(len(v) for v in cols.values())
+        cols = {k: v[:n] for k, v in cols.items()}
+    return cols
+
+
+def _mean(values: np.ndarray | None) -> float:
+    if values is None or len(values) == 0:
+        return math.nan
+    return float(np.mean(values))
+
+
+def _summarise(f: h5py.File, thresholds: Sequence[float], want_curves: bool) -> tuple[dict, dict[str, np.ndarray] | None]:
+    attrs = {k: _attr(v) for k, v in f.attrs.items()}
+    if "format_version" not in attrs or "config" not in attrs:
+        raise ValueError("not a higbench run file (no format_version/config attributes)")
+    row: dict = {}
+    config = yaml.load(attrs.pop("config") or "{}", Loader=_YamlLoader) or {}
+    for key, value in _flatten(config).items():
+        row[f"config.{key}" if key in _OWN_COLUMNS else key] = value
+    try:
+        overrides = json.loads(attrs.pop("overrides", "[]"))
+    except ValueError:
+        overrides = []
+    row["overrides"] = " ".join(overrides)
+    try:
+        row["resumes"] = len(json.loads(attrs.pop("resumes", "[]")))  # times the run was resumed
+    except ValueError:
+        row["resumes"] = 0
+    for key in (
+        "status",
+        "status_reason",
+        "status_step",
+        "problem",
+        "optimizer",
+        "started",
+        "finished",
+        "steps",
+        "wall_time",
+        "format_version",
+    ):
+        if key in attrs:
+            row[key] = attrs[key]
+
+    curves = _columns(f, "curves", None if want_curves else ("step", "wall_time", "train_loss", "test_loss"))
+    test = curves.get("test_loss")
+    n_evals = 0 if test is None else len(test)
+    row["n_evals"] = n_evals
+    if n_evals:
+        wall = curves.get("wall_time")
+        steps = curves.get("step")
+        row["final_test_loss"] = float(test[-1])
+        finite = np.isfinite(test)
+        if finite.any():
+            i = int(np.argmin(np.where(finite, test, np.inf)))
+            row["best_test_loss"] = float(test[i])
+            row["best_step"] = int(steps[i]) if steps is not None else i
+        if steps is not None:
+            row["final_step"] = int(steps[-1])
+        if "train_loss" in curves:
+            row["final_train_loss"] = float(curves["train_loss"][-1])
+        for name, values in curves.items():  # extra metrics: final_test_<metric>
+            if name.startswith("test_") and name != "test_loss":
+                row[f"final_{name}"] = float(values[-1])
+        if "wall_time" not in row and wall is not None:
+            row["wall_time"] = float(wall[-1])
+        if "steps" not in row and steps is not None:
+            row["steps"] = int(steps[-1])
+        for t in thresholds:
+            hit = np.flatnonzero(test <= t)
+            row[threshold_column(t)] = float(wall[hit[0]]) if (len(hit) and wall is not None) else math.nan
+    else:
+        for t in thresholds:
+            row[threshold_column(t)] = math.nan
+
+    updates = _columns(f, "updates", ("update_s", "jacobian_s", "inversion_s"))
+    update_s = updates.get("update_s")
+    row["mean_update_s"] = _mean(update_s)
+    row["median_update_s"] = float(np.median(update_s)) if update_s is not None and len(update_s) else math.nan
+    row["mean_jacobian_s"] = _mean(updates.get("jacobian_s"))
+    row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
+    if "memory" in f:
+        for key, value in f["memory"].attrs.items():
+            row[key] = _attr(value)
+    if "env" in f:
+        for key, value in f["env"].attrs.items():
+            row[f"env.{key}"] = _attr(value)
+    return row, (curves if want_curves else None)
+
+
+def read_run_summary(
+    path: str | Path, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, curves: bool = False
+) -> tuple[dict, dict | None]:
+    """(row, curve columns or None) of one run file; never raises for an unreadable file."""
+    path = Path(path)
+    row: dict = {"path": str(path), "error": ""}
+    try:
+        with h5py.File(path, "r") as f:
+            summary, columns = _summarise(f, thresholds, curves)
+        row.update(summary)
+        if row.get("status") == "running":
+            if os.environ.get("HDF5_USE_FILE_LOCKING", "").upper() in ("FALSE", "0"):
+                row["error"] = "status is running (HDF5 file locking is off: a live writer and a killed one look alike)"
+            else:  # we could take the file lock, so no process on this host is writing it
+                row["error"] = "status is running but no writer holds the file: still running on another host, or killed"
+        return row, columns
+    except BlockingIOError as exc:
+        if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
+            row.update(status="corrupt", error=f"{type(exc).__name__}: {exc}")
+            return row, None
+        # Locked by a live writer. Files written without SWMR can still be read unlocked up to
+        # the last flush (HDF5 refuses when the file carries the 'open for write' flag).
+        try:
+            with h5py.File(path, "r", locking=False) as f:
+                summary, columns = _summarise(f, thresholds, curves)
+            row.update(summary)
+            row["status"] = "running"
+            row["error"] = "being written (file locked by another process); read up to its last flush"
+            return row, columns
+        except Exception:  # noqa: BLE001 - anything from a half-written file
+            row.update(status="running", error="being written (file locked by another process)")
+            return row, None
+    except Exception as exc:  # noqa: BLE001 - truncated, garbage, not HDF5, half-written
+        message = f"{type(exc).__name__}: {exc}"
+        if "already open for write" in message:
+            # HDF5's superblock flag (libver='latest' files): the writer is alive elsewhere or died
+            # without closing the file; `h5clear -s <file>` makes a dead run's file readable.
+            row.update(
+                status="running", error="open-for-write flag set: writer still running elsewhere, or killed (h5clear -s recovers)"
+            )
+        else:
+            row.update(status="corrupt", error=message)
+        return row, None
+
+
+# -- the index -------------------------------------------------------------------------------
+
+
+_ALWAYS = (
+    "path",
+    "status",
+    "error",
+    "overrides",
+    "problem.name",
+    "optimizer.name",
+    "steps",
+    "wall_time",
+    "final_test_loss",
+    "best_test_loss",
+)
+_NUMERIC = ("steps", "wall_time", "final_test_loss", "best_test_loss")
+
+
+def _frame(rows: list[dict]) -> pd.DataFrame:
+    df = pd.DataFrame.from_records(rows)
+    for col in _ALWAYS:  # present even when no file could be read
+        if col not in df.columns:
+            df[col] = pd.Series(
+                np.nan if col in _NUMERIC else None, index=df.index, dtype="float64" if col in _NUMERIC else "object"
+            )
+    first = [c for c in ("path", "status", "problem.name", "optimizer.name", "overrides") if c in df.columns]
+    return df[first + [c for c in df.columns if c not in first]]
+
+
+def _curves_frame(parts: list[tuple[str, dict[str, np.ndarray]]]) -> pd.DataFrame:
+    names: list[str] = []
+    for _, cols in parts:
+        names.extend(c for c in cols if c not in names)
+    lengths = [len(next(iter(cols.values()))) if cols else 0 for _, cols in parts]
+    total = sum(lengths)
+    data: dict[str, np.ndarray | pd.Categorical] = {}
+    paths = [p for p, _ in parts]
+    codes = np.repeat(np.arange(len(parts)), lengths)
+    data["path"] = pd.Categorical.from_codes(codes, categories=pd.Index(paths)) if paths else pd.Categorical([])
+    for name in names:
+        chunks = [cols[name] if name in cols else np.full(n, np.nan) for (_, cols), n in zip(parts, lengths)]
+        data[name] = np.concatenate(chunks) if chunks else np.empty(0)
+    df = pd.DataFrame(data, index=pd.RangeIndex(total))
+    for col in ("step", "epoch"):
+        if col in df and np.isfinite(df[col].to_numpy(dtype=float)).all():
+            df[col] = df[col].astype("int64")
+    return df
+
+
+def load_runs(
+    root: str | Path | Iterable[str | Path],
+    curves: bool = False,
+    thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
+    pattern: str = "*.h5",
+) -> pd.DataFrame | tuple[pd.DataFrame, pd.DataFrame]:
+    """One row per run file under ``root``; with ``curves=True`` also the long curves table.
+
+    thresholds: test-loss levels for the ``time_to_<t>`` columns (training-clock seconds at
+    the first evaluation at or below ``t``; NaN if never reached).
+    Returns ``runs`` or ``(runs, curves)``; ``curves`` has one row per (run, evaluation):
+    ``path`` (join key with ``runs``), ``step``, ``epoch``, ``wall_time``, ``train_loss``,
+    ``test_loss``, ``rss_mb`` and any extra ``test_<metric>``.
+    """
+    rows, parts = [], []
+    for path in find_run_files(root, pattern):
+        row, cols = read_run_summary(path, thresholds, curves)
+        rows.append(row)
+        if curves and cols:
+            parts.append((row["path"], cols))
+    runs = _frame(rows)
+    return (runs, _curves_frame(parts)) if curves else runs
+
+
+def load_curves(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") -> pd.DataFrame:
+    """The long curves table alone (see ``load_runs``)."""
+    return load_runs(root, curves=True, pattern=pattern)[1]
+
+
+def best_runs(df: pd.DataFrame, by: str | Sequence[str] = "optimizer.name", metric: str = "final_test_loss") -> pd.DataFrame:
+    """The best completed run per group (lowest ``metric``): the table-2 selection.
+
+    Only runs with status ``completed`` and a finite ``metric`` compete, so diverged,
+    interrupted, failed, running and corrupt runs are never selected.
+    """
+    keys = [by] if isinstance(by, str) else list(by)
+    missing = [k for k in [*keys, metric, "status"] if k not in df.columns]
+    if missing:
+        raise KeyError(f"best_runs: no column(s) {missing} in the runs table")
+    values = pd.to_numeric(df[metric], errors="coerce")
+    ok = df["status"].isin(RUN_STATUSES_DONE) & np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
+    candidates = df[ok].assign(_metric=values[ok])
+    if candidates.empty:
+        return df.iloc[0:0]
+    best = candidates.sort_values([*keys, "_metric", "path"]).groupby(keys, sort=True, dropna=False).head(1)
+    return best.drop(columns="_metric").sort_values(keys).reset_index(drop=True)

@@ -1,0 +1,193 @@
+"""Checkpoints and resume: continue an interrupted run exactly where its last checkpoint was.
+
+A checkpoint is a sidecar file next to the run file, ``run.h5.ckpt`` (so an index that
+globs ``*.h5`` never mistakes it for a run), written atomically: ``torch.save`` to a
+temporary file in the same directory, ``fsync``, ``os.replace``. It holds everything the
+loop needs to continue as if never stopped:
+
+* model weights and the optimizer's ``state_dict`` (Adam's moments, ...; JacobianPower
+  has no state beyond its hyper-parameters),
+* step, epoch, position in the epoch, the shuffle generator's state at the start of the
+  epoch (the epoch's batches are replayed up to the position, so the data order is the
+  original one), the global torch RNG state, the next evaluation time, the training-loss
+  accumulator, the training clock,
+* the number of rows of every table of the run file at that moment: resume cuts the
+  tables back to them, so nothing written after the checkpoint is duplicated.
+
+The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
+and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
+periodic one. Resuming: ``higbench resume=<run dir or run file>`` (or ``resume=true`` with
+``hydra.run.dir=<run dir>``); the run's own stored config is used, and only the keys in
+``RESUMABLE_KEYS`` (budgets, evaluation and checkpoint intervals, threads, progress,
+device, memory cap) may be changed on the command line.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from higbench.config import ConfigError, show
+
+RUN_FILE_NAME = "run.h5"
+SUFFIX = ".ckpt"
+FORMAT = 1
+RESUMABLE_KEYS = ("budget", "eval_every", "checkpoint_every", "progress", "threads", "device", "memory_limit_mb", "resume")
+RESUMABLE_STATUSES = ("running", "interrupted", "failed")
+
+
+def checkpoint_path(run_path: str | Path) -> Path:
+    run_path = Path(run_path)
+    return run_path.with_name(run_path.name + SUFFIX)
+
+
+def save(run_path: str | Path, state: dict[str, Any]) -> Path:
+    """Write the checkpoint of ``run_path`` atomically (temp file, fsync, rename)."""
+    import torch
+
+    final = checkpoint_path(run_path)
+    tmp = final.with_name(f"{final.name}.tmp{os.getpid()}")
+    state = {"format": FORMAT, "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **state}
+    with open(tmp, "wb") as f:
+        torch.save(state, f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, final)
+    try:  # make the rename itself durable
+        fd = os.open(final.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError:
+        pass
+    return final
+
+
+def load(run_path: str | Path) -> dict[str, Any]:
+    import torch
+
+    path = checkpoint_path(run_path)
+    if not path.is_file():
+        raise ConfigError(
+            "resume",
+            str(run_path),
+            f"no checkpoint {path.name} next to the run file (was checkpoint_every null and the run killed?)",
+        )
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign file
+        raise ConfigError(
+            "resume", str(run_path), f"checkpoint {path.name} is unreadable ({type(exc).__name__}: {exc})"
+        ) from None
+    if state.get("format") != FORMAT:
+        raise ConfigError("resume", str(run_path), f"checkpoint format {state.get('format')} is not {FORMAT}")
+    return state
+
+
+def remove(run_path: str | Path) -> None:
+    checkpoint_path(run_path).unlink(missing_ok=True)
+
+
+# -- resolving what to resume ----------------------------------------------------------------
+
+
+def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
+    """The run file that ``resume=<value>`` designates (``true``: the one in ``run_dir``)."""
+    if resume is True:
+        if run_dir is None:
+            raise ConfigError("resume", True, "needs hydra.run.dir=<run dir>, or give the run: resume=<run dir or run file>")
+        return Path(run_dir) / RUN_FILE_NAME
+    p = Path(str(resume)).expanduser()
+    return p / RUN_FILE_NAME if p.is_dir() or p.suffix != ".h5" else p
+
+
+def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
+    """(status, stored config YAML) of a run to resume; ConfigError if it cannot be resumed."""
+    import h5py
+
+    if not run_file.is_file():
+        raise ConfigError("resume", resume_value, f"no run file {run_file}")
+    try:
+        # With file locking: a live writer holds the file, and we must not write into it.
+        with h5py.File(run_file, "r") as f:
+            status = _attr(f.attrs.get("status", ""))
+            config = _attr(f.attrs.get("config", ""))
+    except BlockingIOError:
+        raise ConfigError("resume", resume_value, f"{run_file} is open in another process (that run is still going)") from None
+    except Exception as exc:  # noqa: BLE001
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({type(exc).__name__})") from None
+    if status not in RESUMABLE_STATUSES:
+        raise ConfigError(
+            "resume", resume_value, f"run is {status}, nothing to resume (resumable: {', '.join(RESUMABLE_STATUSES)})"
+        )
+    if not checkpoint_path(run_file).is_file():
+        raise ConfigError(
+            "resume", resume_value, f"no checkpoint next to {run_file} (set checkpoint_every to make runs resumable)"
+        )
+    if not config:
+        raise ConfigError("resume", resume_value, f"{run_file} holds no config")
+    return status, config
+
+
+def _attr(v):
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def override_keys(overrides: list[str]) -> list[tuple[str, str]]:
+    """(key, override text) of command-line overrides, parsed by Hydra's own grammar."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parsed = OverridesParser.create().parse_overrides(list(overrides))
+    return [(o.key_or_group, o.input_line) for o in parsed]
+
+
+def _lookup(data: dict, dotted: str):
+    node: Any = data
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return KeyError
+        node = node[part]
+    return node
+
+
+def _assign(data: dict, dotted: str, value) -> None:
+    parts = dotted.split(".")
+    node = data
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+    node[parts[-1]] = value
+
+
+def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
+    """The stored config of the run, with the command-line changes that resuming allows.
+
+    ``composed``: the config Hydra composed for this invocation; ``overrides``: the task
+    overrides given on the command line. A key outside ``RESUMABLE_KEYS`` may be repeated
+    with the run's own value (re-running the same command with ``resume=...``) but not
+    changed: that would be another experiment.
+    """
+    import copy
+
+    merged = copy.deepcopy(stored)
+    for key, line in override_keys(overrides):
+        if key.startswith("hydra.") or key == "hydra":
+            continue
+        top = key.split(".")[0]
+        new = _lookup(composed, key)
+        if top in RESUMABLE_KEYS:
+            if new is not KeyError:
+                _assign(merged, key, new)
+            continue
+        old = _lookup(stored, key)
+        if new is KeyError or old is KeyError or new != old:
+            shown = "<absent>" if old is KeyError else show(old)
+            raise ConfigError(
+                key,
+                line.split("=", 1)[-1],
+                f"cannot change when resuming (the run has {key}={shown}); resumable keys: {', '.join(RESUMABLE_KEYS)}",
+            )
+    merged["resume"] = None
+    return merged

@@ -1,0 +1,166 @@
+"""Memory guard for GN/HIG: refuse a batch size whose Jacobian/inversion step cannot fit.
+
+The Jacobian-power step materialises J (rows = batch_size * |y|, columns = |theta|) and
+inverts it, either through the Gram matrix K = J J^T (rows x rows) or the thin SVD of J.
+``estimate_bytes`` gives the peak of that step (the dominant arrays; model, data and
+first-order optimizers are small next to it). ``check`` compares it with the memory
+available now (``MemAvailable`` of /proc/meminfo, free CUDA memory on a GPU) or a
+configured cap (``memory_limit_mb``) and raises ``ConfigError`` with the estimate and the
+largest batch size that fits, so a run fails in a second instead of being killed by the
+OS an hour in.
+
+The model is deliberately simple and errs on the large side; a faster Jacobian path
+(structured, never materialising J) can refine ``estimate_bytes`` without changing callers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from higbench.config import ConfigError
+
+ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
+
+
+@dataclass
+class Estimate:
+    total: int
+    parts: dict[str, int]
+    solver: str
+
+    def describe(self) -> str:
+        return ", ".join(f"{k} {mb(v)}" for k, v in self.parts.items() if v)
+
+
+def mb(n_bytes: float) -> str:
+    return f"{n_bytes / 2**20:,.0f} MB" if n_bytes >= 2**20 else f"{n_bytes / 2**20:.2f} MB"
+
+
+def _itemsize(dtype) -> int:
+    name = str(dtype).replace("torch.", "")
+    if name not in ITEMSIZE:
+        raise ValueError(f"dtype={dtype!r}: expected one of {tuple(ITEMSIZE)}")
+    return ITEMSIZE[name]
+
+
+def resolve_solver(solver: str, rows: int, n_params: int) -> str:
+    """``auto`` as JacobianPower resolves it for sizing: SVD for tall J, Gram for wide J."""
+    if solver in ("gram", "svd"):
+        return solver
+    return "svd" if rows >= n_params else "gram"
+
+
+def estimate_bytes(
+    batch_size: int,
+    output_size: int,
+    n_params: int,
+    dtype="float32",
+    solver: str = "auto",
+    precision="float64",
+    jacobian: str = "naive",
+) -> Estimate:
+    """Peak bytes of one Jacobian-power update.
+
+    batch_size, output_size (|y| per sample), n_params (|theta|); dtype: network dtype (J as
+    computed); precision: dtype of the inversion (J is converted to it); solver: gram, svd
+    or auto; jacobian: naive (torch.func J in ``dtype``, then cast) or structured (computed in
+    ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
+    ``higbench.optim.structured`` forms only per-layer factors).
+    """
+    rows, p = batch_size * output_size, n_params
+    e, e2 = _itemsize(dtype), _itemsize(precision)
+    solver = resolve_solver(solver, rows, p)
+    if jacobian == "structured":
+        parts = {"jacobian": rows * p * e2, "jacobian_cast": 0}
+    else:
+        parts = {
+            # torch.func returns one block per parameter tensor, then concatenates: 2 copies at the peak
+            "jacobian": 2 * rows * p * e,
+            "jacobian_cast": rows * p * e2 if e2 != e else 0,
+        }
+    if solver == "gram":
+        # K = J J^T, eigenvectors of K, LAPACK syevd workspace (~1 + 6n + 2n^2 doubles)
+        parts["gram"] = rows * rows * e2
+        parts["eigh"] = (3 * rows * rows + 6 * rows) * e2
+    else:
+        k = min(rows, p)
+        # gesdd destroys its input (a copy of J), returns U (rows x k) and Vh (k x p),
+        # workspace ~ 4k^2 + max(rows, p) * k
+        parts["svd_input"] = rows * p * e2
+        parts["svd_factors"] = (rows * k + k * p) * e2
+        parts["svd_work"] = (4 * k * k + max(rows, p) * k) * e2
+    return Estimate(sum(parts.values()), parts, solver)
+
+
+def available_bytes(device: str = "cpu") -> tuple[int, str]:
+    """(bytes available now, where that number comes from)."""
+    if str(device).startswith("cuda"):
+        import torch
+
+        free, _total = torch.cuda.mem_get_info(torch.device(device))
+        return int(free), "free CUDA memory"
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024, "MemAvailable"
+    except OSError:
+        pass
+    try:
+        import os
+
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")), "available physical memory"
+    except (ValueError, OSError, AttributeError):
+        return 2**62, "unknown"
+
+
+def largest_batch(
+    limit: int,
+    output_size: int,
+    n_params: int,
+    dtype="float32",
+    solver: str = "auto",
+    precision="float64",
+    upper: int = 1 << 30,
+    jacobian: str = "naive",
+) -> int:
+    """Largest batch size whose estimate fits in ``limit`` bytes (0 if not even 1 fits)."""
+    if estimate_bytes(1, output_size, n_params, dtype, solver, precision, jacobian).total > limit:
+        return 0
+    lo, hi = 1, upper
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if estimate_bytes(mid, output_size, n_params, dtype, solver, precision, jacobian).total <= limit:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+def check(
+    batch_size: int,
+    output_size: int,
+    n_params: int,
+    dtype="float32",
+    solver: str = "auto",
+    precision="float64",
+    device: str = "cpu",
+    limit_mb: float | None = None,
+    jacobian: str = "naive",
+) -> Estimate:
+    """Raise ConfigError if the step for ``batch_size`` does not fit; return the estimate."""
+    est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, jacobian)
+    avail, source = available_bytes(device)
+    if limit_mb is not None and limit_mb * 2**20 < avail:
+        avail, source = int(limit_mb * 2**20), "memory_limit_mb"
+    if est.total > avail:
+        best = largest_batch(avail, output_size, n_params, dtype, solver, precision, upper=batch_size, jacobian=jacobian)
+        advice = f"largest batch size that fits: {best}" if best else "not even batch_size=1 fits"
+        raise ConfigError(
+            "batch_size",
+            batch_size,
+            f"the {est.solver.upper()} Jacobian-power step needs about {mb(est.total)} "
+            f"({batch_size}x{output_size} rows x {n_params} params; {est.describe()}) "
+            f"but {mb(avail)} is available ({source}); {advice}",
+        )
+    return est

@@ -1,0 +1,74 @@
+"""Helpers of the fault-injection suite (tests/reliability): run the CLI as a subprocess, watch a run file."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+# Small, fast runs: one torch thread (the test machine has 2 shared cores; 2 threads per
+# process oversubscribe it 20x), no progress bar.
+FAST = ["threads=1", "progress=false"]
+
+
+def cli_env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env.pop("HYDRA_FULL_ERROR", None)
+    return env
+
+
+def run_cli(args: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``python -m higbench.cli *args`` in ``cwd``; text output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "higbench.cli", *args], cwd=cwd, env=cli_env(), capture_output=True, text=True, timeout=timeout
+    )
+
+
+def start_cli(args: list[str], cwd: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "higbench.cli", *args],
+        cwd=cwd,
+        env=cli_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def table_rows(path: Path, group: str = "curves") -> int:
+    """Rows of a table of a run file that may be being written (0 if not readable yet)."""
+    try:
+        with h5py.File(path, "r", locking=False) as f:
+            if group not in f or "step" not in f[group]:
+                return 0
+            return int(f[group]["step"].shape[0])
+    except (OSError, KeyError):
+        return 0
+
+
+def wait_for_rows(path: Path, n: int, proc: subprocess.Popen | None = None, timeout: float = 60, group: str = "curves") -> int:
+    """Wait until ``path`` has at least ``n`` rows in ``group`` (fails if the process ends first)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        rows = table_rows(path, group)
+        if rows >= n:
+            return rows
+        if proc is not None and proc.poll() is not None:
+            out, err = proc.communicate()
+            pytest.fail(f"process ended (rc {proc.returncode}) before {path} had {n} {group} rows:\n{out}\n{err}")
+        time.sleep(0.05)
+    pytest.fail(f"{path} did not reach {n} {group} rows in {timeout}s")
+
+
+def files_under(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))

@@ -1,0 +1,181 @@
+"""The results index on synthetic run files written with the real RunFileWriter."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import REPO
+from synthetic import write_run
+
+from higbench.results import best_runs, load_curves, load_runs
+from higbench.results.__main__ import main as results_main
+from higbench.results.index import threshold_column
+
+
+@pytest.fixture
+def tree(tmp_path):
+    root = tmp_path / "outputs"
+    write_run(root / "a/0_lr=0.1/run.h5", optimizer="adam", lr=0.1, test_loss=[1.0, 0.05, 0.004, 0.002])
+    write_run(root / "a/1_lr=0.01/run.h5", optimizer="adam", lr=0.01, batch_size=128, test_loss=[1.0, 0.3, 0.2, 0.1])
+    # the lowest loss of all, but diverged: never the best run
+    write_run(root / "b/0/run.h5", optimizer="adam", lr=1.0, test_loss=[1.0, 1e-4, 1e-5, math.inf], status="diverged")
+    write_run(root / "b/1/run.h5", optimizer="hig", lr=1.0, batch_size=32, test_loss=[1.0, 1e-3, 1e-6, 5e-7])
+    write_run(root / "b/2/run.h5", optimizer="hig", lr=0.5, batch_size=32, test_loss=[1.0, 1e-2, 1e-3, 2e-4])
+    return root
+
+
+def test_one_row_per_run_with_flattened_config_and_metrics(tree):
+    runs = load_runs(tree, thresholds=(1e-2, 1e-3))
+    assert len(runs) == 5
+    row = runs.set_index("path").loc[str(tree / "a/0_lr=0.1/run.h5")]
+    assert row["problem.name"] == "toy" and row["optimizer.name"] == "adam"
+    assert row["optimizer.lr"] == 0.1 and row["batch_size"] == 64 and row["optimizer.betas"] == (0.9, 0.999)
+    assert row["status"] == "completed" and row["error"] == ""
+    assert row["final_test_loss"] == 0.002 and row["best_test_loss"] == 0.002
+    assert row["steps"] == 20 and row["wall_time"] == 1.5 and row["n_evals"] == 4
+    # the synthetic evaluations are 0.5 s apart: 0.05 at 0.5 s, 0.004 at 1.0 s
+    assert row[threshold_column(1e-2)] == 1.0 and row[threshold_column(1e-3)] != row[threshold_column(1e-3)]  # NaN: never reached
+    assert threshold_column(1e-2) == "time_to_1e-2" and threshold_column(3e-4) == "time_to_3e-4"
+    assert row["mean_update_s"] == pytest.approx(0.01) and row["mean_jacobian_s"] == pytest.approx(0.004)
+    assert row["peak_rss_mb"] == 123.0 and row["resumes"] == 0
+    assert row["overrides"] == "optimizer=adam optimizer.lr=0.1 batch_size=64"
+    diverged = runs[runs["status"] == "diverged"].iloc[0]
+    assert math.isinf(diverged["final_test_loss"]) and diverged["best_test_loss"] == 1e-5
+
+
+def test_best_runs_never_pick_a_diverged_run(tree):
+    runs = load_runs(tree)
+    best = best_runs(runs, by="optimizer.name")
+    assert list(best["optimizer.name"]) == ["adam", "hig"]
+    assert best.set_index("optimizer.name").loc["adam", "path"] == str(tree / "a/0_lr=0.1/run.h5")
+    assert best.set_index("optimizer.name").loc["hig", "optimizer.lr"] == 1.0
+    assert "overrides" in best and (best["status"] == "completed").all()
+    by_best = best_runs(runs, by=["optimizer.name", "batch_size"], metric="best_test_loss")
+    assert len(by_best) == 3  # adam/64, adam/128, hig/32 (the diverged adam/64 run excluded)
+    with pytest.raises(KeyError):
+        best_runs(runs, by="no.such.column")
+
+
+def test_curves_long_table(tree):
+    runs, curves = load_runs(tree, curves=True)
+    assert len(curves) == 5 * 4
+    assert set(curves["path"].astype(str)) == set(runs["path"])
+    assert curves["step"].dtype == np.int64
+    one = curves[curves["path"] == str(tree / "b/1/run.h5")]
+    assert one["test_loss"].tolist() == [1.0, 1e-3, 1e-6, 5e-7]
+    assert load_curves(tree).shape == curves.shape
+
+
+def test_unreadable_files_are_reported_not_fatal(tree):
+    good = tree / "a/0_lr=0.1/run.h5"
+    data = good.read_bytes()
+    (tree / "c").mkdir()
+    (tree / "c/truncated.h5").write_bytes(data[: len(data) // 3])
+    (tree / "c/garbage.h5").write_bytes(b"not hdf5 at all" * 10)
+    (tree / "c/empty.h5").write_bytes(b"")
+    import h5py
+
+    with h5py.File(tree / "c/foreign.h5", "w") as f:  # an HDF5 file that is not a run file
+        f["x"] = [1, 2, 3]
+    runs = load_runs(tree).set_index("path")
+    assert len(runs) == 9
+    for name in ("truncated", "garbage", "empty", "foreign"):
+        row = runs.loc[str(tree / f"c/{name}.h5")]
+        assert row["status"] == "corrupt" and row["error"], name
+    assert (runs["status"] == "completed").sum() == 4
+    assert len(best_runs(runs.reset_index())) == 2
+
+
+WRITER = textwrap.dedent(
+    """
+    import sys
+    sys.path[:0] = [{repo!r}, {here!r}]
+    from synthetic import write_run
+    w = write_run(__import__("pathlib").Path({path!r}), optimizer="sgd", test_loss=[1.0, 0.5], close=False)
+    print("ready", flush=True)
+    sys.stdin.readline()
+    """
+)
+
+
+def test_run_being_written_and_killed_writer(tree):
+    """A live writer's file shows as running; after SIGKILL it reads up to the last flush."""
+    path = tree / "live/run.h5"
+    code = WRITER.format(repo=str(REPO), here=os.path.dirname(__file__), path=str(path))
+    proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        row = load_runs(tree).set_index("path").loc[str(path)]
+        assert row["status"] == "running" and row["error"]
+        assert len(best_runs(load_runs(tree))) == 2  # a running run is never a best run
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    row = load_runs(tree).set_index("path").loc[str(path)]
+    assert row["status"] == "running"  # the writer never closed it
+    assert row["final_test_loss"] == 0.5 and row["n_evals"] == 2  # what was flushed is there
+
+
+def test_cli_table_filters_and_best(tree, capsys):
+    assert results_main([str(tree)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("5 of 5 runs") and "diverged" in out and "a/0_lr=0.1/run.h5" in out
+
+    assert results_main([str(tree), "--optimizer", "hig", "--columns", "optimizer.lr,batch_size"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("2 of 5 runs") and "adam" not in out and "optimizer.lr" in out
+
+    assert results_main([str(tree), "--status", "diverged"]) == 0
+    assert capsys.readouterr().out.startswith("1 of 5 runs")
+
+    assert results_main([str(tree), "--best"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[0].startswith("2 of 5 runs")
+    assert any("a/0_lr=0.1/run.h5" in ln and "optimizer.lr=0.1" in ln for ln in lines)  # with its overrides
+    assert any("b/1/run.h5" in ln for ln in lines) and not any("b/0/run.h5" in ln for ln in lines)
+
+    csv = tree / "runs.csv"
+    assert results_main([str(tree), "--problem", "toy", "--csv", str(csv)]) == 0
+    capsys.readouterr()
+    assert csv.read_text().count("\n") == 6
+
+    assert results_main([str(tree / "missing")]) == 2
+
+
+def test_cli_module_entry_point(tree):
+    proc = subprocess.run(
+        [sys.executable, "-m", "higbench.results", str(tree), "--best"], capture_output=True, text=True, cwd=REPO, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("2 of 5 runs")
+
+
+def test_cli_best_keeps_dipole_mlp_and_cnn_apart(tree, capsys):
+    write_run(tree / "d/mlp/run.h5", problem="dipole", optimizer="hig", problem_extra={"model": "mlp"}, test_loss=[1.0, 1e-3])
+    write_run(tree / "d/cnn/run.h5", problem="dipole", optimizer="hig", problem_extra={"model": "cnn"}, test_loss=[1.0, 1e-2])
+    assert results_main([str(tree), "--best", "--problem", "dipole"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("2 of 7 runs") and "d/mlp/run.h5" in out and "d/cnn/run.h5" in out
+    assert results_main([str(tree), "--best", "--by", "problem.name,optimizer.name"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("3 of 7 runs") and "d/mlp/run.h5" in out and "d/cnn/run.h5" not in out
+
+
+def test_only_unreadable_files_and_empty_root(tmp_path, capsys):
+    (tmp_path / "bad.h5").write_bytes(b"garbage")
+    runs = load_runs(tmp_path)
+    assert runs["status"].tolist() == ["corrupt"] and best_runs(runs).empty
+    assert results_main([str(tmp_path), "--best"]) == 0
+    assert capsys.readouterr().out.startswith("0 of 1 runs")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert load_runs(empty).empty and load_curves(empty).empty
+    assert results_main([str(empty)]) == 0

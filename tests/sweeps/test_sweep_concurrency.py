@@ -1,0 +1,51 @@
+"""Two sweeps started at the same moment into the same outputs/ never share a run file."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+from conftest import TINY, cli_command, cli_env
+
+from higbench.results import load_runs
+
+SWEEP = ["-m", "optimizer=adam", "optimizer.lr=0.01,0.1", *TINY]
+
+
+def start_together(cwd, *argvs):
+    procs = [
+        subprocess.Popen(cli_command(*argv), cwd=cwd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for argv in argvs
+    ]
+    return [(p, *p.communicate(timeout=300)) for p in procs]
+
+
+def test_concurrent_sweeps_get_their_own_directories(tmp_path):
+    """Same command twice, at once, with the default sweep directory of conf/config.yaml
+    (outputs/sweeps/<date>/<time with microseconds>, relative to the working directory)."""
+    for proc, _out, err in start_together(tmp_path, SWEEP, SWEEP):
+        assert proc.returncode == 0, err[-3000:]
+    runs = load_runs(tmp_path / "outputs")
+    assert len(runs) == 4 and runs["path"].is_unique
+    assert set(runs["status"]) == {"completed"}, runs[["path", "status", "error"]]
+    sweep_dirs = {p.rsplit("/", 2)[0] for p in runs["path"]}
+    assert len(sweep_dirs) == 2  # one per sweep, each with both jobs and its multirun.yaml
+    for d in sweep_dirs:
+        assert sorted(p.rsplit("/", 2)[1].split("_")[0] for p in runs["path"] if p.startswith(d + "/")) == ["0", "1"]
+        assert Path(d, "multirun.yaml").is_file()
+    assert sorted(runs["optimizer.lr"]) == [0.01, 0.01, 0.1, 0.1]
+
+
+@pytest.mark.slow
+def test_forced_same_sweep_dir_never_overwrites(tmp_path):
+    """Even when both sweeps are told the same directory, a run file has one writer: the
+    writer opens with mode "w-" (exclusive create), the loser stops with an error."""
+    same = [*SWEEP, f"hydra.sweep.dir={tmp_path / 'same'}"]
+    results = start_together(tmp_path, same, same)
+    codes = sorted(p.returncode for p, _, _ in results)
+    assert codes[0] == 0 and codes[1] != 0, [(p.returncode, err[-500:]) for p, _, err in results]
+    loser_err = next(err for p, _, err in results if p.returncode != 0)
+    assert "refusing to overwrite" in loser_err or "already holds a run file" in loser_err
+    runs = load_runs(tmp_path / "same")
+    assert len(runs) == 2 and set(runs["status"]) == {"completed"}
