@@ -14,6 +14,11 @@ and exit code 2, with nothing written. The job itself checks again (sweepers who
 cannot be listed in advance, e.g. Optuna); a job that fails there removes the files
 Hydra made for it and exits 2.
 
+Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
+refused (exit 2, before Hydra touches the directory), and of two runs racing for one
+directory the second fails to create the file ("w-") and exits 2. The only way to write
+into an existing run file is ``resume=`` (see ``higbench.runner.checkpoint``).
+
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
 status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``).

@@ -24,6 +24,15 @@ flag makes a killed writer's file unopenable until ``h5clear -s`` (measured with
 default). Readers open with ``locking=False`` so they can read a file that is still being
 written (up to its last flush).
 
+What this does not guarantee: HDF5 without SWMR has no atomic flush. A kill that lands
+inside a flush which allocates new file space (a new chunk of a table) can leave that
+newest chunk unreadable ("addr overflow ... eoa"); measured with HDF5 2.0, 1 of 150 kills
+of a writer that does nothing but append and flush, 0 of 150 with SWMR. The runner writes
+only at evaluations (a few ms per evaluation), so the exposure per kill is far smaller.
+SWMR would close it but is not used: a SWMR file killed mid-run cannot be reopened for
+writing (resume) without ``h5clear``, holds no lock a reader could test for liveness, and
+needs ``swmr=True`` in every reader.
+
 Never overwriting: a new run file is created with mode ``"w-"`` (fails if the file
 exists). The only writer that opens an existing file is ``RunFileWriter.reopen``, used by
 ``resume=...``: it truncates every table to the rows recorded by the checkpoint it resumes

@@ -50,11 +50,15 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
     final = checkpoint_path(run_path)
     tmp = final.with_name(f"{final.name}.tmp{os.getpid()}")
     state = {"format": FORMAT, "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **state}
-    with open(tmp, "wb") as f:
-        torch.save(state, f)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, final)
+    try:
+        with open(tmp, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # the previous checkpoint stays as it was
+        raise
     try:  # make the rename itself durable
         fd = os.open(final.parent, os.O_RDONLY)
         try:

@@ -338,9 +338,10 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     status, reason = "completed", ""
 
     def flush_pending() -> None:
-        writer.append_rows("updates", pending)
-        for values in pending.values():
+        rows = {k: list(v) for k, v in pending.items()}
+        for values in pending.values():  # cleared first: a stop mid-write never writes them twice
             values.clear()
+        writer.append_rows("updates", rows)
 
     def record_evaluation() -> float:
         nonlocal last_eval_step

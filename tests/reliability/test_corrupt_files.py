@@ -19,10 +19,14 @@ from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
 from higbench.runner.train import train
 
-# A writer that appends and flushes as the runner does, and prints how many rows each
-# flush made durable; it is killed at some moment of its loop.
+# A writer that appends and flushes as the runner does at each evaluation (a burst of
+# appends, one flush, then "training" for a while), and prints how many rows each flush
+# made durable; it is killed at some moment of its loop, during a burst or between.
+# (HDF5 without SWMR has no atomic flush: a kill inside a flush that allocates new file
+# space can leave the newest chunk unreadable. Measured with a writer that does nothing but
+# append and flush: 1 of 150 kills. See higbench/runfile/writer.py.)
 WRITER = """
-import sys, numpy as np
+import sys, time, numpy as np
 from higbench.runfile.writer import RunFileWriter
 w = RunFileWriter(sys.argv[1], "problem: {name: toy}\\n", [], env={"host": "x"}, meta={"problem": "toy", "optimizer": "adam"})
 i = 0
@@ -33,6 +37,7 @@ while True:
     w.flush()
     print(i + 1, flush=True)
     i += 1
+    time.sleep(0.01)
 """
 
 

@@ -24,11 +24,12 @@ import pytest
 import torch
 import yaml
 from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 from rel_helpers import FAST, start_cli, table_rows, wait_for_rows
 
 from higbench import cli
-from higbench.config import to_plain
+from higbench.config import ConfigError, to_plain
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner.checkpoint import checkpoint_path, resume_config
@@ -125,6 +126,14 @@ def stopped(tmp_path_factory):
                     time.sleep(0.05)
                 assert checkpoint_path(run_file).exists(), "no checkpoint was written"
                 wait_for_rows(run_file, ckpt_state(run_file)["rows"]["curves"]["step"] + 3, procs[name], timeout=60)
+            if name == "sigkill":  # resuming a run that is still going is refused
+                try:
+                    cli.precheck([f"resume={root / name}"])
+                    results["resume_live"] = "accepted"
+                except ConfigError as exc:
+                    results["resume_live"] = str(exc)
+                finally:
+                    GlobalHydra.instance().clear()
             seen[name] = table_rows(run_file)
             procs[name].send_signal(RUNS[name][1])
         results.update({name: finish(p) for name, p in procs.items()})
@@ -170,6 +179,7 @@ def test_sigkill_leaves_a_readable_running_file(stopped):
     assert curves["step"].is_monotonic_increasing
     state = ckpt_state(run_file)
     assert len(curves) > state["rows"]["curves"]["step"], "the kill should land after rows beyond the checkpoint"
+    assert "open in another process" in results["resume_live"], results["resume_live"]
     index = pytest.importorskip("higbench.results.index")
     runs = index.load_runs(root)
     status = {p.split("/")[-2]: s for p, s in zip(runs["path"], runs["status"])}
