@@ -23,6 +23,7 @@ import argparse
 import math
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -66,7 +67,9 @@ def make_model(seed: int = 0) -> nn.Module:
     return nn.Sequential(nn.Linear(10, 32), nn.Tanh(), nn.Linear(32, 32), nn.Tanh(), nn.Linear(32, 2))
 
 
-def train(optimizer: str = "hig", seconds: float = 10.0, max_steps: int | None = None, batch_size: int = 64, seed: int = 0, log=print):
+def train(
+    optimizer: str = "hig", seconds: float = 10.0, max_steps: int | None = None, batch_size: int = 64, seed: int = 0, log=print
+):
     """Train for ``seconds`` (or ``max_steps`` updates); returns [(time, step, test loss)]."""
     gen = torch.Generator().manual_seed(seed)
     test = sample(512, gen)
@@ -87,7 +90,7 @@ def train(optimizer: str = "hig", seconds: float = 10.0, max_steps: int | None =
         t0 = time.perf_counter()
         if optimizer == "hig":
             # The network, the simulator and the per-sample loss, as three callables.
-            opt.step_structured(model, obs, physics=spring, loss=lambda y: per_sample_loss(y, obs))
+            opt.step_structured(model, obs, physics=spring, loss=partial(per_sample_loss, observed=obs))
         else:
             opt.zero_grad()
             per_sample_loss(spring(model(obs)), obs).mean().backward()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from higbench.figures import registry
 from higbench.figures.data import FigureData
-from higbench.figures.runs import DONE_STATUSES, Composer, Job, RunIndex, expand, job_seconds, launch, resolve
+from higbench.figures.runs import Composer, Job, RunIndex, expand, job_seconds, launch, resolve
 from higbench.figures.spec import Figure, Preset
 
 
@@ -220,11 +220,4 @@ def plan(ids: list[str], preset: str, runs_root: str | Path = "outputs") -> list
         builder.close()
 
 
-def status_counts(jobs: list[Job]) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for j in jobs:
-        out[j.status] = out.get(j.status, 0) + 1
-    return out
-
-
-__all__ = ["build", "plan", "Builder", "BuildResult", "DONE_STATUSES"]
+__all__ = ["build", "plan", "Builder", "BuildResult"]

@@ -215,21 +215,35 @@ class FigureData:
         if not runs:
             return None
         series = []
+        diverged = []
         for r in runs:
             c = r.curves
             xs = (transform(r, c) if transform is not None else c[x].to_numpy(dtype=float)) + x_offset
             ys = c[y].to_numpy(dtype=float)
             self.record(panel, label, r, x, xs, y, ys)
-            series.append((xs, ys))
+            ok = np.isfinite(ys) & np.isfinite(xs)
+            series.append((xs[ok], ys[ok]))
+            if r.status == "diverged" and ok.any():
+                diverged.append((xs[ok][-1], ys[ok][-1], r.meta.get("status_step")))
+        series = [s for s in series if len(s[0])]
+        if not series:
+            return None
+        if diverged:
+            steps = sorted({d[2] for d in diverged if d[2] is not None})
+            label += f" (diverged{' at step ' + ', '.join(map(str, steps)) if steps else ''})"
         if len(series) == 1:
             (line,) = ax.plot(*series[0], label=label, color=color, ls=ls, **kw)
-            return line
-        lo = max(s[0][0] for s in series)
-        hi = min(s[0][-1] for s in series)
-        grid = np.linspace(lo, hi, 200) if hi > lo else np.array([lo])
-        logs = np.array([np.interp(grid, xs, np.log10(np.maximum(ys, 1e-300))) for xs, ys in series])
-        (line,) = ax.plot(grid, 10 ** np.median(logs, axis=0), label=f"{label} ({len(series)} seeds)", color=color, ls=ls, **kw)
-        ax.fill_between(grid, 10 ** logs.min(axis=0), 10 ** logs.max(axis=0), color=line.get_color(), alpha=0.2, lw=0)
+        else:
+            lo = max(s[0][0] for s in series)
+            hi = min(s[0][-1] for s in series)
+            grid = np.linspace(lo, hi, 200) if hi > lo else np.array([lo])
+            logs = np.array([np.interp(grid, xs, np.log10(np.maximum(ys, 1e-300))) for xs, ys in series])
+            (line,) = ax.plot(
+                grid, 10 ** np.median(logs, axis=0), label=f"{label} ({len(series)} seeds)", color=color, ls=ls, **kw
+            )
+            ax.fill_between(grid, 10 ** logs.min(axis=0), 10 ** logs.max(axis=0), color=line.get_color(), alpha=0.2, lw=0)
+        for dx, dy, _ in diverged:  # where a diverged run's last finite evaluation was
+            ax.plot([dx], [dy], marker="x", ms=8, mew=2, color=line.get_color(), ls="none")
         return line
 
     # -- writing ------------------------------------------------------------------------

@@ -23,7 +23,7 @@ Usable without the runner, three ways (fastest first):
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -84,7 +84,9 @@ class JacobianPower(torch.optim.Optimizer):
             if precision not in _DTYPES:
                 raise ValueError(f"precision={precision!r}: expected one of {tuple(_DTYPES)}")
             precision = _DTYPES[precision]
-        defaults = dict(lr=lr, kappa=kappa, beta=beta, tau=tau, truncation=truncation, solver=solver, precision=precision, jacobian=jacobian)
+        defaults = dict(
+            lr=lr, kappa=kappa, beta=beta, tau=tau, truncation=truncation, solver=solver, precision=precision, jacobian=jacobian
+        )
         super().__init__(params, defaults)
         if len(self.param_groups) != 1:
             raise ValueError("JacobianPower supports a single parameter group")
@@ -128,7 +130,7 @@ class JacobianPower(torch.optim.Optimizer):
         if isinstance(J, StructuredJacobian):
             if self.resolved_solver(J.rows, J.n_params) == "svd":
                 return jacobian_power(J.matrix().to(g["precision"]), grad_y, **self._opts())
-            return J.transpose_apply(gram_coefficients(J.gram().to(g["precision"]), grad_y, **self._opts()))
+            return J.transpose_apply(gram_coefficients(J.gram().to(g["precision"]), grad_y, **self._opts(), overwrite=True))
         J = J.to(g["precision"])
         if self.resolved_solver(*J.shape) == "svd":
             return jacobian_power(J, grad_y, **self._opts())
@@ -182,7 +184,10 @@ class JacobianPower(torch.optim.Optimizer):
                 eye = torch.eye(rows, dtype=y.dtype, device=y.device).reshape(rows, *y.shape)
                 jac = torch.autograd.grad(y, self.params, grad_outputs=eye, is_grads_batched=True, allow_unused=True)
                 J = torch.cat(
-                    [(j if j is not None else torch.zeros(rows, *p.shape, dtype=y.dtype)).reshape(rows, -1) for j, p in zip(jac, self.params)],
+                    [
+                        (j if j is not None else torch.zeros(rows, *p.shape, dtype=y.dtype)).reshape(rows, -1)
+                        for j, p in zip(jac, self.params)
+                    ],
                     dim=1,
                 )
         self._finish(J, grad_y, t0)

@@ -99,6 +99,7 @@ def gram_coefficients(
     tau: float = 1e-6,
     truncation: str = "relative",
     method: str = "auto",
+    overwrite: bool = False,
 ) -> torch.Tensor:
     """Output-space coefficients c with ``J^T c = jacobian_power(J, g, ...)``.
 
@@ -108,6 +109,7 @@ def gram_coefficients(
     method: ``eigh`` (torch.linalg.eigh: all eigenvectors), ``tridiagonal`` (Householder
     tridiagonalisation, eigenvectors applied to g only; ``higbench.optim.tridiagonal``, needs
     SciPy) or ``auto`` (tridiagonal for float64 CPU matrices of 256 rows and more).
+    overwrite: K may be destroyed (tridiagonal route; saves a copy of K).
     """
     if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
         raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
@@ -115,7 +117,7 @@ def gram_coefficients(
     if resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal":
         from higbench.optim.tridiagonal import TridiagonalEigen
 
-        eig = TridiagonalEigen(K)
+        eig = TridiagonalEigen(K, overwrite=overwrite)
         lam, project, expand = eig.values, eig.project, eig.expand
     else:
         lam, U = torch.linalg.eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy

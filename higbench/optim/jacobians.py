@@ -9,7 +9,7 @@ with no structure at all: the brute-force ground truth used in tests.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import nn

@@ -32,7 +32,7 @@ the naive torch.func rows (``higbench.optim.jacobians``) to the precision of the
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 from torch import nn
@@ -154,7 +154,9 @@ class StructuredJacobian:
 class GenericJacobian(StructuredJacobian):
     """Materialised J = blockdiag(A_i) N for any network, through torch.func (per-sample VJPs)."""
 
-    def __init__(self, model: nn.Module, params: Sequence[torch.Tensor], net_inputs: torch.Tensor, A: torch.Tensor, dtype: torch.dtype):
+    def __init__(
+        self, model: nn.Module, params: Sequence[torch.Tensor], net_inputs: torch.Tensor, A: torch.Tensor, dtype: torch.dtype
+    ):
         placed = _param_positions(model, params)
         b, m, n = A.shape
         values = {name: p.detach().to(dtype) for name, p, _ in placed}
@@ -218,7 +220,9 @@ class MLPJacobian(StructuredJacobian):
     Nothing of size rows x |theta| is formed for ``gram`` and ``transpose_apply``.
     """
 
-    def __init__(self, model: nn.Module, params: Sequence[torch.Tensor], net_inputs: torch.Tensor, A: torch.Tensor, dtype: torch.dtype):
+    def __init__(
+        self, model: nn.Module, params: Sequence[torch.Tensor], net_inputs: torch.Tensor, A: torch.Tensor, dtype: torch.dtype
+    ):
         layers = mlp_layers(model)
         if layers is None:
             raise ValueError("MLPJacobian needs an nn.Sequential of nn.Linear and elementwise activations")
@@ -327,7 +331,11 @@ class GraphJacobian(StructuredJacobian):
         seed.view(b, m, b, n).diagonal(dim1=0, dim2=2).copy_(A.to(u.dtype).permute(1, 2, 0))
         grads = torch.autograd.grad(u.reshape(b, n), list(params), seed, is_grads_batched=True, allow_unused=True)
         self.J = torch.cat(
-            [(g if g is not None else torch.zeros(R, *p.shape, dtype=u.dtype, device=u.device)).reshape(R, -1) for g, p in zip(grads, params)], dim=1
+            [
+                (g if g is not None else torch.zeros(R, *p.shape, dtype=u.dtype, device=u.device)).reshape(R, -1)
+                for g, p in zip(grads, params)
+            ],
+            dim=1,
         ).to(dtype)
         self.rows, self.n_params = self.J.shape
 

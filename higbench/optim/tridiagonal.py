@@ -107,10 +107,11 @@ class TridiagonalEigen:
     """K = Q W diag(values) W^T Q^T, with Q kept as reflectors (never formed).
 
     ``project(g)`` = U^T g and ``expand(x)`` = U x for U = Q W (the eigenvectors of K).
-    K must be float64 and symmetric (its lower triangle is used).
+    K must be float64 and symmetric (one triangle is used). ``overwrite``: K (a contiguous
+    CPU tensor) may be destroyed, saving a copy of n^2 doubles.
     """
 
-    def __init__(self, K: torch.Tensor):
+    def __init__(self, K: torch.Tensor, overwrite: bool = False):
         from scipy.linalg.lapack import dstevd, dsytrd, dsytrd_lwork
 
         if K.dtype != torch.float64:
@@ -125,7 +126,9 @@ class TridiagonalEigen:
             else:
                 lwork, info = dsytrd_lwork(n, lower=1)
                 # a.T is the Fortran-ordered view of the same (symmetric) matrix: no relayout.
-                self.c, d, e, self.tau, info = dsytrd(a.T, lower=1, lwork=int(lwork))
+                self.c, d, e, self.tau, info = dsytrd(
+                    a.T, lower=1, lwork=int(lwork), overwrite_a=int(overwrite and K.is_contiguous())
+                )
                 if info != 0:
                     raise torch.linalg.LinAlgError(f"dsytrd failed (info={info})")
             if n > 1:

@@ -65,6 +65,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--threshold", action="append", type=float, help="add a time_to_<t> column (repeatable)")
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
     p.add_argument("--pattern", default="*.h5", help="run file name pattern (default: *.h5)")
+    p.add_argument("--jobs", type=int, default=1, help="processes reading run files (for thousands of files)")
     p.add_argument("--csv", metavar="FILE", help="also write the full filtered table (all columns) to FILE")
     p.add_argument("--width", type=int, default=60, help="truncate the overrides column to this many characters (0: never)")
     return p.parse_args(argv)
@@ -75,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     roots = [Path(r) for r in args.roots]
     thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
     try:
-        df = load_runs(roots, thresholds=thresholds, pattern=args.pattern)
+        df = load_runs(roots, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs)
     except FileNotFoundError as exc:
         print(f"higbench-results: error: {exc}", file=sys.stderr)
         return 2
@@ -100,7 +101,11 @@ def main(argv: list[str] | None = None) -> int:
             if args.by
             else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
         )
-        df = best_runs(df, by=by, metric=args.metric) if len(df) else df
+        try:
+            df = best_runs(df, by=by, metric=args.metric) if len(df) else df
+        except KeyError as exc:
+            print(f"higbench-results: error: {exc.args[0]}", file=sys.stderr)
+            return 2
     elif args.metric in df:
         df = df.sort_values(["problem.name", "optimizer.name", args.metric], na_position="last")
     if args.csv:

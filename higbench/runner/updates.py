@@ -121,25 +121,26 @@ class JacobianPowerUpdate:
             return UpdateResult(value, finite=False, reason="non-finite loss")
         if J is None:
             return UpdateResult(value, finite=False, reason="non-finite Jacobian")
-        if self.structured and self.optimizer.resolved_solver(J.rows, J.n_params) == "gram":
-            try:
+        # Gram route: K (part of the derivatives), then eigen-solve + one J^T c in the inversion.
+        # Otherwise J itself (formed here if structured), then SVD (or Gram of J) in the inversion.
+        K = None
+        if isinstance(J, StructuredJacobian):
+            if self.optimizer.resolved_solver(J.rows, J.n_params) == "gram":
                 K = J.gram()
-            except torch.linalg.LinAlgError as exc:
-                return UpdateResult(value, finite=False, reason=f"Gram matrix failed: {exc}")
-            finite = bool(torch.isfinite(K).all())
-            direction_of = lambda: J.transpose_apply(gram_coefficients(K, grad_y.reshape(-1).to(K.dtype), **self.optimizer._opts()))  # noqa: E731
-        else:
-            if isinstance(J, StructuredJacobian):
+            else:
                 J = J.matrix()
-            finite = bool(torch.isfinite(J).all())
-            direction_of = lambda: self.optimizer.direction(J, grad_y)  # noqa: E731
+        finite = bool(torch.isfinite(K if K is not None else J).all())
         _sync(dev)
         t1 = time.perf_counter()
         if not finite:
             return UpdateResult(value, finite=False, reason="non-finite Jacobian")
         try:
-            direction = direction_of()
-        except torch.linalg.LinAlgError as exc:  # e.g. SVD failed to converge
+            if K is not None:
+                coeff = gram_coefficients(K, grad_y.reshape(-1).to(K.dtype), **self.optimizer._opts(), overwrite=True)
+                direction = J.transpose_apply(coeff)
+            else:
+                direction = self.optimizer.direction(J, grad_y)
+        except torch.linalg.LinAlgError as exc:  # e.g. SVD or eigh failed to converge
             return UpdateResult(value, finite=False, reason=f"inversion failed: {exc}")
         _sync(dev)
         t2 = time.perf_counter()

@@ -193,3 +193,26 @@ def test_whole_smoke_preset(tmp_path):
         "all", "--preset", "smoke", "--runs-root", str(tmp_path / "outputs"), "--out", str(tmp_path / "figures"), cwd=tmp_path
     )
     assert "0 run(s) launched" in again.stdout and t_again < elapsed
+
+
+@pytest.mark.slow
+def test_a_run_made_by_hand_with_the_cli_is_reused(tmp_path):
+    """A plain `higbench` run with the same resolved config counts (threads/progress do not matter)."""
+    from higbench.figures import registry
+    from higbench.figures.runs import expand
+    from higbench.figures.spec import Preset
+
+    job = next(j for j in expand(registry.figures()["fig4c"], Preset("smoke")) if j.overrides["optimizer"] == "hig")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    by_hand = [*job.override_list(), "threads=2", "progress=true", f"hydra.run.dir={tmp_path / 'outputs' / 'runs' / 'mine'}"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "higbench.cli", *by_hand], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out, _ = figures(
+        "fig4c", "--preset", "smoke", "--runs-root", str(tmp_path / "outputs"), "--out", str(tmp_path / "figs"), cwd=tmp_path
+    )
+    assert "1 run(s) launched" in out.stdout, out.stdout  # the Adam run only
+    info = json.loads((tmp_path / "figs" / "fig4c.json").read_text())
+    hig = next(r for r in info["runs"] if r["sweep"] == "hig")
+    assert "runs/mine/run.h5" in hig["path"]

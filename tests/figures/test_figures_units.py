@@ -7,6 +7,7 @@ import random
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from higbench.figures import registry
@@ -192,3 +193,33 @@ def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path):
     ]
     report = (tmp_path / "figs" / "REPORT.md").read_text()
     assert "HIG 0.25 s / Adam 0.1 s = 2.5x" in report and "**reproduced**" in report  # 2.5x vs the paper's 1.8x: within 3x
+
+
+def _fake_run(t, loss, **cols):
+    import pandas as pd
+
+    from higbench.figures.data import RunData
+
+    r = RunData(Job("f", "s", {}, seed=0, status="completed"))
+    r.__dict__["_run"] = ({}, pd.DataFrame({"wall_time": t, "test_loss": loss, **cols}))
+    return r
+
+
+def test_claim_helpers_crossing_time_and_plateau():
+    from higbench.figures.checks import crossing_time, final, loss_at
+    from higbench.figures.dipole import energy_ratio, plateau_fraction
+
+    adam = _fake_run([0, 100, 200, 300], [1.0, 1e-3, 1e-4, 1e-4])
+    hig = _fake_run([0, 100, 200, 300], [1.0, 1e-2, 1e-5, 1e-7])
+    assert crossing_time(hig, adam) == 200
+    assert crossing_time(adam, hig) is None  # Adam ends above HIG
+    assert loss_at(adam, 150) == pytest.approx(10**-3.5)
+    assert final([adam, hig]) == pytest.approx(np.median([1e-4, 1e-7]))
+    stall = _fake_run(
+        [0, 10, 20, 30, 40],
+        [1.0, 0.5, 0.5, 0.5, 0.1],
+        test_low_energy_loss=[0.5, 0.01, 0.01, 0.01, 0.01],
+        test_high_energy_loss=[0.5, 0.4, 0.4, 0.3, 0.05],
+    )
+    assert plateau_fraction(stall) == pytest.approx(0.75)
+    assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30, 5]))

@@ -2,6 +2,7 @@
 
 import pytest
 import torch
+from optim_helpers import CASES, setup
 from torch import nn
 
 from higbench.optim.jacobians import full_jacobian, per_sample_jacobian
@@ -14,8 +15,6 @@ from higbench.optim.structured import (
     network_jacobian,
     solver_jacobian,
 )
-
-from optim_helpers import CASES, setup
 
 
 def reference(p, model, batch):

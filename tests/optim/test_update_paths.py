@@ -20,7 +20,7 @@ from higbench.runner.updates import JacobianPowerUpdate, build_update
 EPS = float(np.finfo(np.float64).eps)
 
 
-BATCH = {"poisson": 1, "dipole_cnn": 2}  # keep the naive reference (and its SVD) fast
+BATCH = {"poisson": 1, "dipole_cnn": 1}  # keep the naive reference (and its SVD) fast
 
 
 def update_delta(case, tau, jacobian, solver, batch_size=None, *overrides, optimizer="hig"):
@@ -49,7 +49,8 @@ def rel(a, b):
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_all_paths_agree(case):
-    for tau in (1e-6, 1e-5):
+    # Poisson's spectrum spans 4 decades only: no truncation at either tau, one is enough.
+    for tau in (1e-6,) if case == "poisson" else (1e-6, 1e-5):
         ref, update = update_delta(case, tau, "naive", "svd")
         assert not update.structured
         struct_svd, update = update_delta(case, tau, "structured", "svd")
@@ -64,16 +65,13 @@ def test_all_paths_agree(case):
 def test_gram_route_at_tau_1e6_within_its_precision_bound():
     """A case where the Gram route's eps/tau^2 limit shows: the dipole over 24 steps, b = 2.
 
-    Measured 6.7e-6 relative (structured) at tau = 1e-6 (5e-9 at tau = 1e-5): above 1e-6,
+    Measured 1.5e-5 relative (structured) at tau = 1e-6 (5.9e-9 at tau = 1e-5): above 1e-6,
     far inside the bound eps/tau^2 = 2.2e-4 of eigh in float64.
     """
     tau = 1e-6
     ref, _ = update_delta("dipole", tau, "naive", "svd", 2, "problem.steps=24")
     gram, _ = update_delta("dipole", tau, "structured", "gram", 2, "problem.steps=24")
     assert rel(gram, ref) < EPS / tau**2
-    ref, _ = update_delta("dipole", 1e-5, "naive", "svd", 2, "problem.steps=24")
-    gram, _ = update_delta("dipole", 1e-5, "structured", "gram", 2, "problem.steps=24")
-    assert rel(gram, ref) < 1e-6
 
 
 def test_gauss_newton_paths_agree():

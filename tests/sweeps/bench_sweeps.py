@@ -24,7 +24,7 @@ REPO = HERE.parents[1]
 sys.path[:0] = [str(REPO), str(HERE)]
 
 
-def sweep(updates: int, optimizer: str, repeats: int) -> None:
+def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) -> None:
     env = dict(os.environ, PYTHONPATH=str(REPO))
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         env.pop(var, None)
@@ -35,11 +35,14 @@ def sweep(updates: int, optimizer: str, repeats: int) -> None:
         "basic, threads=1": ["threads=1"],
         "joblib n_jobs=2": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
     }
+    if only:
+        short = {"basic (sequential)": "basic", "basic, threads=1": "basic1", "joblib n_jobs=2": "joblib"}
+        variants = {k: v for k, v in variants.items() if short[k] in only}
     times: dict[str, list[float]] = {k: [] for k in variants}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(repeats):
             for name, extra in variants.items():
-                out = Path(tmp) / f"{r}_{name.split()[0]}_{len(extra)}"
+                out = Path(tmp) / f"{r}_{list(variants).index(name)}"
                 t = time.perf_counter()
                 proc = subprocess.run(
                     [sys.executable, "-m", "higbench.cli", *base, *extra, f"hydra.sweep.dir={out}"],
@@ -65,9 +68,10 @@ def sweep(updates: int, optimizer: str, repeats: int) -> None:
     print(f"cores: {os.cpu_count()}, load average now: {os.getloadavg()}")
     for k, v in best.items():
         print(f"{k:20s} best of {repeats}: {v:6.2f} s")
-    joblib_s = best["joblib n_jobs=2"]
-    seq, seq1 = best["basic (sequential)"], best["basic, threads=1"]
-    print(f"speed-up joblib(2) vs basic: {seq / joblib_s:.2f}x; vs basic threads=1: {seq1 / joblib_s:.2f}x")
+    joblib_s = best.get("joblib n_jobs=2")
+    for name in ("basic (sequential)", "basic, threads=1"):
+        if joblib_s and name in best:
+            print(f"speed-up joblib n_jobs=2 vs {name}: {best[name] / joblib_s:.2f}x")
 
 
 def index(n: int, keep: str | None) -> None:
@@ -110,11 +114,12 @@ if __name__ == "__main__":
     s.add_argument("--updates", type=int, default=2000)
     s.add_argument("--optimizer", default="adam")
     s.add_argument("--repeats", type=int, default=2)
+    s.add_argument("--only", nargs="*", help="variants: basic (default threads), basic1 (threads=1), joblib")
     i = sub.add_parser("index")
     i.add_argument("--files", type=int, default=1000)
     i.add_argument("--keep", help="directory to write the files into (reused if it has run files)")
     a = p.parse_args()
     if a.what == "sweep":
-        sweep(a.updates, a.optimizer, a.repeats)
+        sweep(a.updates, a.optimizer, a.repeats, a.only)
     else:
         index(a.files, a.keep)

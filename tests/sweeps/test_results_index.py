@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import REPO
 from synthetic import write_run
@@ -148,6 +149,8 @@ def test_cli_table_filters_and_best(tree, capsys):
     assert csv.read_text().count("\n") == 6
 
     assert results_main([str(tree / "missing")]) == 2
+    assert results_main([str(tree), "--best", "--metric", "no_such_metric"]) == 2
+    assert "no_such_metric" in capsys.readouterr().err
 
 
 def test_cli_module_entry_point(tree):
@@ -179,3 +182,10 @@ def test_only_unreadable_files_and_empty_root(tmp_path, capsys):
     empty.mkdir()
     assert load_runs(empty).empty and load_curves(empty).empty
     assert results_main([str(empty)]) == 0
+
+
+def test_parallel_reading_gives_the_same_tables(tree):
+    runs, curves = load_runs(tree, curves=True)
+    runs2, curves2 = load_runs(tree, curves=True, jobs=2)
+    pd.testing.assert_frame_equal(runs, runs2)
+    pd.testing.assert_frame_equal(curves, curves2)
