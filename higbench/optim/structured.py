@@ -80,18 +80,22 @@ def solver_jacobian(
             ur = u.detach().repeat(m, *([1] * (u.ndim - 1))).requires_grad_(True)
             xr = None if inputs is None else inputs.repeat(m, *([1] * (inputs.ndim - 1)))
             yr = call(xr, ur).reshape(m * b, -1)
+            if not yr.requires_grad:  # y does not depend on u at all
+                return yr[:b].detach(), yr.new_zeros(b, m, u_flat_size)
             seed = torch.eye(m, dtype=yr.dtype, device=yr.device).repeat_interleave(b, dim=0)
-            (grad,) = torch.autograd.grad(yr, ur, seed)
+            (grad,) = torch.autograd.grad(yr, ur, seed, materialize_grads=True)
             A = grad.reshape(m, b, u_flat_size).transpose(0, 1)
             return yr[:b].detach(), A
         leaf = u.detach().requires_grad_(True)
         y = call(inputs, leaf)
         y2 = y.reshape(b, -1)
         m = y2.shape[1]
+        if not y2.requires_grad:  # y does not depend on u at all
+            return y2.detach(), y2.new_zeros(b, m, u_flat_size)
         if method == "batched":
             seed = torch.eye(m, dtype=y2.dtype, device=y2.device)[:, None, :].expand(m, b, m)
             try:
-                (grad,) = torch.autograd.grad(y2, leaf, seed, is_grads_batched=True, retain_graph=True)
+                (grad,) = torch.autograd.grad(y2, leaf, seed, is_grads_batched=True, retain_graph=True, materialize_grads=True)
                 return y2.detach(), grad.reshape(m, b, u_flat_size).transpose(0, 1)
             except RuntimeError:  # an op without a vmap rule: do the passes one by one
                 pass
@@ -99,7 +103,7 @@ def solver_jacobian(
         for k in range(m):
             seed = torch.zeros_like(y2)
             seed[:, k] = 1.0
-            (grad,) = torch.autograd.grad(y2, leaf, seed, retain_graph=k < m - 1)
+            (grad,) = torch.autograd.grad(y2, leaf, seed, retain_graph=k < m - 1, materialize_grads=True)
             rows.append(grad.reshape(b, u_flat_size))
         return y2.detach(), torch.stack(rows, dim=1)
 

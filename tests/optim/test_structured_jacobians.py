@@ -128,3 +128,15 @@ def test_float32_model_gives_float64_factors_close_to_the_float32_reference():
     J = sj.matrix()
     assert J.dtype == torch.float64
     assert (J - J_ref.double()).abs().max() <= 1e-5 * J_ref.abs().max()
+
+
+@pytest.mark.parametrize("method", SOLVER_JACOBIAN_METHODS)
+def test_solver_jacobian_of_outputs_independent_of_some_or_all_of_u(method):
+    u = torch.randn(3, 4, dtype=torch.float64)
+    y, A = solver_jacobian(lambda v: torch.stack([2 * v[:, 0], v[:, 1] ** 2], 1), None, u, method=method)
+    expected = torch.zeros(3, 2, 4, dtype=torch.float64)
+    expected[:, 0, 0] = 2
+    expected[:, 1, 1] = 2 * u[:, 1]
+    torch.testing.assert_close(A, expected)
+    y, A = solver_jacobian(lambda v: torch.ones(v.shape[0], 2, dtype=v.dtype), None, u, method=method)
+    assert A.shape == (3, 2, 4) and not A.any()
