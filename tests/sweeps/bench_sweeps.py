@@ -4,8 +4,8 @@
     python tests/sweeps/bench_sweeps.py index [--files 1000]
 
 sweep: wall time of `higbench -m +experiment=toy_lr_grid` (4 jobs, a fixed number of updates
-each) through the basic launcher (sequential, torch's default threads) and through joblib
-with 2 workers (loky caps each at cores // 2 threads); prints the speed-up.
+each) through the basic launcher (sequential; torch's default threads, and threads=1) and
+through joblib with 2 workers (threads=1, higbench's default); prints the speed-up.
 index: writes N small synthetic run files with RunFileWriter, then times load_runs.
 """
 
@@ -31,7 +31,7 @@ def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) ->
     base = ["-m", "+experiment=toy_lr_grid", f"optimizer={optimizer}", "budget.seconds=null", f"budget.max_updates={updates}",
             "eval_unit=updates", f"eval_every={max(updates // 4, 1)}", "progress=false"]  # fmt: skip
     variants = {
-        "basic (sequential)": [],
+        "basic (sequential)": ["threads=null"],
         "basic, threads=1": ["threads=1"],
         "joblib n_jobs=2": ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"],
     }
@@ -114,7 +114,7 @@ if __name__ == "__main__":
     s.add_argument("--updates", type=int, default=2000)
     s.add_argument("--optimizer", default="adam")
     s.add_argument("--repeats", type=int, default=2)
-    s.add_argument("--only", nargs="*", help="variants: basic (default threads), basic1 (threads=1), joblib")
+    s.add_argument("--only", nargs="*", help="variants: basic (threads=null), basic1 (threads=1), joblib")
     i = sub.add_parser("index")
     i.add_argument("--files", type=int, default=1000)
     i.add_argument("--keep", help="directory to write the files into (reused if it has run files)")

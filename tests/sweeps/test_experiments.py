@@ -117,4 +117,3 @@ def test_slurm_launcher_writes_the_sbatch_script(hydra_compose, tmp_path, monkey
 def test_joblib_launcher_is_available(hydra_compose):
     cfg = hydra_compose("config", overrides=["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"], return_hydra_config=True)
     assert cfg.hydra.launcher._target_.endswith("JoblibLauncher") and cfg.hydra.launcher.n_jobs == 2
-    assert cfg.threads is None  # left to the launcher (loky caps OMP_NUM_THREADS per worker)

@@ -43,6 +43,7 @@ def test_joblib_two_workers_cap_threads(tmp_path):
         "-m",
         "+experiment=toy_lr_grid",
         *TINY,
+        "threads=null",  # torch's default thread count (conf/config.yaml sets threads=1)
         f"hydra.sweep.dir={sweep}",
         "hydra/launcher=joblib",
         "hydra.launcher.n_jobs=2",
