@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -44,6 +45,7 @@ def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) ->
             for name, extra in variants.items():
                 out = Path(tmp) / f"{r}_{list(variants).index(name)}"
                 t = time.perf_counter()
+                cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
                 proc = subprocess.run(
                     [sys.executable, "-m", "higbench.cli", *base, *extra, f"hydra.sweep.dir={out}"],
                     env=env,
@@ -52,6 +54,8 @@ def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) ->
                     text=True,
                 )
                 times[name].append(time.perf_counter() - t)
+                cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
                 if proc.returncode != 0:
                     sys.exit(f"{name} failed:\n{proc.stderr[-2000:]}")
                 from higbench.results import load_runs
@@ -61,7 +65,8 @@ def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) ->
                 clocks = runs["wall_time"].sum()
                 threads = sorted(set(runs["env.torch_threads"]))
                 print(
-                    f"  {name:20s} {times[name][-1]:6.2f} s   (sum of run clocks {clocks:6.2f} s, torch threads {threads})",
+                    f"  {name:20s} {times[name][-1]:6.2f} s  cpu {cpu:6.2f} s ({cpu / times[name][-1]:.2f} cores)"
+                    f"  sum of run clocks {clocks:6.2f} s, torch threads {threads}, load {os.getloadavg()[0]:.2f}",
                     flush=True,
                 )
     best = {k: min(v) for k, v in times.items()}
