@@ -11,7 +11,9 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
     wheels = tmp_path / "wheels"
     build = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(wheels), str(ROOT)],
-        capture_output=True, text=True, timeout=300,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert build.returncode == 0, build.stderr
     (wheel,) = wheels.glob("higbench-*.whl")
@@ -19,14 +21,31 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
     py = venv / "bin" / "python"
-    install = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall", str(wheel)], capture_output=True, text=True, timeout=300)
+    install = subprocess.run(
+        [str(py), "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall", str(wheel)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert install.returncode == 0, install.stderr
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    where = subprocess.run([str(py), "-c", "import higbench.cli as c; print(c.config_dir())"], cwd=elsewhere, capture_output=True, text=True, timeout=120)
+    where = subprocess.run(
+        [str(py), "-c", "import higbench.cli as c; print(c.config_dir())"],
+        cwd=elsewhere,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     conf = Path(where.stdout.strip())
     assert "site-packages" in str(conf) and (conf / "config.yaml").is_file() and (conf / "problem" / "dipole_cnn.yaml").is_file()
-    job = subprocess.run([str(venv / "bin" / "higbench"), "problem=oscillator", "optimizer=adam", "--cfg", "job"], cwd=elsewhere, capture_output=True, text=True, timeout=120)
+    job = subprocess.run(
+        [str(venv / "bin" / "higbench"), "problem=oscillator", "optimizer=adam", "--cfg", "job"],
+        cwd=elsewhere,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert job.returncode == 0, job.stderr
     assert "name: oscillator" in job.stdout and "lr: 0.0003" in job.stdout  # the (problem, optimizer) specialisation
 

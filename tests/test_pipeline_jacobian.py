@@ -34,15 +34,16 @@ def test_full_jacobian_matches_finite_differences():
     J = full_jacobian(model, p.physics, batch.inputs, batch.net_inputs)
     params = list(model.parameters())
     h = 1e-6
-    for col, (tensor, index) in enumerate([(params[0], (3, 1)), (params[-1], (5,)), (params[2], (0, 7))]):
+    for tensor, index in ((params[0], (3, 1)), (params[-1], (5,)), (params[2], (0, 7))):
         with torch.no_grad():
             base = p.outputs(model, batch).reshape(-1)
             tensor[index] += h
             bumped = p.outputs(model, batch).reshape(-1)
             tensor[index] -= h
-        flat = sum(q.numel() for q in params[: [id(q) for q in params].index(id(tensor))]) + torch.tensor(index).dot(
-            torch.tensor(tensor.stride()[: len(index)])
-        ).item()
+        flat = (
+            sum(q.numel() for q in params[: [id(q) for q in params].index(id(tensor))])
+            + torch.tensor(index).dot(torch.tensor(tensor.stride()[: len(index)])).item()
+        )
         torch.testing.assert_close((bumped - base) / h, J[:, flat], rtol=1e-4, atol=1e-6)
 
 

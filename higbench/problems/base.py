@@ -7,8 +7,8 @@ The runner and the optimizers only use this interface, so adding a problem is on
 from __future__ import annotations
 
 import abc
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 import torch
@@ -28,7 +28,7 @@ class Batch:
     def __len__(self) -> int:
         return self.net_inputs.shape[0]
 
-    def __getitem__(self, idx) -> "Batch":
+    def __getitem__(self, idx) -> Batch:
         return Batch(self.net_inputs[idx], self.inputs[idx], self.targets[idx])
 
 

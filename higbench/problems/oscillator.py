@@ -44,5 +44,12 @@ class Oscillator(FixedDataProblem):
         """States (b, steps+1, 4) and controls (b, steps) under the network (figure 2a)."""
         with torch.no_grad():
             u = model(batch.net_inputs)
-            states = simulate(batch.inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control), return_trajectory=True)
+            states = simulate(
+                batch.inputs,
+                u,
+                dt=self.cfg.dt,
+                coupling=self.cfg.coupling,
+                control=tuple(self.cfg.control),
+                return_trajectory=True,
+            )
         return states, u

@@ -10,7 +10,7 @@ curves use a fixed evaluation set drawn from a separate seeded stream (also unse
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import torch
 from torch import nn

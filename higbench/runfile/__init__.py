@@ -3,4 +3,13 @@
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 from higbench.runfile.writer import FORMAT_VERSION, STATUSES, RunFileExists, RunFileWriter
 
-__all__ = ["RunFileWriter", "RunFileExists", "FORMAT_VERSION", "STATUSES", "load_run", "load_updates", "load_logs", "load_weights"]
+__all__ = [
+    "RunFileWriter",
+    "RunFileExists",
+    "FORMAT_VERSION",
+    "STATUSES",
+    "load_run",
+    "load_updates",
+    "load_logs",
+    "load_weights",
+]

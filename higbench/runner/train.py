@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first optimizer (3-4 s here):
+
 # import it up front, so that no launcher's first run pays it inside the training clock.
 from omegaconf import DictConfig, OmegaConf
 
