@@ -29,29 +29,27 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def sidecars(out_dir: Path) -> dict[str, dict]:
+def _json_sidecars(out_dir: Path) -> dict[str, dict]:
+    """Every figure sidecar (<id>.json with an "id") in out_dir, unreadable ones skipped."""
     figs = {}
     for path in sorted(Path(out_dir).glob("*.json")):
         try:
             info = json.loads(path.read_text())
         except ValueError:
             continue
-        if isinstance(info, dict) and "id" in info and "runs" in info:
+        if isinstance(info, dict) and "id" in info:
             figs[info["id"]] = info
     return figs
 
 
+def sidecars(out_dir: Path) -> dict[str, dict]:
+    """Sidecars of drawn figures (those that list their runs)."""
+    return {k: v for k, v in _json_sidecars(out_dir).items() if "runs" in v}
+
+
 def collect(out_dir: Path) -> list[dict]:
     rows = {}
-    figs = {}
-    for path in sorted(Path(out_dir).glob("*.json")):
-        try:
-            info = json.loads(path.read_text())
-        except ValueError:
-            continue
-        if not isinstance(info, dict) or "id" not in info:
-            continue
-        figs[info["id"]] = info
+    for info in _json_sidecars(out_dir).values():
         for c in info.get("claims", []):
             rows[c["id"]] = c
     out = []
