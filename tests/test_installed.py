@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+import sysconfig
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -17,10 +18,25 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
     )
     assert build.returncode == 0, build.stderr
     (wheel,) = wheels.glob("higbench-*.whl")
-    # A venv that sees this environment's torch/hydra but holds its own (non-editable) higbench.
+    # A venv that holds its own (non-editable) higbench and borrows torch/hydra from *this*
+    # environment. Not `--system-site-packages`: that exposes the base interpreter's
+    # packages, not this venv's, and a fresh machine's base Python has none.
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     py = venv / "bin" / "python"
+    venv_site = Path(
+        subprocess.run(
+            [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
+        ).stdout.strip()
+    )
+    # Plain path lines in a .pth are appended after the venv's own site-packages, and .pth
+    # files inside them are not run, so this environment's editable higbench stays invisible.
+    ours = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}
+    (venv_site / "_higbench_test_deps.pth").write_text("\n".join(sorted(ours)) + "\n")
     install = subprocess.run(
         [str(py), "-m", "pip", "install", "-q", "--no-deps", "--force-reinstall", str(wheel)],
         capture_output=True,
@@ -37,7 +53,9 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
         text=True,
         timeout=120,
     )
+    assert where.returncode == 0, where.stderr
     conf = Path(where.stdout.strip())
+    assert conf.is_relative_to(venv_site), f"{conf} is not inside the wheel install {venv_site}"
     assert "site-packages" in str(conf) and (conf / "config.yaml").is_file() and (conf / "problem" / "dipole_cnn.yaml").is_file()
     job = subprocess.run(
         [str(venv / "bin" / "higbench"), "problem=oscillator", "optimizer=adam", "--cfg", "job"],
