@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -12,6 +13,21 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `optuna` need the optuna extra: without it they are skipped, with the reason shown (-ra)."""
+    try:
+        if importlib.util.find_spec("hydra_plugins.hydra_optuna_sweeper") is not None:
+            return
+    except ModuleNotFoundError:  # no hydra_plugins namespace at all
+        pass
+    skip = pytest.mark.skip(reason="needs the optuna extra (Hydra's Optuna sweeper): run `make test-optuna`")
+    for item in items:
+        if "optuna" in item.keywords:
+            item.add_marker(skip)
+
 
 # A budget of a few updates, one evaluation per update, no progress bar.
 TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false"]

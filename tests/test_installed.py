@@ -17,6 +17,9 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
         timeout=300,
     )
     assert build.returncode == 0, build.stderr
+    # A clean build: no deprecated license table, no config folder missing from `packages`.
+    for warning in ("BuildBackendWarning", "SetuptoolsDeprecationWarning", "is absent from the `packages`"):
+        assert warning not in build.stderr, build.stderr
     (wheel,) = wheels.glob("higbench-*.whl")
     # A venv that holds its own (non-editable) higbench and borrows torch/hydra from *this*
     # environment. Not `--system-site-packages`: that exposes the base interpreter's
@@ -73,4 +76,7 @@ def test_every_subpackage_is_listed_in_pyproject():
 
     listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
     found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "higbench").rglob("__init__.py")}
+    # conf/ ships as higbench.conf; each config group folder is a data-only package.
+    found |= {".".join(("higbench", *p.relative_to(ROOT).parts)) for p in (ROOT / "conf").rglob("*") if p.is_dir()}
+    found.add("higbench.conf")
     assert found <= listed, f"add {sorted(found - listed)} to [tool.setuptools] packages"

@@ -46,7 +46,7 @@ def test_every_experiment_is_listed():
     assert set(EXPERIMENTS) == set(EXPECTED)
 
 
-@pytest.mark.parametrize("name", EXPERIMENTS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.optuna) if "optuna" in n else n for n in EXPERIMENTS])
 def test_experiment_composes_and_its_grid_validates(name, hydra_compose):
     problem, optimizer, keys = EXPECTED[name]
     if not (CONF / "problem" / f"{problem}.yaml").is_file():

@@ -95,6 +95,7 @@ def test_submitit_local(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.optuna
 def test_optuna_sweeper(tmp_path):
     """Optuna proposes lr/tau/batch_size, minimises what the job returns (the final test loss)."""
     sweep = tmp_path / "sweep"
