@@ -98,12 +98,20 @@ def _composition_error(exc: Exception, overrides: list[str], config_name: str) -
         value = next((o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+~") == full_key and "=" in o), "?")
         parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
         others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
+        target = None
         try:
             base = OmegaConf.to_container(compose(config_name, overrides=others), resolve=False)
             node = OmegaConf.select(OmegaConf.create(base), parent) if parent else base
             valid = sorted(node.keys()) if hasattr(node, "keys") else []
+            target = node.get("_target_") if parent == "optimizer" and hasattr(node, "get") else None
         except Exception:  # noqa: BLE001
             valid = []
+        leaf = full_key.rsplit(".", 1)[-1]
+        if target and leaf in _constructor_args(str(target)):
+            # A constructor argument the optimizer's YAML does not list: Hydra adds it with `+`.
+            return ConfigError(
+                full_key, value, f"not set in conf/optimizer/{base['optimizer'].get('name')}.yaml; add it with +{full_key}={value}"
+            )
         where = f" under {parent}" if parent else ""
         return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
     if "Could not find" in text and "Available options in" in text:
@@ -124,6 +132,15 @@ def _composition_error(exc: Exception, overrides: list[str], config_name: str) -
             key, _, value = line.partition("=")
             return ConfigError(key, value, f"cannot parse this override ({first})")
     return ConfigError("overrides", " ".join(overrides), first)
+
+
+def _constructor_args(target: str) -> tuple[str, ...]:
+    from higbench.config import optimizer_args
+
+    try:
+        return optimizer_args(target)
+    except ConfigError:
+        return ()
 
 
 def _job_overrides(overrides: list[str], sweeper_params: dict | None) -> tuple[list[list[str]], bool]:

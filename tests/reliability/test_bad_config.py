@@ -273,6 +273,17 @@ def test_unknown_keys_list_the_valid_ones(tmp_path, monkeypatch, capsys):
         assert "unknown key" in err and expected in err, err
 
 
+def test_constructor_argument_missing_from_yaml_says_to_add_it_with_plus(tmp_path, monkeypatch, capsys):
+    """torch.optim.Adam takes amsgrad, conf/optimizer/adam.yaml does not list it: the error says `+`."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        cli.main(["optimizer=adam", "optimizer.amsgrad=true"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "higbench: error: optimizer.amsgrad=true: not set in conf/optimizer/adam.yaml; add it with +optimizer.amsgrad=true"
+    assert files_under(tmp_path) == []
+
+
 def test_memory_guard_message_gives_estimate_and_fitting_batch(tmp_path, monkeypatch, capsys):
     from higbench.runner import memory_guard
 
