@@ -109,9 +109,8 @@ def _composition_error(exc: Exception, overrides: list[str], config_name: str) -
         leaf = full_key.rsplit(".", 1)[-1]
         if target and leaf in _constructor_args(str(target)):
             # A constructor argument the optimizer's YAML does not list: Hydra adds it with `+`.
-            return ConfigError(
-                full_key, value, f"not set in conf/optimizer/{base['optimizer'].get('name')}.yaml; add it with +{full_key}={value}"
-            )
+            yaml_file = f"conf/optimizer/{base['optimizer'].get('name')}.yaml"
+            return ConfigError(full_key, value, f"not set in {yaml_file}; add it with +{full_key}={value}")
         where = f" under {parent}" if parent else ""
         return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
     if "Could not find" in text and "Available options in" in text:

@@ -15,7 +15,6 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
-
 def pytest_collection_modifyitems(config, items):
     """Tests marked `optuna` need the optuna extra: without it they are skipped, with the reason shown (-ra)."""
     try:

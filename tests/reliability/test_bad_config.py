@@ -280,7 +280,8 @@ def test_constructor_argument_missing_from_yaml_says_to_add_it_with_plus(tmp_pat
         cli.main(["optimizer=adam", "optimizer.amsgrad=true"])
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
-    assert err == "higbench: error: optimizer.amsgrad=true: not set in conf/optimizer/adam.yaml; add it with +optimizer.amsgrad=true"
+    expected = "optimizer.amsgrad=true: not set in conf/optimizer/adam.yaml; add it with +optimizer.amsgrad=true"
+    assert err == f"higbench: error: {expected}"
     assert files_under(tmp_path) == []
 
 
