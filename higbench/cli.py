@@ -215,6 +215,10 @@ def precheck(argv: list[str]) -> list[str]:
             validate(task)
             configs.append((job, cfg, task))
 
+        if not args.multirun:  # a line at once: torch and the pre-flight take seconds (jobs of a sweep: in _run_job)
+            from higbench.runner.progress import announce, start_text
+
+            announce(configs[0][2].get("progress", True), start_text(OmegaConf.create(configs[0][2])))
         from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
 
         if args.multirun:
@@ -302,6 +306,10 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 
 
 def _run_job(cfg: DictConfig) -> float:
+    from higbench.runner.progress import announce, start_text
+
+    if HydraConfig.get().mode == RunMode.MULTIRUN:  # a single run said it in precheck
+        announce(cfg.get("progress", True), start_text(cfg))  # before torch loads (seconds)
     from higbench.runfile.writer import RunFileBusy, RunFileExists
     from higbench.runner import checkpoint
     from higbench.runner.train import train
@@ -338,12 +346,8 @@ def _run_job(cfg: DictConfig) -> float:
         raise ConfigError("hydra.run.dir", str(output_dir), str(exc)) from None
     except RunFileBusy as exc:
         raise ConfigError("resume", str(run_path), str(exc)) from None
-    print(
-        f"{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in "
-        f"{summary.wall_time:.1f}s, final test loss {summary.final_test_loss:.4e}"
-        + (f" ({summary.reason})" if summary.reason else "")
-    )
-    print(f"run file: {summary.path}")
+    for line in summary_lines(summary, cfg):  # through logging: the console and <run dir>/higbench.log
+        log.info(line)
     if summary.status == "interrupted":
         print(f"resume with: higbench resume={summary.path.parent}", file=sys.stderr)
         signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
@@ -352,6 +356,32 @@ def _run_job(cfg: DictConfig) -> float:
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
+
+
+SUMMARY_THRESHOLDS = (1e-3, 1e-4, 1e-5)  # test-loss levels whose training-clock time the summary shows
+log = logging.getLogger("higbench")
+
+
+def summary_lines(summary, cfg: DictConfig) -> list[str]:
+    """The end-of-run lines, read back from the closed run file (the numbers the index shows)."""
+    from higbench.results.index import read_run_summary, threshold_column
+    from higbench.runner.progress import job_label
+
+    label = job_label()
+    head = f"{label}{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in {summary.wall_time:.1f}s"
+    row, _ = read_run_summary(summary.path, thresholds=SUMMARY_THRESHOLDS)  # never raises
+    if "final_test_loss" not in row:  # an unreadable file: say what the loop knew
+        row["final_test_loss"] = summary.final_test_loss
+    final = row.get("final_test_loss", math.nan)
+    at = f" (last evaluated at step {row['final_step']})" if "final_step" in row and row["final_step"] != summary.steps else ""
+    lines = [f"{head}, final test loss {final:.4e}{at}" + (f" ({summary.reason})" if summary.reason else "")]
+    times = []
+    for t in SUMMARY_THRESHOLDS:
+        value = row.get(threshold_column(t), math.nan)
+        times.append(f"{t:.0e}: " + (f"{value:.1f}s" if math.isfinite(value) else "not reached"))
+    lines.append(f"{label}time to test loss " + ", ".join(times))
+    lines.append(f"{label}run file: {summary.path}")
+    return lines
 
 
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")

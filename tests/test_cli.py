@@ -80,3 +80,24 @@ def test_every_problem_trains_a_few_updates(cli, tmp_path, problem, optimizer):
     assert proc.returncode == 0, proc.stderr
     meta, curves = load_run(run_files(tmp_path / "outputs")[0])
     assert meta["status"] == "completed" and curves["test_loss"].notna().all()
+
+
+def test_help_lists_every_choice_and_the_outputs(cli, tmp_path):
+    proc = cli("--help", tiny=False)
+    assert proc.returncode == 0, proc.stderr
+    conf = Path(__file__).resolve().parent.parent / "conf"
+    for group in ("problem", "optimizer", "experiment"):
+        for name in sorted(p.stem for p in (conf / group).glob("*.yaml")):
+            assert f" {name} " in proc.stdout.replace("\n", " \n"), f"--help does not list {group} {name}"
+    assert "problem_optimizer:" not in proc.stdout and "powered by Hydra" not in proc.stdout
+    assert "outputs/runs/" in proc.stdout and "budget.seconds" in proc.stdout
+    assert not (tmp_path / "outputs").exists()
+
+
+def test_hydra_log_is_named_after_the_tool_and_not_empty(cli, tmp_path):
+    proc = cli("problem=toy", "optimizer=adam")
+    assert proc.returncode == 0, proc.stderr
+    (run,) = run_files(tmp_path / "outputs")
+    log = run.parent / "higbench.log"
+    assert log.is_file() and not (run.parent / "cli.log").exists()
+    assert "completed: toy/adam" in log.read_text()  # the summary goes through logging too

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import signal
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, memory_guard
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
+from higbench.runner.progress import Progress
 from higbench.runner.updates import JacobianPowerUpdate, build_update
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -225,43 +225,6 @@ def preflight(cfg: DictConfig) -> None:
         check_memory(cfg, problem, model, update)
 
 
-# -- progress --------------------------------------------------------------------------------
-
-
-class Progress:
-    """tqdm on a terminal, one plain line per evaluation otherwise."""
-
-    def __init__(self, enabled: bool, budget_s: float | None, start: float = 0.0):
-        self.tty = enabled and sys.stderr.isatty()
-        self.bar = None
-        if self.tty:
-            from tqdm import tqdm
-
-            self.bar = tqdm(
-                total=budget_s,
-                initial=start,
-                unit="s",
-                bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt}s {postfix}",
-                file=sys.stderr,
-            )
-        self.enabled = enabled
-
-    def update(self, step: int, wall: float, train_loss: float, test_loss: float | None) -> None:
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.n = min(wall, self.bar.total or wall)
-            self.bar.set_postfix_str(
-                f"step {step} loss {train_loss:.3e}" + (f" test {test_loss:.3e}" if test_loss is not None else "")
-            )
-        elif test_loss is not None:
-            print(f"step {step:7d}  t {wall:8.2f}s  train {train_loss:.4e}  test {test_loss:.4e}", file=sys.stderr, flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-
-
 # -- the loop --------------------------------------------------------------------------------
 
 
@@ -272,6 +235,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     run's stored config, see ``checkpoint.resume_config``) instead of creating it.
     """
     run_path = Path(run_path)
+    name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     state = checkpoint.load(run_path) if resume else None
     device, problem = _setup(cfg)
     test = problem.test_set()
@@ -335,7 +299,9 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
         torch.set_rng_state(state["torch_rng"])
         if device.type == "cuda" and state.get("cuda_rng") is not None:
             torch.cuda.set_rng_state(state["cuda_rng"], device)
-    progress = Progress(cfg.get("progress", True), cfg.budget.seconds, start=clock())
+    progress = Progress(
+        cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
+    )
     last_ckpt = clock()
     clock.resume()
     status, reason = "completed", ""
@@ -433,6 +399,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
             ):
                 pending[k].append(v)
             memory.sample()
+            progress.tick(step, clock())
             if step >= max_updates or clock() >= budget_s:
                 break
             if (step if by_updates else clock()) >= next_eval:
