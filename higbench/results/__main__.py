@@ -23,7 +23,7 @@ SUMMARY_COLUMNS = [
     "optimizer.name",
     "status",
     "steps",
-    "wall_time",
+    "train_time_s",
     "final_test_loss",
     "best_test_loss",
     "overrides",
@@ -65,6 +65,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--threshold", action="append", type=float, help="add a time_to_<t> column (repeatable)")
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
     p.add_argument("--pattern", default="*.h5", help="run file name pattern (default: *.h5)")
+    p.add_argument(
+        "--figure-runs", action="store_true", help="also list the runs `make figures` made (under figures-runs/; off by default)"
+    )
     p.add_argument("--jobs", type=int, default=1, help="processes reading run files (for thousands of files)")
     p.add_argument("--csv", metavar="FILE", help="also write the full filtered table (all columns) to FILE")
     p.add_argument("--width", type=int, default=60, help="truncate the overrides column to this many characters (0: never)")
@@ -76,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     roots = [Path(r) for r in args.roots]
     thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
     try:
-        df = load_runs(roots, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs)
+        df = load_runs(roots, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs, figure_runs=args.figure_runs)
     except FileNotFoundError as exc:
         print(f"higbench-results: error: {exc}", file=sys.stderr)
         return 2
@@ -102,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
             else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
         )
         try:
-            df = best_runs(df, by=by, metric=args.metric) if len(df) else df
+            df = best_runs(df, by=by, metric=args.metric, per_problem=not args.by) if len(df) else df  # --by: the whole grouping
         except KeyError as exc:
             print(f"higbench-results: error: {exc.args[0]}", file=sys.stderr)
             return 2

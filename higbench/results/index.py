@@ -2,10 +2,11 @@
 
     runs = load_runs("outputs")                       # one row per run file
     runs, curves = load_runs("outputs", curves=True)  # + one row per (run, evaluation)
-    best_runs(runs, by="optimizer.name")              # table-2 selection
+    best_runs(runs, by="optimizer.name")              # table-2 selection, per problem
 
 ``runs`` has the flattened config (``problem.name``, ``optimizer.lr``, ``batch_size``, ...),
-``path``, ``status``, ``overrides``, ``steps``, ``wall_time``, ``final_test_loss``,
+``path``, ``source``, ``status``, ``overrides``, ``steps``, ``train_time_s`` (the training
+clock at the end: evaluations excluded), ``final_test_loss``,
 ``best_test_loss``, ``time_to_<threshold>`` (training clock at the first evaluation whose
 test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``.
 
@@ -271,15 +272,58 @@ _ALWAYS = (
 _NUMERIC = ("steps", "wall_time", "final_test_loss", "best_test_loss")
 
 
+# Renamed for the table: the run file's root attribute `wall_time` is the training clock.
+_RENAMED = {"wall_time": "train_time_s"}
+# Kept in the row dict (read_run_summary) but not in the table: duplicates of other columns
+# (`problem.name`, `optimizer.name`; `final_step` is `steps` except for a run stopped between
+# evaluations, where `status_step` and the curves tell).
+_DROPPED = ("problem", "optimizer", "final_step")
+FIGURE_RUNS_DIR = "figures-runs"  # where `make figures` puts its runs (higbench/figures/runs.py)
+
+
+def _number(text: str) -> int | float:
+    try:
+        return int(text)
+    except ValueError:
+        try:
+            return float(text)
+        except ValueError:
+            return math.nan
+
+
+def _integer_columns(rows: list[dict]) -> set[str]:
+    """Columns whose values are all ints (bools aside): kept as integers despite missing values."""
+    seen: dict[str, bool] = {}
+    for row in rows:
+        for k, v in row.items():
+            if v is None or (isinstance(v, float) and math.isnan(v)):
+                continue
+            seen[k] = seen.get(k, True) and isinstance(v, int | np.integer) and not isinstance(v, bool | np.bool_)
+    return {k for k, ok in seen.items() if ok}
+
+
 def _frame(rows: list[dict]) -> pd.DataFrame:
+    for row in rows:  # runs whose config lacks the name (old files): take it from the root attribute
+        for key in ("problem", "optimizer"):
+            if row.get(f"{key}.name") is None and row.get(key) is not None:
+                row[f"{key}.name"] = row[key]
+    for row in rows:  # files written before numbers were stored as numbers held them as text
+        for key in _NUMERIC:
+            if isinstance(row.get(key), str):
+                row[key] = _number(row[key])
+    integers = _integer_columns(rows)
     df = pd.DataFrame.from_records(rows)
+    df = df.drop(columns=[c for c in _DROPPED if c in df.columns])
+    for col in integers & set(df.columns):
+        if df[col].dtype.kind == "f":  # ints with a missing value: pandas' nullable integers
+            df[col] = df[col].astype("Int64")
     for col in _ALWAYS:  # present even when no file could be read
         if col not in df.columns:
             df[col] = pd.Series(
                 np.nan if col in _NUMERIC else None, index=df.index, dtype="float64" if col in _NUMERIC else "object"
             )
     first = [c for c in ("path", "status", "problem.name", "optimizer.name", "overrides") if c in df.columns]
-    return df[first + [c for c in df.columns if c not in first]]
+    return df[first + [c for c in df.columns if c not in first]].rename(columns=_RENAMED)
 
 
 def _curves_frame(parts: list[tuple[str, dict[str, np.ndarray]]]) -> pd.DataFrame:
@@ -312,6 +356,7 @@ def load_runs(
     thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
     pattern: str = "*.h5",
     jobs: int = 1,
+    figure_runs: bool = False,
 ) -> pd.DataFrame | tuple[pd.DataFrame, pd.DataFrame]:
     """One row per run file under ``root``; with ``curves=True`` also the long curves table.
 
@@ -319,11 +364,18 @@ def load_runs(
     the first evaluation at or below ``t``; NaN if never reached).
     jobs: processes reading files (reading is HDF5-bound, a few ms per file; worth it for
     thousands of files on several cores).
+    figure_runs: also index the runs `make figures` made (under a ``figures-runs`` folder
+    below a root; often smoke-preset budgets). Off by default, so a table of your runs is
+    not mixed with them; a root that is itself inside ``figures-runs`` is always indexed.
+    The ``source`` column says ``figures`` or ``runs``.
     Returns ``runs`` or ``(runs, curves)``; ``curves`` has one row per (run, evaluation):
     ``path`` (join key with ``runs``), ``step``, ``epoch``, ``wall_time``, ``train_loss``,
     ``test_loss``, ``rss_mb`` and any extra ``test_<metric>``.
     """
     paths = find_run_files(root, pattern)
+    roots = [Path(root)] if isinstance(root, str | Path) else [Path(r) for r in root]
+    if not figure_runs:
+        paths = [p for p in paths if not _under_figure_runs(p, roots)]
     if jobs > 1 and len(paths) > 2 * jobs:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -335,10 +387,23 @@ def load_runs(
             ]
     else:
         results = _read_chunk(paths, thresholds, curves)
+    for row, _ in results:
+        row["source"] = "figures" if FIGURE_RUNS_DIR in Path(row["path"]).parts else "runs"
     runs = _frame([row for row, _ in results])
     if not curves:
         return runs
     return runs, _curves_frame([(row["path"], cols) for row, cols in results if cols])
+
+
+def _under_figure_runs(path: Path, roots: list[Path]) -> bool:
+    """Whether ``path`` lies in a figures-runs folder below the root it was found under."""
+    for r in roots:
+        try:
+            rel = path.relative_to(r)
+        except ValueError:
+            continue
+        return FIGURE_RUNS_DIR in rel.parts[:-1]
+    return False
 
 
 def load_curves(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") -> pd.DataFrame:
@@ -346,13 +411,19 @@ def load_curves(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") 
     return load_runs(root, curves=True, pattern=pattern)[1]
 
 
-def best_runs(df: pd.DataFrame, by: str | Sequence[str] = "optimizer.name", metric: str = "final_test_loss") -> pd.DataFrame:
+def best_runs(
+    df: pd.DataFrame, by: str | Sequence[str] = "optimizer.name", metric: str = "final_test_loss", per_problem: bool = True
+) -> pd.DataFrame:
     """The best completed run per group (lowest ``metric``): the table-2 selection.
 
     Only runs with status ``completed`` and a finite ``metric`` compete, so diverged,
-    interrupted, failed, running and corrupt runs are never selected.
+    interrupted, failed, running and corrupt runs are never selected. Losses of different
+    problems do not compare: with ``per_problem`` (default) the groups are also split by
+    ``problem.name`` (and ``problem.model``, where runs have it).
     """
     keys = [by] if isinstance(by, str) else list(by)
+    if per_problem:
+        keys = [k for k in ("problem.name", "problem.model") if k in df.columns and k not in keys] + keys
     missing = [k for k in [*keys, metric, "status"] if k not in df.columns]
     if missing:
         raise KeyError(f"best_runs: no column(s) {missing} in the runs table")

@@ -23,8 +23,17 @@ def _open(path: str | Path) -> h5py.File:
     return h5py.File(path, "r", locking=False)
 
 
+_NUMERIC_ATTRS = {"steps": int, "status_step": int, "format_version": int, "wall_time": float}
+
+
 def read_meta(f: h5py.File) -> dict:
     meta = {k: _attr(v) for k, v in f.attrs.items()}
+    for key, kind in _NUMERIC_ATTRS.items():  # older files may hold these as text
+        if isinstance(meta.get(key), str):
+            try:
+                meta[key] = kind(float(meta[key])) if kind is int else kind(meta[key])
+            except ValueError:
+                pass
     meta["config"] = yaml.safe_load(meta.get("config", "{}")) or {}
     meta["overrides"] = json.loads(meta.get("overrides", "[]"))
     meta["resumes"] = json.loads(meta.get("resumes", "[]"))

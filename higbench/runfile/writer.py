@@ -63,6 +63,36 @@ class RunFileBusy(OSError):
 
 TABLES = ("curves", "logs", "updates")
 
+# (units, description) written as attributes of each table dataset, so a file explains itself
+# (h5dump, HDFView). Extra metrics (curves/test_<metric>) get a generic entry.
+DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
+    ("curves", "step"): ("updates", "update count at this evaluation (0: the initial network)"),
+    ("curves", "epoch"): ("epochs", "completed passes over the training set at this evaluation"),
+    ("curves", "wall_time"): ("s", "training clock at this evaluation (evaluations excluded; start-up included)"),
+    ("curves", "train_loss"): ("loss", "mean mini-batch loss since the previous evaluation (NaN at step 0)"),
+    ("curves", "test_loss"): ("loss", "mean loss over the test set"),
+    ("curves", "rss_mb"): ("MB", "resident memory of the process at this evaluation"),
+    ("logs", "neuron_mean"): ("activation", "per hidden neuron: mean activation over the validation inputs"),
+    ("logs", "neuron_std"): ("activation", "per hidden neuron: standard deviation of the activation over the validation inputs"),
+    ("logs", "probe_output"): ("output", "network output for the probe input problem.probe_x"),
+    ("logs", "probe_target"): ("output", "target for the probe input problem.probe_x"),
+    ("updates", "step"): ("updates", "update count after this update"),
+    ("updates", "wall_time"): ("s", "training clock after this update"),
+    ("updates", "loss"): ("loss", "mean loss of this update's mini-batch"),
+    ("updates", "jacobian_s"): ("s", "time of the derivatives (forward pass, gradient or Jacobian factors)"),
+    ("updates", "inversion_s"): ("s", "time of the inversion (GN/HIG: Gram/SVD; first-order: 0)"),
+    ("updates", "apply_s"): ("s", "time to apply the update to the weights"),
+    ("updates", "update_s"): ("s", "whole update: jacobian_s + inversion_s + apply_s"),
+}
+
+
+def dataset_info(group: str, name: str) -> tuple[str, str] | None:
+    if (group, name) in DATASET_INFO:
+        return DATASET_INFO[group, name]
+    if group == "curves" and name.startswith("test_"):
+        return "loss", f"{name[5:].replace('_', ' ')} over the test set"
+    return None
+
 
 class RunFileWriter:
     def __init__(self, path: str | Path, config_yaml: str, overrides: list[str], env: Mapping, meta: Mapping):
@@ -163,7 +193,10 @@ class RunFileWriter:
         values = np.asarray(values)
         g = self.f[group]
         if name not in g:
-            g.create_dataset(name, data=values, maxshape=(None, *values.shape[1:]), chunks=True)
+            ds = g.create_dataset(name, data=values, maxshape=(None, *values.shape[1:]), chunks=True)
+            info = dataset_info(group, name)
+            if info is not None:
+                ds.attrs["units"], ds.attrs["description"] = info
             return
         ds = g[name]
         if ds.shape[1:] != values.shape[1:]:

@@ -62,7 +62,7 @@ def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) ->
 
                 runs = load_runs(out)
                 assert len(runs) == 4 and set(runs["status"]) == {"completed"}, runs[["path", "status"]]
-                clocks = runs["wall_time"].sum()
+                clocks = runs["train_time_s"].sum()
                 threads = sorted(set(runs["env.torch_threads"]))
                 print(
                     f"  {name:20s} {times[name][-1]:6.2f} s  cpu {cpu:6.2f} s ({cpu / times[name][-1]:.2f} cores)"

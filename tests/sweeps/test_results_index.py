@@ -40,7 +40,7 @@ def test_one_row_per_run_with_flattened_config_and_metrics(tree):
     assert row["optimizer.lr"] == 0.1 and row["batch_size"] == 64 and row["optimizer.betas"] == (0.9, 0.999)
     assert row["status"] == "completed" and row["error"] == ""
     assert row["final_test_loss"] == 0.002 and row["best_test_loss"] == 0.002
-    assert row["steps"] == 20 and row["wall_time"] == 1.5 and row["n_evals"] == 4
+    assert row["steps"] == 20 and row["train_time_s"] == 1.5 and row["n_evals"] == 4
     # the synthetic evaluations are 0.5 s apart: 0.05 at 0.5 s, 0.004 at 1.0 s
     assert row[threshold_column(1e-2)] == 1.0 and row[threshold_column(1e-3)] != row[threshold_column(1e-3)]  # NaN: never reached
     assert threshold_column(1e-2) == "time_to_1e-2" and threshold_column(3e-4) == "time_to_3e-4"
@@ -62,6 +62,50 @@ def test_best_runs_never_pick_a_diverged_run(tree):
     assert len(by_best) == 3  # adam/64, adam/128, hig/32 (the diverged adam/64 run excluded)
     with pytest.raises(KeyError):
         best_runs(runs, by="no.such.column")
+
+
+def test_best_runs_never_mix_problems_and_skip_figure_runs(tmp_path):
+    write_run(tmp_path / "toy/run.h5", problem="toy", optimizer="gn", test_loss=[1.0, 1e-8])
+    write_run(tmp_path / "osc/run.h5", problem="oscillator", optimizer="gn", test_loss=[1.0, 1e-3])
+    write_run(tmp_path / "figures-runs/fig1/t/0/run.h5", problem="toy", optimizer="gn", test_loss=[1.0, 1e-9])
+    runs = load_runs(tmp_path)
+    assert len(runs) == 2 and set(runs["source"]) == {"runs"}  # the figures' runs only when asked
+    best = best_runs(runs, by="optimizer.name")
+    assert sorted(zip(best["problem.name"], best["final_test_loss"])) == [("oscillator", 1e-3), ("toy", 1e-8)]
+    assert len(best_runs(runs, by="optimizer.name", per_problem=False)) == 1
+    every = load_runs(tmp_path, figure_runs=True)
+    assert len(every) == 3 and (every["source"] == "figures").sum() == 1
+    assert len(load_runs(tmp_path / "figures-runs")) == 1  # asked for by its root
+
+
+def test_table_has_no_duplicate_columns_and_integer_keys(tree):
+    (tree / "junk.h5").write_bytes(b"not hdf5")  # a corrupt row: integer columns get a missing value
+    runs = load_runs(tree)
+    for gone in ("problem", "optimizer", "final_step", "wall_time"):
+        assert gone not in runs.columns
+    assert runs["train_time_s"].dtype.kind == "f"
+    for col in ("batch_size", "steps", "n_evals"):
+        assert runs[col].dtype.name in ("Int64", "int64"), (col, runs[col].dtype)
+    assert runs["batch_size"].isna().sum() == 1
+
+
+def test_datasets_say_their_units_and_old_text_attributes_still_read(tmp_path):
+    import h5py
+
+    from higbench.results import load_run
+
+    path = write_run(tmp_path / "a/run.h5")
+    with h5py.File(path, "r+") as f:
+        for group in ("curves", "updates"):
+            for name, ds in f[group].items():
+                assert ds.attrs["units"] and ds.attrs["description"], (group, name)
+        assert f["curves/wall_time"].attrs["units"] == "s"
+        assert isinstance(f.attrs["steps"], np.integer)
+        f.attrs["steps"], f.attrs["wall_time"] = "20", "1.5"  # as an older writer might have left them
+    meta, _ = load_run(path)
+    assert meta["steps"] == 20 and meta["wall_time"] == 1.5
+    runs = load_runs(tmp_path)
+    assert runs["steps"].iloc[0] == 20 and runs["train_time_s"].iloc[0] == 1.5
 
 
 def test_curves_long_table(tree):
