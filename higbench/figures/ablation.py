@@ -52,8 +52,11 @@ def _lines(d: FigureData, ax, sweep: str, key: str, symbol: str, panel: str) -> 
     for i, v in enumerate(values):
         runs = d.runs(sweep, **{key.replace(".", "__"): v})
         if runs:
-            status = "" if runs[0].status == "completed" else f" ({runs[0].status})"
-            d.curve(ax, runs, f"{symbol}={num(v)}{status}", panel=panel, color=cmap(i / max(1, len(values) - 1)))
+            # d.curve names a divergence itself; other statuses are said here
+            status = "" if runs[0].status in ("completed", "diverged") else f" ({runs[0].status})"
+            # viridis up to 0.85: its bright yellow end is nearly invisible on white
+            color = cmap(0.85 * i / max(1, len(values) - 1))
+            d.curve(ax, runs, f"{symbol}={num(v)}{status}", panel=panel, color=color, lw=1.8)
     semilogy_axes(ax)
     legend(ax)
 
@@ -61,9 +64,9 @@ def _lines(d: FigureData, ax, sweep: str, key: str, symbol: str, panel: str) -> 
 def plot_fig12(d: FigureData) -> None:
     fig, axes = new_figure(2, 1, width=4.8, height=3.8)
     _lines(d, axes[0, 0], "beta", "optimizer.beta", "β", "a) beta")
-    axes[0, 0].set_title("a) HIG, prefactor max(s)^β", fontsize=9)
+    axes[0, 0].set_title("a) oscillators, HIG: prefactor max(s)^β", fontsize=9)
     _lines(d, axes[0, 1], "kappa", "optimizer.kappa", "κ", "b) kappa")
-    axes[0, 1].set_title("b) exponent κ (1: GD, -1/2: HIG, -1: GN)", fontsize=9)
+    axes[0, 1].set_title("b) oscillators: exponent κ (1: GD, -1/2: HIG, -1: GN)", fontsize=9)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     d.save(fig)
 
@@ -72,7 +75,7 @@ def plot_fig13(d: FigureData) -> None:
     fig, axes = new_figure(2, 1, width=4.8, height=3.8, sharey=True)
     for ax, opt in zip(axes[0], ("hig", "gn")):
         _lines(d, ax, opt, "optimizer.tau", "τ", opt)
-        ax.set_title(f"{'HIG' if opt == 'hig' else 'Gauss-Newton'}: truncation τ", fontsize=9)
+        ax.set_title(f"oscillators, {'HIG' if opt == 'hig' else 'Gauss-Newton'}: truncation τ", fontsize=9)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     d.save(fig)
 

@@ -150,6 +150,8 @@ class FigureData:
     budgets: dict[str, str] = field(default_factory=dict)
     rows: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    banded: bool = False  # a curve drew a min-max band (the caption then says what it is)
+    diverged_marked: bool = False  # a diverged run's last point was marked
 
     def runs(self, sweep: str | None = None, only_ok: bool = True, **where: Any) -> list[RunData]:
         """Runs of a sweep (all sweeps if None) whose resolved config matches ``where``
@@ -239,11 +241,18 @@ class FigureData:
             grid = np.linspace(lo, hi, 200) if hi > lo else np.array([lo])
             logs = np.array([np.interp(grid, xs, np.log10(np.maximum(ys, 1e-300))) for xs, ys in series])
             (line,) = ax.plot(
-                grid, 10 ** np.median(logs, axis=0), label=f"{label} ({len(series)} seeds)", color=color, ls=ls, **kw
-            )
+                grid, 10 ** np.median(logs, axis=0), label=f"{label} (median of {len(series)} seeds, band: min-max)",
+                color=color, ls=ls, **kw,
+            )  # fmt: skip
             ax.fill_between(grid, 10 ** logs.min(axis=0), 10 ** logs.max(axis=0), color=line.get_color(), alpha=0.2, lw=0)
-        for dx, dy, _ in diverged:  # where a diverged run's last finite evaluation was
-            ax.plot([dx], [dy], marker="x", ms=8, mew=2, color=line.get_color(), ls="none")
+            self.banded = True
+        for dx, dy, _ in diverged:  # where a diverged run's last finite evaluation was, named in the plot
+            ax.plot([dx], [dy], marker="X", ms=10, mew=1, mec="black", color=line.get_color(), ls="none", zorder=5)
+            ax.annotate(
+                "diverged", (dx, dy), xytext=(8, 8), textcoords="offset points", fontsize=7, color=line.get_color(),
+                fontweight="bold", arrowprops={"arrowstyle": "-", "color": line.get_color(), "lw": 0.8},
+            )  # fmt: skip
+            self.diverged_marked = True
         return line
 
     # -- writing ------------------------------------------------------------------------
@@ -251,8 +260,15 @@ class FigureData:
     def caption(self) -> str:
         budgets = "; ".join(f"{k}: {v}" for k, v in self.budgets.items())
         missing = len(self.missing())
-        return f"{self.figure.id} - preset {self.preset.name} - budget per run {budgets}" + (
-            f" - {missing} run(s) missing" if missing else ""
+        keys = []  # what the marks mean, for the figures that have them
+        if self.banded:
+            keys.append("lines: median over seeds, shaded: min-max over seeds")
+        if self.diverged_marked:
+            keys.append("X: last finite evaluation of a diverged run")
+        return (
+            f"{self.figure.id} - preset {self.preset.name} - budget per run {budgets}"
+            + (f" - {missing} run(s) missing" if missing else "")
+            + (f" - {'; '.join(keys)}" if keys else "")
         )
 
     def save(self, fig) -> None:
@@ -359,6 +375,16 @@ def new_figure(ncols: int = 1, nrows: int = 1, width: float = 4.2, height: float
 
     fig, axes = plt.subplots(nrows, ncols, figsize=(width * ncols, height * nrows + 0.3), squeeze=False, **kw)
     return fig, axes
+
+
+def join_label(name: str, detail: str) -> str:
+    """'Adam' + 'Adam η=1e-4 b=64' -> 'Adam η=1e-4 b=64'; 'HIG after Adam' + 'HIG η=0.02' -> 'HIG after Adam (η=0.02)'."""
+    if detail.startswith(name):
+        return detail
+    first, _, rest = detail.partition(" ")
+    if first in name.split():
+        detail = rest
+    return f"{name} ({detail})" if detail else name
 
 
 def legend(ax, **kw) -> None:

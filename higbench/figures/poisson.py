@@ -16,7 +16,7 @@ import numpy as np
 
 from higbench.figures import checks
 from higbench.figures.checks import best, e, final, loss_at, verdict
-from higbench.figures.data import COLORS, FigureData, RunData, legend, new_figure, semilogy_axes
+from higbench.figures.data import COLORS, FigureData, RunData, join_label, legend, new_figure, semilogy_axes
 from higbench.figures.registry import Claim, claim, register
 from higbench.figures.spec import Budget, Figure, Preset, Sweep
 
@@ -145,7 +145,7 @@ def _chain(d: FigureData, ax, names: list[tuple[str, str, str]], panel: str) -> 
         if parent is not None:
             parent_sweep = parent.sweep
             offset = ends.get(parent_sweep, 0.0)
-        d.curve(ax, runs, f"{label} ({run.label()})", panel=panel, color=color, x_offset=offset)
+        d.curve(ax, runs, join_label(label, run.label()), panel=panel, color=color, x_offset=offset)
         ends[sweep] = offset + float(run.curves["wall_time"].iloc[-1])
     semilogy_axes(ax)
     legend(ax)
