@@ -57,6 +57,9 @@ def config_dir() -> str:
 
 
 def fail(exc: BaseException | str) -> None:
+    from higbench.runner.progress import clear_transient
+
+    clear_transient()  # the terminal's "checking" line: the error replaces it
     message = " ".join(str(exc).split())  # one line, whatever the cause
     print(f"higbench: error: {message}", file=sys.stderr, flush=True)
     sys.exit(EXIT_BAD_INPUT)
@@ -215,10 +218,11 @@ def precheck(argv: list[str]) -> list[str]:
             validate(task)
             configs.append((job, cfg, task))
 
-        if not args.multirun:  # a line at once: torch and the pre-flight take seconds (jobs of a sweep: in _run_job)
+        if not args.multirun:  # on a terminal, a line at once: torch and the pre-flight take seconds
             from higbench.runner.progress import announce, start_text
 
-            announce(configs[0][2].get("progress", True), start_text(OmegaConf.create(configs[0][2])))
+            task0 = configs[0][2]
+            announce(task0.get("progress", True), start_text(OmegaConf.create(task0)) + " - checking", transient=True)
         from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
 
         if args.multirun:
@@ -308,8 +312,7 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 def _run_job(cfg: DictConfig) -> float:
     from higbench.runner.progress import announce, start_text
 
-    if HydraConfig.get().mode == RunMode.MULTIRUN:  # a single run said it in precheck
-        announce(cfg.get("progress", True), start_text(cfg))  # before torch loads (seconds)
+    announce(cfg.get("progress", True), start_text(cfg))  # replaces precheck's transient line
     from higbench.runfile.writer import RunFileBusy, RunFileExists
     from higbench.runner import checkpoint
     from higbench.runner.train import train

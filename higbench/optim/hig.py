@@ -28,7 +28,9 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
-from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, gram_is_accurate, jacobian_power
+from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, jacobian_power
+from higbench.optim.jacobians import per_sample_jacobian
+from higbench.optim.routes import choose_solver
 from higbench.optim.structured import GraphJacobian, StructuredJacobian, network_jacobian, solver_jacobian
 
 SOLVERS = ("auto", "gram", "svd")
@@ -53,7 +55,7 @@ class JacobianPower(torch.optim.Optimizer):
         jacobian: "structured" (solver and network differentiated apart, see
             ``higbench.optim.structured``) or "naive" (torch.func Jacobian through
             network and solver per sample, J always materialised; the reference). Used by
-            the runner; ``step_structured`` and ``step`` follow their own inputs.
+            ``step_structured`` (which the runner calls); ``step`` follows its closure.
     """
 
     def __init__(
@@ -90,7 +92,14 @@ class JacobianPower(torch.optim.Optimizer):
         super().__init__(params, defaults)
         if len(self.param_groups) != 1:
             raise ValueError("JacobianPower supports a single parameter group")
+        # What the last update did, for callers that record it (the runner): phase timings
+        # (jacobian_s: all derivatives incl. K or J itself; inversion_s: eigh/SVD and the
+        # product back to parameters; apply_s), whether it was finite (a non-finite loss,
+        # Jacobian or direction, or a failed inversion, leaves the parameters untouched)
+        # and why not.
         self.last_timings: dict[str, float] = {}
+        self.last_finite: bool = True
+        self.last_reason: str = ""
 
     # -- the pieces, so callers with their own Jacobians (the runner) can time each phase --
 
@@ -107,17 +116,26 @@ class JacobianPower(torch.optim.Optimizer):
         return dict(kappa=g["kappa"], beta=g["beta"], tau=g["tau"], truncation=g["truncation"])
 
     def resolved_solver(self, rows: int | None = None, n_params: int | None = None) -> str:
-        """``auto``: the Gram route when J is wide (rows < params) and tau is resolvable.
-
-        For tall J (more rows than parameters, e.g. the toy's 512 x 30) the thin SVD of J is
-        cheaper than eigh of the rows x rows Gram matrix.
-        """
+        """``gram`` or ``svd`` for a J of rows x n_params (``higbench.optim.routes.choose_solver``)."""
         g = self.group
-        if g["solver"] != "auto":
-            return g["solver"]
-        if rows is not None and n_params is not None and rows >= n_params:
-            return "svd"
-        return "gram" if gram_is_accurate(g["tau"], g["precision"], g["truncation"]) else "svd"
+        return choose_solver(g["solver"], rows, n_params, g["tau"], g["precision"], g["truncation"])
+
+    def _derivative_tail(self, J: torch.Tensor | StructuredJacobian):
+        """(route, J, K): the end of the derivative phase, K = J J^T for the Gram route, else J as a matrix."""
+        precision = self.group["precision"]
+        if isinstance(J, StructuredJacobian):
+            route = self.resolved_solver(J.rows, J.n_params)
+            return (route, J, J.gram()) if route == "gram" else (route, J.matrix().to(precision), None)
+        J = J.to(precision)
+        route = self.resolved_solver(*J.shape)
+        return (route, J, J @ J.T) if route == "gram" else (route, J, None)
+
+    def _inversion(self, route: str, J, K, grad_y: torch.Tensor) -> torch.Tensor:
+        g = grad_y.reshape(-1)
+        if route == "gram":
+            c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True)
+            return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
+        return jacobian_power(J, g.to(J.dtype), **self._opts())
 
     def direction(self, J: torch.Tensor | StructuredJacobian, grad_y: torch.Tensor) -> torch.Tensor:
         """max(s)^beta V diag(s^kappa) U^T g in ``precision``.
@@ -125,16 +143,7 @@ class JacobianPower(torch.optim.Optimizer):
         J: the materialised Jacobian (rows, |theta|) or a ``StructuredJacobian`` (then the
         Gram route never forms J); grad_y: (rows,) or anything with rows elements.
         """
-        g = self.group
-        grad_y = grad_y.reshape(-1).to(g["precision"])
-        if isinstance(J, StructuredJacobian):
-            if self.resolved_solver(J.rows, J.n_params) == "svd":
-                return jacobian_power(J.matrix().to(g["precision"]), grad_y, **self._opts())
-            return J.transpose_apply(gram_coefficients(J.gram().to(g["precision"]), grad_y, **self._opts(), overwrite=True))
-        J = J.to(g["precision"])
-        if self.resolved_solver(*J.shape) == "svd":
-            return jacobian_power(J, grad_y, **self._opts())
-        return J.T @ gram_coefficients(J @ J.T, grad_y, **self._opts())
+        return self._inversion(*self._derivative_tail(J), grad_y)
 
     @torch.no_grad()
     def apply(self, direction: torch.Tensor) -> None:
@@ -145,12 +154,33 @@ class JacobianPower(torch.optim.Optimizer):
             p.sub_(lr * direction[offset : offset + n].view_as(p).to(p.dtype))
             offset += n
 
+    def _sync(self) -> None:
+        device = self.params[0].device
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    def _refuse(self, reason: str) -> None:
+        self.last_timings, self.last_finite, self.last_reason = {}, False, reason
+
     def _finish(self, J, grad_y: torch.Tensor, t0: float) -> None:
+        """The rest of one update from its derivatives: K or J, inversion, apply; timed and checked."""
+        route, J, K = self._derivative_tail(J)
+        if not torch.isfinite(K if K is not None else J).all():
+            return self._refuse("non-finite Jacobian")
+        self._sync()
         t1 = time.perf_counter()
-        d = self.direction(J, grad_y)
+        try:
+            d = self._inversion(route, J, K, grad_y)
+        except torch.linalg.LinAlgError as exc:  # e.g. SVD or eigh failed to converge
+            return self._refuse(f"inversion failed: {exc}")
+        self._sync()
         t2 = time.perf_counter()
+        if not torch.isfinite(d).all():
+            return self._refuse("non-finite update direction")
         self.apply(d)
+        self._sync()
         self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
+        self.last_finite, self.last_reason = True, ""
 
     # -- torch.optim-style entry points for user code --
 
@@ -190,7 +220,10 @@ class JacobianPower(torch.optim.Optimizer):
                     ],
                     dim=1,
                 )
-        self._finish(J, grad_y, t0)
+        if not torch.isfinite(loss):
+            self._refuse("non-finite loss")
+        else:
+            self._finish(J, grad_y, t0)
         return loss.detach()
 
     def step_structured(
@@ -210,18 +243,37 @@ class JacobianPower(torch.optim.Optimizer):
             differentiable, batched, samples independent; returns y (b, ...).
         loss: ``loss(y)`` -> per-sample losses (b,) (or the scalar batch mean); g is the
             gradient of their mean.
-        Returns the batch-mean loss before the update (detached).
+        With ``jacobian="naive"`` J comes from torch.func through network and solver per
+        sample (the reference). Returns the batch-mean loss before the update (detached);
+        ``last_timings``, ``last_finite`` and ``last_reason`` say how the update went.
         """
         t0 = time.perf_counter()
+        naive = self.group["jacobian"] == "naive"
         with torch.no_grad():
             u = model(net_inputs)
-        y, A = solver_jacobian(physics, inputs, u)
+            if naive:
+                y = physics(u) if inputs is None else physics(inputs, u)
+        if not naive:
+            y, A = solver_jacobian(physics, inputs, u)
         with torch.enable_grad():
             y_leaf = y.requires_grad_(True)
             value = loss(y_leaf)
             value = value.mean() if value.ndim > 0 else value
             (grad_y,) = torch.autograd.grad(value, y_leaf)
-        J = network_jacobian(model, self.params, net_inputs, A, self.group["precision"])
+        if not torch.isfinite(value):
+            self._refuse("non-finite loss")
+            return value.detach()
+        if naive:  # the reference: torch.func Jacobian through network and solver per sample, J materialised
+            if inputs is None:
+                inputs, physics_xu = torch.zeros(u.shape[0], 0, dtype=u.dtype, device=u.device), lambda _x, v: physics(v)
+            else:
+                physics_xu = physics
+            J = per_sample_jacobian(model, physics_xu, inputs, net_inputs)
+        elif not torch.isfinite(A).all():
+            self._refuse("non-finite Jacobian")
+            return value.detach()
+        else:
+            J = network_jacobian(model, self.params, net_inputs, A, self.group["precision"])
         self._finish(J, grad_y, t0)
         return value.detach()
 

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import torch
 
+from higbench.optim.routes import gram_resolves
+
 TRUNCATION_MODES = ("relative", "absolute")
 
 
@@ -139,13 +141,5 @@ def gram_coefficients(
 
 
 def gram_is_accurate(tau: float, dtype: torch.dtype = torch.float64, truncation: str = "relative") -> bool:
-    """Whether the Gram route resolves the relative cutoff tau.
-
-    eigh(K) is backward stable: eigenvalues carry an absolute error of order
-    eps * max(s)^2, so a singular value s = tau * max(s) comes out with a relative error of
-    about eps / tau^2. Requiring tau^2 > 100 * eps keeps it below 1% at the cutoff and far
-    smaller above it; below that, ``auto`` falls back to the SVD of J.
-    """
-    if truncation != "relative":
-        return True  # absolute mode: the caller owns the scale; the SVD stays available
-    return tau * tau > 100 * torch.finfo(dtype).eps
+    """Whether the Gram route resolves the relative cutoff tau (see ``routes.gram_resolves``)."""
+    return gram_resolves(tau, dtype, truncation)

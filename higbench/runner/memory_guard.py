@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from higbench.config import ConfigError
+from higbench.optim.routes import choose_solver
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
 
@@ -43,13 +44,6 @@ def _itemsize(dtype) -> int:
     return ITEMSIZE[name]
 
 
-def resolve_solver(solver: str, rows: int, n_params: int) -> str:
-    """``auto`` as JacobianPower resolves it for sizing: SVD for tall J, Gram for wide J."""
-    if solver in ("gram", "svd"):
-        return solver
-    return "svd" if rows >= n_params else "gram"
-
-
 def estimate_bytes(
     batch_size: int,
     output_size: int,
@@ -58,18 +52,21 @@ def estimate_bytes(
     solver: str = "auto",
     precision="float64",
     jacobian: str = "naive",
+    tau: float = 1e-6,
+    truncation: str = "relative",
 ) -> Estimate:
     """Peak bytes of one Jacobian-power update.
 
     batch_size, output_size (|y| per sample), n_params (|theta|); dtype: network dtype (J as
     computed); precision: dtype of the inversion (J is converted to it); solver: gram, svd
-    or auto; jacobian: naive (torch.func J in ``dtype``, then cast) or structured (computed in
+    or auto, resolved with tau and truncation by the optimizer's own rule
+    (``higbench.optim.routes.choose_solver``); jacobian: naive (torch.func J in ``dtype``, then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
     """
     rows, p = batch_size * output_size, n_params
     e, e2 = _itemsize(dtype), _itemsize(precision)
-    solver = resolve_solver(solver, rows, p)
+    solver = choose_solver(solver, rows, p, tau, precision, truncation)
     if jacobian == "structured":
         parts = {"jacobian": rows * p * e2, "jacobian_cast": 0}
     else:
@@ -123,14 +120,17 @@ def largest_batch(
     precision="float64",
     upper: int = 1 << 30,
     jacobian: str = "naive",
+    tau: float = 1e-6,
+    truncation: str = "relative",
 ) -> int:
     """Largest batch size whose estimate fits in ``limit`` bytes (0 if not even 1 fits)."""
-    if estimate_bytes(1, output_size, n_params, dtype, solver, precision, jacobian).total > limit:
+    route = {"jacobian": jacobian, "tau": tau, "truncation": truncation}
+    if estimate_bytes(1, output_size, n_params, dtype, solver, precision, **route).total > limit:
         return 0
     lo, hi = 1, upper
     while lo < hi:
         mid = (lo + hi + 1) // 2
-        if estimate_bytes(mid, output_size, n_params, dtype, solver, precision, jacobian).total <= limit:
+        if estimate_bytes(mid, output_size, n_params, dtype, solver, precision, **route).total <= limit:
             lo = mid
         else:
             hi = mid - 1
@@ -147,14 +147,17 @@ def check(
     device: str = "cpu",
     limit_mb: float | None = None,
     jacobian: str = "naive",
+    tau: float = 1e-6,
+    truncation: str = "relative",
 ) -> Estimate:
     """Raise ConfigError if the step for ``batch_size`` does not fit; return the estimate."""
-    est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, jacobian)
+    route = {"jacobian": jacobian, "tau": tau, "truncation": truncation}
+    est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, **route)
     avail, source = available_bytes(device)
     if limit_mb is not None and limit_mb * 2**20 < avail:
         avail, source = int(limit_mb * 2**20), "memory_limit_mb"
     if est.total > avail:
-        best = largest_batch(avail, output_size, n_params, dtype, solver, precision, upper=batch_size, jacobian=jacobian)
+        best = largest_batch(avail, output_size, n_params, dtype, solver, precision, upper=batch_size, **route)
         advice = f"largest batch size that fits: {best}" if best else "not even batch_size=1 fits"
         raise ConfigError(
             "batch_size",

@@ -39,10 +39,34 @@ def start_text(cfg) -> str:
     return f"{cfg.problem.name}/{cfg.optimizer.name}: {verb}, batch size {cfg.batch_size}, budget {budget_text} (training clock)"
 
 
-def announce(enabled: bool, text: str) -> None:
-    """A line before the (possibly slow) set-up, so the terminal is never silent."""
-    if enabled:
-        _line(f"{job_label()}{text}")
+_transient = False  # a start line without newline on the terminal, to be replaced
+
+
+def announce(enabled: bool, text: str, transient: bool = False) -> None:
+    """A line before the (possibly slow) set-up, so the terminal is never silent.
+
+    transient: only on a terminal, and replaced by whatever comes next (the real start line,
+    or the one-line error of a refused config), so refused input still shows one line.
+    """
+    global _transient
+    if not enabled:
+        return
+    if transient:
+        if sys.stderr.isatty():
+            sys.stderr.write(f"{job_label()}{text}")
+            sys.stderr.flush()
+            _transient = True
+        return
+    clear_transient()
+    _line(f"{job_label()}{text}")
+
+
+def clear_transient() -> None:
+    global _transient
+    if _transient:
+        sys.stderr.write("\r\033[K")  # back to the line's start, erase it
+        sys.stderr.flush()
+        _transient = False
 
 
 def _line(text: str) -> None:

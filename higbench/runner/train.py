@@ -169,17 +169,15 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
         y = problem.outputs(model, problem.test_set()[:1])
     output_size = int(y[0].numel())
     n_params = sum(p.numel() for p in model.parameters() if p.requires_grad)
-    rows = int(cfg.batch_size) * output_size
     opt = update.optimizer
-    solver = opt.group["solver"]
-    if solver == "auto" and rows < n_params and opt.resolved_solver(rows, n_params) == "svd":
-        solver = "svd"  # tau too small for the Gram route: SVD at every batch size
     return memory_guard.check(
         int(cfg.batch_size),
         output_size,
         n_params,
         dtype=cfg.dtype,
-        solver=solver,
+        solver=opt.group["solver"],  # resolved per batch size by the optimizer's rule (tau, truncation)
+        tau=opt.group["tau"],
+        truncation=opt.group["truncation"],
         precision=str(opt.group["precision"]),
         device=str(problem.device),
         limit_mb=cfg.get("memory_limit_mb"),

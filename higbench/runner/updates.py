@@ -17,9 +17,6 @@ from omegaconf import DictConfig, OmegaConf
 from torch import nn
 
 from higbench.optim.hig import JacobianPower
-from higbench.optim.inversion import gram_coefficients
-from higbench.optim.jacobians import per_sample_jacobian
-from higbench.optim.structured import StructuredJacobian, network_jacobian, solver_jacobian
 from higbench.problems.base import Batch, Problem
 
 # Config keys that describe the optimizer but are not constructor arguments.
@@ -66,90 +63,47 @@ class FirstOrderUpdate:
 
 
 class JacobianPowerUpdate:
-    """GN / HIG: structured (or naive) Jacobian, inversion, plain SGD application.
+    """GN / HIG: one call of the optimizer's public ``step_structured`` per batch.
 
-    Structured (``optimizer.jacobian: structured``, the default): u = f(z; theta), then the
-    solver Jacobians A_i = dy_i/du_i by |y| batched reverse passes through the physics, then
-    the network part (per-layer factors for MLPs, torch.func for other networks), and on
-    the Gram route K = J J^T and one J^T c product without forming J
-    (``higbench.optim.structured``). Naive (``optimizer.jacobian: naive``): torch.func
-    Jacobian of network + physics per sample, materialised J (``per_sample_jacobian``).
+    The update itself (derivatives, Gram-or-SVD route, inversion, finiteness checks, phase
+    timings) lives in ``higbench.optim.hig.JacobianPower``, the class researchers use, so
+    the runner's timings and results are those of the public optimizer. Here only the
+    problem is unpacked: y = physics(inputs, model(net_inputs)) (``Problem.outputs``) and
+    the per-sample ``problem.loss``.
 
-    Phases: ``jacobian_s`` all derivatives (A, network factors or J, and K), ``inversion_s``
-    eigh/SVD and the product mapping the coefficients back to parameters, ``apply_s`` the
-    parameter update.
+    Phases (``JacobianPower.last_timings``): ``jacobian_s`` all derivatives (solver
+    Jacobians, network factors or J, and K or J itself), ``inversion_s`` eigh/SVD and the
+    product mapping the coefficients back to parameters, ``apply_s`` the parameter update.
     """
 
     def __init__(self, problem: Problem, model: nn.Module, optimizer: JacobianPower):
         self.problem, self.model, self.optimizer = problem, model, optimizer
+        # A problem with its own ``outputs`` goes through the optimizer's generic step(closure).
+        self.composed = type(problem).outputs is Problem.outputs
 
     @property
     def structured(self) -> bool:
-        if self.optimizer.group.get("jacobian", "structured") != "structured":
-            return False
-        # The structured path assumes outputs = physics(inputs, model(net_inputs)).
-        return type(self.problem).outputs is Problem.outputs
-
-    def derivatives(self, batch: Batch):
-        """(loss, g, J): the batch-mean loss, g = d loss / d y (rows,), J (structured or a tensor)."""
-        opt = self.optimizer
-        if self.structured:
-            with torch.no_grad():
-                u = self.model(batch.net_inputs)
-            y, A = solver_jacobian(self.problem.physics, batch.inputs, u)
-            y = y.requires_grad_(True)
-            loss = self.problem.loss(y, batch.targets).mean()  # g is the gradient of the batch mean
-            (grad_y,) = torch.autograd.grad(loss, y)
-            if not torch.isfinite(loss) or not torch.isfinite(A).all():
-                return loss, grad_y, None
-            J = network_jacobian(self.model, opt.params, batch.net_inputs, A, opt.group["precision"])
-            return loss, grad_y, J
-        y = self.problem.outputs(self.model, batch)
-        loss = self.problem.loss(y, batch.targets).mean()
-        (grad_y,) = torch.autograd.grad(loss, y)
-        if not torch.isfinite(loss):
-            return loss, grad_y, None
-        J = per_sample_jacobian(self.model, self.problem.physics, batch.inputs, batch.net_inputs)
-        return loss, grad_y, J
+        """Whether J is computed structured (solver and network apart), as the memory guard sizes it."""
+        return self.composed and self.optimizer.group.get("jacobian", "structured") == "structured"
 
     def __call__(self, batch: Batch) -> UpdateResult:
-        dev = self.problem.device
-        t0 = time.perf_counter()
-        loss, grad_y, J = self.derivatives(batch)
-        value = loss.item()
-        if not torch.isfinite(loss):
-            return UpdateResult(value, finite=False, reason="non-finite loss")
-        if J is None:
-            return UpdateResult(value, finite=False, reason="non-finite Jacobian")
-        # Gram route: K (part of the derivatives), then eigen-solve + one J^T c in the inversion.
-        # Otherwise J itself (formed here if structured), then SVD (or Gram of J) in the inversion.
-        K = None
-        if isinstance(J, StructuredJacobian):
-            if self.optimizer.resolved_solver(J.rows, J.n_params) == "gram":
-                K = J.gram()
-            else:
-                J = J.matrix()
-        finite = bool(torch.isfinite(K if K is not None else J).all())
-        _sync(dev)
-        t1 = time.perf_counter()
-        if not finite:
-            return UpdateResult(value, finite=False, reason="non-finite Jacobian")
-        try:
-            if K is not None:
-                coeff = gram_coefficients(K, grad_y.reshape(-1).to(K.dtype), **self.optimizer._opts(), overwrite=True)
-                direction = J.transpose_apply(coeff)
-            else:
-                direction = self.optimizer.direction(J, grad_y)
-        except torch.linalg.LinAlgError as exc:  # e.g. SVD or eigh failed to converge
-            return UpdateResult(value, finite=False, reason=f"inversion failed: {exc}")
-        _sync(dev)
-        t2 = time.perf_counter()
-        if not torch.isfinite(direction).all():
-            return UpdateResult(value, finite=False, reason="non-finite update direction")
-        self.optimizer.apply(direction)
-        _sync(dev)
-        t3 = time.perf_counter()
-        return UpdateResult(value, {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": t3 - t2})
+        opt, problem = self.optimizer, self.problem
+        if self.composed:
+            value = opt.step_structured(
+                self.model,
+                batch.net_inputs,
+                physics=problem.physics,
+                loss=lambda y: problem.loss(y, batch.targets),
+                inputs=batch.inputs,
+            )
+        else:
+
+            def closure():
+                y = problem.outputs(self.model, batch)
+                return y, problem.loss(y, batch.targets).mean()
+
+            value = opt.step(closure)
+        return UpdateResult(value.item(), dict(opt.last_timings), opt.last_finite, opt.last_reason)
 
 
 def optimizer_kwargs(opt_cfg: DictConfig) -> dict:

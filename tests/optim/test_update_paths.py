@@ -108,3 +108,40 @@ def test_non_finite_weights_are_reported_not_applied():
     result = build_update(p, model, cfg.optimizer)(batch)
     assert not result.finite and "non-finite" in result.reason
     torch.testing.assert_close(flat(model), before, equal_nan=True)
+
+
+def test_runner_update_is_the_public_optimizer_step():
+    """The runner calls JacobianPower.step_structured: same weights, timings and finiteness as a user's call."""
+    cfg, p, model, batch = setup("oscillator")
+    import copy
+
+    from higbench.runner.updates import optimizer_kwargs
+
+    user_model = copy.deepcopy(model)
+    result = build_update(p, model, cfg.optimizer)(batch)
+    opt = JacobianPower(user_model.parameters(), **optimizer_kwargs(cfg.optimizer))
+    opt.step_structured(user_model, batch.net_inputs, p.physics, lambda y: p.loss(y, batch.targets), inputs=batch.inputs)
+    torch.testing.assert_close(flat(user_model), flat(model), rtol=0, atol=0)
+    assert result.finite and opt.last_finite
+    assert set(result.timings) == set(opt.last_timings) == {"jacobian_s", "inversion_s", "apply_s"}
+
+
+@pytest.mark.parametrize("solver", ["auto", "gram", "svd"])
+@pytest.mark.parametrize("tau", [1e-4, 1e-6, 1e-8])
+@pytest.mark.parametrize("rows,n_params", [(10, 100), (512, 30), (100, 100)])
+def test_memory_guard_sizes_the_route_the_optimizer_takes(solver, tau, rows, n_params):
+    from higbench.runner.memory_guard import estimate_bytes
+
+    opt = JacobianPower([torch.nn.Parameter(torch.zeros(3))], tau=tau, solver=solver)
+    assert estimate_bytes(rows, 1, n_params, solver=solver, tau=tau).solver == opt.resolved_solver(rows, n_params)
+
+
+def test_public_optimizer_reports_a_non_finite_update_and_leaves_the_weights():
+    cfg, p, model, batch = setup("oscillator")
+    with torch.no_grad():
+        model[0].weight[0, 0] = float("nan")
+    before = flat(model)
+    opt = JacobianPower(model.parameters(), tau=1e-6)
+    opt.step_structured(model, batch.net_inputs, p.physics, lambda y: p.loss(y, batch.targets), inputs=batch.inputs)
+    assert not opt.last_finite and "non-finite" in opt.last_reason and opt.last_timings == {}
+    torch.testing.assert_close(flat(model), before, equal_nan=True)
