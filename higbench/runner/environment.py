@@ -11,6 +11,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import psutil
 import torch
 
 import higbench
@@ -60,18 +61,12 @@ def environment(device: torch.device) -> dict:
     return env
 
 
-_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+_PROCESS = psutil.Process()
 
 
 def current_rss_mb() -> float:
-    """Resident set size now (Linux /proc; falls back to ru_maxrss elsewhere)."""
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * _PAGE / 2**20
-    except OSError:
-        import resource
-
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    """Resident set size of this process now."""
+    return _PROCESS.memory_info().rss / 2**20
 
 
 class MemoryMonitor:

@@ -4,7 +4,7 @@ The Jacobian-power step materialises J (rows = batch_size * |y|, columns = |thet
 inverts it, either through the Gram matrix K = J J^T (rows x rows) or the thin SVD of J.
 ``estimate_bytes`` gives the peak of that step (the dominant arrays; model, data and
 first-order optimizers are small next to it). ``check`` compares it with the memory
-available now (``MemAvailable`` of /proc/meminfo, free CUDA memory on a GPU) or a
+available now (psutil's available memory, free CUDA memory on a GPU) or a
 configured cap (``memory_limit_mb``) and raises ``ConfigError`` with the estimate and the
 largest batch size that fits, so a run fails in a second instead of being killed by the
 OS an hour in.
@@ -96,19 +96,9 @@ def available_bytes(device: str = "cpu") -> tuple[int, str]:
 
         free, _total = torch.cuda.mem_get_info(torch.device(device))
         return int(free), "free CUDA memory"
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024, "MemAvailable"
-    except OSError:
-        pass
-    try:
-        import os
+    import psutil
 
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")), "available physical memory"
-    except (ValueError, OSError, AttributeError):
-        return 2**62, "unknown"
+    return int(psutil.virtual_memory().available), "available memory"
 
 
 def largest_batch(
