@@ -163,6 +163,10 @@ def test_sigint_sigterm_close_the_file_cleanly(stopped, name):
     assert len(curves) >= seen[name], "rows seen before the signal were lost"
     assert curves["step"].is_unique and curves["step"].is_monotonic_increasing
     assert len(load_weights(run_file)) == 4
+    if name == "sigint":  # the summary's final test loss is the file's last evaluation, and says its step
+        assert f"final test loss {curves['test_loss'].iloc[-1]:.4e}" in out, out
+        last = int(curves["step"].iloc[-1])
+        assert last == meta["steps"] or f"(last evaluated at step {last})" in out, out
     state = ckpt_state(run_file)  # a clean stop saves a checkpoint at the very step it stopped
     assert state["step"] == meta["steps"]
     assert load_updates(run_file)["step"].tolist() == list(range(1, meta["steps"] + 1))
