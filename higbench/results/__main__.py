@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, load_runs, threshold_column
+from higbench.results.index import DEFAULT_THRESHOLDS, under_figure_runs, best_runs, find_run_files, load_runs, threshold_column
 
 SUMMARY_COLUMNS = [
     "path",
@@ -115,9 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         df.to_csv(args.csv, index=False)
 
     counts = df["status"].value_counts().to_dict() if len(df) else {}
+    left_out = 0 if args.figure_runs else sum(under_figure_runs(p, roots) for p in find_run_files(roots, args.pattern))
     print(
         f"{len(df)} of {total} runs under {', '.join(map(str, roots))}"
         + (f" ({', '.join(f'{n} {s}' for s, n in counts.items())})" if counts else "")
+        + (f"; {left_out} run(s) of `make figures` left out (--figure-runs)" if left_out else "")
     )
     if not len(df):
         return 0

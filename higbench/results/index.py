@@ -375,7 +375,7 @@ def load_runs(
     paths = find_run_files(root, pattern)
     roots = [Path(root)] if isinstance(root, str | Path) else [Path(r) for r in root]
     if not figure_runs:
-        paths = [p for p in paths if not _under_figure_runs(p, roots)]
+        paths = [p for p in paths if not under_figure_runs(p, roots)]
     if jobs > 1 and len(paths) > 2 * jobs:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -395,7 +395,7 @@ def load_runs(
     return runs, _curves_frame([(row["path"], cols) for row, cols in results if cols])
 
 
-def _under_figure_runs(path: Path, roots: list[Path]) -> bool:
+def under_figure_runs(path: Path, roots: list[Path]) -> bool:
     """Whether ``path`` lies in a figures-runs folder below the root it was found under."""
     for r in roots:
         try:
