@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from higbench.results.index import DEFAULT_THRESHOLDS, under_figure_runs, best_runs, find_run_files, load_runs, threshold_column
+from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
 
 SUMMARY_COLUMNS = [
     "path",
