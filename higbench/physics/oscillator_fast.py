@@ -1,0 +1,279 @@
+"""Fast oscillator solver: the RK4 loop of ``higbench.physics.oscillator`` compiled, with its adjoint.
+
+Same scheme, same arguments and results as ``oscillator.simulate`` (the reference, kept for
+the tests and for non-CPU devices); equal to it to ~1e-13 relative in float64, outputs and
+gradients (tests/physics/test_oscillator.py runs every test on both).
+
+The state is s = (x1, x2, p1, p2), the right-hand side F(s) = (p, -a(x)) with the negated
+acceleration a_i(x) = x_i +- k (x1 - x2)^3 - c_i u; one RK4 step is
+
+    Y1 = s, Y2 = s + h/2 F(Y1), Y3 = s + h/2 F(Y2), Y4 = s + h F(Y3),
+    s' = s + h/6 (F(Y1) + 2 F(Y2) + 2 F(Y3) + F(Y4)).
+
+Its discrete adjoint (the exact transpose of the step's linearisation, so gradients equal
+autograd's through the reference up to rounding): with lambda' = dL/ds' and Gk_i = dL/dF(Y_i),
+
+    Gk4 = h/6 lambda',            Gk3 = h/3 lambda' + h  J4^T Gk4,
+    Gk2 = h/3 lambda' + h/2 J3^T Gk3,  Gk1 = h/6 lambda' + h/2 J2^T Gk2,
+    lambda = lambda' + sum_i J_i^T Gk_i,   dL/du = -sum_i c . (Gk_i)_p-part,
+
+where J_i^T (gx, gp) = (-A(Y_i)^T gp, gx) and A = da/dx = [[1+e, -e], [-e, 1+e]], e = 3 k d^2.
+The stage states are recomputed in the backward sweep from the stored step states.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from higbench.physics._adjoint import as_numpy64, available, batch_first, njit
+from higbench.physics.oscillator import CONTROL, DT
+from higbench.physics.oscillator import simulate as simulate_reference
+
+
+@njit
+def _forward_kernel(x0, u, dt, k, c1, c2, traj):
+    """traj[i, t] = state after t RK4 steps of sample i (traj[i, 0] = x0[i])."""
+    b, steps = u.shape
+    h2, h6 = 0.5 * dt, dt / 6.0
+    for i in range(b):
+        x1, x2, p1, p2 = x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3]
+        traj[i, 0, 0], traj[i, 0, 1], traj[i, 0, 2], traj[i, 0, 3] = x1, x2, p1, p2
+        for t in range(steps):
+            g1, g2 = c1 * u[i, t], c2 * u[i, t]
+            d = x1 - x2
+            f = k * d * d * d
+            a1, a2 = x1 + f - g1, x2 - f - g2
+            y1, y2 = x1 + h2 * p1, x2 + h2 * p2
+            q1, q2 = p1 - h2 * a1, p2 - h2 * a2
+            d = y1 - y2
+            f = k * d * d * d
+            b1, b2 = y1 + f - g1, y2 - f - g2
+            y1, y2 = x1 + h2 * q1, x2 + h2 * q2
+            r1, r2 = p1 - h2 * b1, p2 - h2 * b2
+            d = y1 - y2
+            f = k * d * d * d
+            e1, e2 = y1 + f - g1, y2 - f - g2
+            y1, y2 = x1 + dt * r1, x2 + dt * r2
+            s1, s2 = p1 - dt * e1, p2 - dt * e2
+            d = y1 - y2
+            f = k * d * d * d
+            f1, f2 = y1 + f - g1, y2 - f - g2
+            x1 = x1 + h6 * (p1 + 2.0 * (q1 + r1) + s1)
+            x2 = x2 + h6 * (p2 + 2.0 * (q2 + r2) + s2)
+            p1 = p1 - h6 * (a1 + 2.0 * (b1 + e1) + f1)
+            p2 = p2 - h6 * (a2 + 2.0 * (b2 + e2) + f2)
+            traj[i, t + 1, 0], traj[i, t + 1, 1], traj[i, t + 1, 2], traj[i, t + 1, 3] = x1, x2, p1, p2
+
+
+@njit
+def _adjoint_kernel(traj, u, dt, k, c1, c2, seeds, dtraj, has_dtraj, gx, gu):
+    """Reverse sweep for m seeds per sample at once.
+
+    seeds (m, b, 4): dL/d(final state); dtraj (m, b, steps + 1, 4): dL/d(every state), read
+    only if has_dtraj. Writes gx (m, b, 4) = dL/dx0 and gu (m, b, steps) = dL/du.
+    """
+    m, b = seeds.shape[0], seeds.shape[1]
+    steps = u.shape[1]
+    h2, h6 = 0.5 * dt, dt / 6.0
+    lam = np.empty((m, 4))
+    for i in range(b):
+        for j in range(m):
+            for c in range(4):
+                lam[j, c] = seeds[j, i, c]
+                if has_dtraj:
+                    lam[j, c] += dtraj[j, i, steps, c]
+        for t in range(steps - 1, -1, -1):
+            # Recompute the stage positions and the negated accelerations of step t.
+            x1, x2, p1, p2 = traj[i, t, 0], traj[i, t, 1], traj[i, t, 2], traj[i, t, 3]
+            g1, g2 = c1 * u[i, t], c2 * u[i, t]
+            d = x1 - x2
+            f = k * d * d * d
+            e_1 = 3.0 * k * d * d  # stage 1 stiffness, at Y1 = x
+            a1, a2 = x1 + f - g1, x2 - f - g2
+            y1, y2 = x1 + h2 * p1, x2 + h2 * p2
+            d = y1 - y2
+            f = k * d * d * d
+            e_2 = 3.0 * k * d * d
+            b1, b2 = y1 + f - g1, y2 - f - g2
+            q1, q2 = p1 - h2 * a1, p2 - h2 * a2
+            y1, y2 = x1 + h2 * q1, x2 + h2 * q2
+            d = y1 - y2
+            e_3 = 3.0 * k * d * d
+            r1, r2 = p1 - h2 * b1, p2 - h2 * b2
+            y1, y2 = x1 + dt * r1, x2 + dt * r2
+            d = y1 - y2
+            e_4 = 3.0 * k * d * d
+            for j in range(m):
+                lx1, lx2, lp1, lp2 = lam[j, 0], lam[j, 1], lam[j, 2], lam[j, 3]
+                # Stage 4: dL/dk4 = h/6 lambda'; k4 = (v4, -a4): v-part gx, a-part -gp.
+                vx1, vx2 = h6 * lx1, h6 * lx2
+                va1, va2 = -h6 * lp1, -h6 * lp2  # dL/d(a4)
+                # Back through Y4 = (x + h r, p - h c): position gets A^T va, momentum gets vx.
+                px1 = va1 + e_4 * (va1 - va2)
+                px2 = va2 - e_4 * (va1 - va2)
+                ax1, ax2 = px1, px2  # accumulated dL/dx from the stages
+                ap1, ap2 = vx1, vx2  # accumulated dL/dp
+                du = -(c1 * va1 + c2 * va2)
+                # Stage 3: v3 = r gets 2h/6 lambda'_x + h * dL/dY4pos; a3 gets -2h/6 lambda'_p - h * dL/dY4mom.
+                vx1, vx2 = 2.0 * h6 * lx1 + dt * px1, 2.0 * h6 * lx2 + dt * px2
+                va1, va2 = -2.0 * h6 * lp1 - dt * ap1, -2.0 * h6 * lp2 - dt * ap2
+                px1 = va1 + e_3 * (va1 - va2)
+                px2 = va2 - e_3 * (va1 - va2)
+                ax1, ax2 = ax1 + px1, ax2 + px2
+                ap1, ap2 = ap1 + vx1, ap2 + vx2
+                du -= c1 * va1 + c2 * va2
+                # Stage 2.
+                mx1, mx2 = vx1, vx2  # dL/d(momentum of Y3)
+                vx1, vx2 = 2.0 * h6 * lx1 + h2 * px1, 2.0 * h6 * lx2 + h2 * px2
+                va1, va2 = -2.0 * h6 * lp1 - h2 * mx1, -2.0 * h6 * lp2 - h2 * mx2
+                px1 = va1 + e_2 * (va1 - va2)
+                px2 = va2 - e_2 * (va1 - va2)
+                ax1, ax2 = ax1 + px1, ax2 + px2
+                ap1, ap2 = ap1 + vx1, ap2 + vx2
+                du -= c1 * va1 + c2 * va2
+                # Stage 1 (Y1 = s).
+                mx1, mx2 = vx1, vx2
+                vx1, vx2 = h6 * lx1 + h2 * px1, h6 * lx2 + h2 * px2
+                va1, va2 = -h6 * lp1 - h2 * mx1, -h6 * lp2 - h2 * mx2
+                px1 = va1 + e_1 * (va1 - va2)
+                px2 = va2 - e_1 * (va1 - va2)
+                ax1, ax2 = ax1 + px1, ax2 + px2
+                ap1, ap2 = ap1 + vx1, ap2 + vx2
+                du -= c1 * va1 + c2 * va2
+                gu[j, i, t] = du
+                lam[j, 0], lam[j, 1] = lx1 + ax1, lx2 + ax2
+                lam[j, 2], lam[j, 3] = lp1 + ap1, lp2 + ap2
+                if has_dtraj:
+                    for c in range(4):
+                        lam[j, c] += dtraj[j, i, t, c]
+        for j in range(m):
+            for c in range(4):
+                gx[j, i, c] = lam[j, c]
+
+
+def _run_forward(x0: torch.Tensor, u: torch.Tensor, dt: float, k: float, c1: float, c2: float) -> torch.Tensor:
+    """All states (b, steps + 1, 4), float64, no graph."""
+    x0n, un = as_numpy64(x0), as_numpy64(u)
+    traj = np.empty((un.shape[0], un.shape[1] + 1, 4))
+    _forward_kernel(x0n, un, float(dt), float(k), float(c1), float(c2), traj)
+    return torch.from_numpy(traj)
+
+
+def _run_adjoint(
+    traj: torch.Tensor, u: torch.Tensor, params: tuple, seeds: torch.Tensor, full: bool
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gradients (m, b, 4) w.r.t. x0 and (m, b, steps) w.r.t. u for m cotangents per sample.
+
+    seeds: (m, b, 4) on the final state, or (m, b, steps + 1, 4) on every state if ``full``.
+    """
+    dt, k, c1, c2 = params
+    tn, un, sn = as_numpy64(traj), as_numpy64(u), as_numpy64(seeds)
+    m, b = sn.shape[0], sn.shape[1]
+    if full:
+        final, dtraj = np.zeros((m, b, 4)), sn
+    else:
+        final, dtraj = sn, np.zeros((1, 1, 1, 4))
+    gx, gu = np.empty((m, b, 4)), np.empty((m, b, un.shape[1]))
+    _adjoint_kernel(tn, un, float(dt), float(k), float(c1), float(c2), final, dtraj, full, gx, gu)
+    return torch.from_numpy(gx), torch.from_numpy(gu)
+
+
+class _Simulate(torch.autograd.Function):
+    """(x0, u) -> final state (or all states if ``full``) and the float64 trajectory (saved)."""
+
+    @staticmethod
+    def forward(x0, u, params, full):
+        traj = _run_forward(x0, u, *params)
+        out = traj if full else traj[:, -1]
+        return out.to(x0.dtype).clone(), traj
+
+    @staticmethod
+    def setup_context(ctx, inputs, output):
+        x0, u, params, full = inputs
+        ctx.params, ctx.full = params, full
+        ctx.dtypes = (x0.dtype, u.dtype)
+        ctx.mark_non_differentiable(output[1])
+        ctx.save_for_backward(output[1], u)
+
+    @staticmethod
+    def backward(ctx, g_out, _g_traj):
+        traj, u = ctx.saved_tensors
+        gx, gu = _Adjoint.apply(g_out.unsqueeze(0), traj, u, ctx.params, ctx.full)
+        return gx[0].to(ctx.dtypes[0]), gu[0].to(ctx.dtypes[1]), None, None
+
+    @staticmethod
+    def vmap(info, in_dims, x0, u, params, full):
+        # Samples are independent: fold the vmapped dimension into the solver's batch.
+        n = info.batch_size
+        x0, u = batch_first(x0, in_dims[0], n), batch_first(u, in_dims[1], n)
+        b = x0.shape[1]
+        out, traj = _Simulate.apply(x0.reshape(n * b, 4), u.reshape(n * b, -1), params, full)
+        return (out.reshape(n, b, *out.shape[1:]), traj.reshape(n, b, *traj.shape[1:])), (0, 0)
+
+
+class _Adjoint(torch.autograd.Function):
+    """m cotangents per sample (m, b, ...) -> cotangents of x0 (m, b, 4) and u (m, b, steps), float64.
+
+    Not differentiable again. Its vmap rule calls ``apply`` again (not the kernel), so nested
+    transforms (vmap of jacrev) unwrap one level at a time.
+    """
+
+    @staticmethod
+    def forward(seeds, traj, u, params, full):
+        return _run_adjoint(traj, u, params, seeds, full)
+
+    @staticmethod
+    def setup_context(ctx, inputs, output):
+        pass
+
+    @staticmethod
+    def backward(ctx, *grads):
+        raise RuntimeError("the fast oscillator solver has no second derivative: use problem.solver=reference")
+
+    @staticmethod
+    def vmap(info, in_dims, seeds, traj, u, params, full):
+        n = info.batch_size
+        s = batch_first(seeds, in_dims[0], n)  # (n, m, b, ...)
+        m, b = s.shape[1], s.shape[2]
+        if in_dims[1] is None and in_dims[2] is None:
+            # More cotangents for the same trajectories (jacrev, is_grads_batched): more seeds.
+            gx, gu = _Adjoint.apply(s.reshape(n * m, *s.shape[2:]), traj, u, params, full)
+            return (gx.reshape(n, m, b, 4), gu.reshape(n, m, b, -1)), (0, 0)
+        # Different trajectories: fold the vmapped dimension into the batch.
+        traj, u = batch_first(traj, in_dims[1], n), batch_first(u, in_dims[2], n)
+        s = s.transpose(0, 1).reshape(m, n * b, *s.shape[3:])
+        gx, gu = _Adjoint.apply(s, traj.reshape(n * b, *traj.shape[2:]), u.reshape(n * b, -1), params, full)
+        return (gx.reshape(m, n, b, 4), gu.reshape(m, n, b, -1)), (1, 1)
+
+
+def simulate(
+    x0: torch.Tensor,
+    u: torch.Tensor,
+    dt: float = DT,
+    coupling: float = 1.0,
+    control: tuple[float, float] = CONTROL,
+    return_trajectory: bool = False,
+) -> torch.Tensor:
+    """``oscillator.simulate`` (same arguments, shapes, dtype) through the compiled loop.
+
+    Falls back to the reference for tensors off the CPU or without numba.
+    """
+    if not available(x0, u):
+        return simulate_reference(x0, u, dt, coupling, control, return_trajectory)
+    c1, c2 = (float(c) for c in control)
+    out, _ = _Simulate.apply(x0, u.to(x0.dtype), (float(dt), float(coupling), c1, c2), bool(return_trajectory))
+    return out
+
+
+def solver_jacobian(
+    x0: torch.Tensor, u: torch.Tensor, dt: float = DT, coupling: float = 1.0, control: tuple[float, float] = CONTROL
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Final states y (b, 4) and solver Jacobians A (b, 4, steps) = dy_i/du_i: one sweep, 4 seeds per sample."""
+    c1, c2 = (float(c) for c in control)
+    params = (float(dt), float(coupling), c1, c2)
+    traj = _run_forward(x0, u, *params)
+    b = traj.shape[0]
+    seeds = torch.eye(4, dtype=torch.float64)[:, None, :].expand(4, b, 4)
+    _, gu = _run_adjoint(traj, u, params, seeds, False)
+    return traj[:, -1].to(x0.dtype), gu.permute(1, 0, 2).to(u.dtype)
