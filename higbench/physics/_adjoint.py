@@ -22,6 +22,8 @@ on other devices (``higbench.problems``: ``problem.solver``).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -65,3 +67,89 @@ def batch_first(x: torch.Tensor | None, dim: int | None, size: int) -> torch.Ten
     if dim is None:
         return x.unsqueeze(0).expand(size, *x.shape)
     return x.movedim(dim, 0)
+
+
+@dataclass(frozen=True)
+class Kernels:
+    """A fast solver: ``forward(x0, u, params)`` -> all states (b, steps + 1, *state) float64;
+    ``adjoint(traj, u, params, seeds, full)`` -> (dL/dx0 (m, b, *state), dL/du (m, b, steps))
+    for m cotangents per sample, on the final state (m, b, *state) or, if ``full``, on every
+    state (m, b, steps + 1, *state)."""
+
+    name: str
+    forward: Callable
+    adjoint: Callable
+
+
+def run(kernels: Kernels, x0: torch.Tensor, u: torch.Tensor, params: tuple, full: bool) -> torch.Tensor:
+    """The final state (b, *state), or every state (b, steps + 1, *state) if ``full``, in x0's dtype, differentiable."""
+    out, _ = _Simulate.apply(x0, u, kernels, params, full)
+    return out
+
+
+class _Simulate(torch.autograd.Function):
+    """(x0, u) -> final state (or all states if ``full``), plus the float64 trajectory (saved, no gradient)."""
+
+    @staticmethod
+    def forward(x0, u, kernels, params, full):
+        traj = kernels.forward(x0, u, params)
+        out = traj if full else traj[:, -1]
+        return out.to(x0.dtype).clone(), traj
+
+    @staticmethod
+    def setup_context(ctx, inputs, output):
+        x0, u, kernels, params, full = inputs
+        ctx.kernels, ctx.params, ctx.full = kernels, params, full
+        ctx.dtypes = (x0.dtype, u.dtype)
+        ctx.mark_non_differentiable(output[1])
+        ctx.save_for_backward(output[1], u)
+
+    @staticmethod
+    def backward(ctx, g_out, _g_traj):
+        traj, u = ctx.saved_tensors
+        gx, gu = _Adjoint.apply(g_out.unsqueeze(0), traj, u, ctx.kernels, ctx.params, ctx.full)
+        return gx[0].to(ctx.dtypes[0]), gu[0].to(ctx.dtypes[1]), None, None, None
+
+    @staticmethod
+    def vmap(info, in_dims, x0, u, kernels, params, full):
+        # Samples are independent: fold the vmapped dimension into the solver's batch.
+        n = info.batch_size
+        x0, u = batch_first(x0, in_dims[0], n), batch_first(u, in_dims[1], n)
+        b = x0.shape[1]
+        out, traj = _Simulate.apply(x0.reshape(n * b, *x0.shape[2:]), u.reshape(n * b, -1), kernels, params, full)
+        return (out.reshape(n, b, *out.shape[1:]), traj.reshape(n, b, *traj.shape[1:])), (0, 0)
+
+
+class _Adjoint(torch.autograd.Function):
+    """m cotangents per sample (m, b, ...) -> cotangents of x0 (m, b, *state) and u (m, b, steps), float64.
+
+    Not differentiable again. Its vmap rule calls ``apply`` again (not the kernel), so nested
+    transforms (vmap of jacrev) unwrap one level at a time.
+    """
+
+    @staticmethod
+    def forward(seeds, traj, u, kernels, params, full):
+        return kernels.adjoint(traj, u, params, seeds, full)
+
+    @staticmethod
+    def setup_context(ctx, inputs, output):
+        ctx.name = inputs[3].name
+
+    @staticmethod
+    def backward(ctx, *grads):
+        raise RuntimeError(f"the fast {ctx.name} solver has no second derivative: use problem.solver=reference")
+
+    @staticmethod
+    def vmap(info, in_dims, seeds, traj, u, kernels, params, full):
+        n = info.batch_size
+        s = batch_first(seeds, in_dims[0], n)  # (n, m, b, ...)
+        m, b = s.shape[1], s.shape[2]
+        if in_dims[1] is None and in_dims[2] is None:
+            # More cotangents for the same trajectories (jacrev, is_grads_batched): more seeds.
+            gx, gu = _Adjoint.apply(s.reshape(n * m, *s.shape[2:]), traj, u, kernels, params, full)
+            return (gx.reshape(n, m, *gx.shape[1:]), gu.reshape(n, m, *gu.shape[1:])), (0, 0)
+        # Different trajectories: fold the vmapped dimension into the batch.
+        traj, u = batch_first(traj, in_dims[1], n), batch_first(u, in_dims[2], n)
+        s = s.transpose(0, 1).reshape(m, n * b, *s.shape[3:])
+        gx, gu = _Adjoint.apply(s, traj.reshape(n * b, *traj.shape[2:]), u.reshape(n * b, -1), kernels, params, full)
+        return (gx.reshape(m, n, b, *gx.shape[2:]), gu.reshape(m, n, b, -1)), (1, 1)

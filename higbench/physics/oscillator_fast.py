@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from higbench.physics._adjoint import as_numpy64, available, batch_first, njit
+from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, run
 from higbench.physics.oscillator import CONTROL, DT
 from higbench.physics.oscillator import simulate as simulate_reference
 
@@ -152,8 +152,9 @@ def _adjoint_kernel(traj, u, dt, k, c1, c2, seeds, dtraj, has_dtraj, gx, gu):
                 gx[j, i, c] = lam[j, c]
 
 
-def _run_forward(x0: torch.Tensor, u: torch.Tensor, dt: float, k: float, c1: float, c2: float) -> torch.Tensor:
+def _run_forward(x0: torch.Tensor, u: torch.Tensor, params: tuple) -> torch.Tensor:
     """All states (b, steps + 1, 4), float64, no graph."""
+    dt, k, c1, c2 = params
     x0n, un = as_numpy64(x0), as_numpy64(u)
     traj = np.empty((un.shape[0], un.shape[1] + 1, 4))
     _forward_kernel(x0n, un, float(dt), float(k), float(c1), float(c2), traj)
@@ -179,72 +180,7 @@ def _run_adjoint(
     return torch.from_numpy(gx), torch.from_numpy(gu)
 
 
-class _Simulate(torch.autograd.Function):
-    """(x0, u) -> final state (or all states if ``full``) and the float64 trajectory (saved)."""
-
-    @staticmethod
-    def forward(x0, u, params, full):
-        traj = _run_forward(x0, u, *params)
-        out = traj if full else traj[:, -1]
-        return out.to(x0.dtype).clone(), traj
-
-    @staticmethod
-    def setup_context(ctx, inputs, output):
-        x0, u, params, full = inputs
-        ctx.params, ctx.full = params, full
-        ctx.dtypes = (x0.dtype, u.dtype)
-        ctx.mark_non_differentiable(output[1])
-        ctx.save_for_backward(output[1], u)
-
-    @staticmethod
-    def backward(ctx, g_out, _g_traj):
-        traj, u = ctx.saved_tensors
-        gx, gu = _Adjoint.apply(g_out.unsqueeze(0), traj, u, ctx.params, ctx.full)
-        return gx[0].to(ctx.dtypes[0]), gu[0].to(ctx.dtypes[1]), None, None
-
-    @staticmethod
-    def vmap(info, in_dims, x0, u, params, full):
-        # Samples are independent: fold the vmapped dimension into the solver's batch.
-        n = info.batch_size
-        x0, u = batch_first(x0, in_dims[0], n), batch_first(u, in_dims[1], n)
-        b = x0.shape[1]
-        out, traj = _Simulate.apply(x0.reshape(n * b, 4), u.reshape(n * b, -1), params, full)
-        return (out.reshape(n, b, *out.shape[1:]), traj.reshape(n, b, *traj.shape[1:])), (0, 0)
-
-
-class _Adjoint(torch.autograd.Function):
-    """m cotangents per sample (m, b, ...) -> cotangents of x0 (m, b, 4) and u (m, b, steps), float64.
-
-    Not differentiable again. Its vmap rule calls ``apply`` again (not the kernel), so nested
-    transforms (vmap of jacrev) unwrap one level at a time.
-    """
-
-    @staticmethod
-    def forward(seeds, traj, u, params, full):
-        return _run_adjoint(traj, u, params, seeds, full)
-
-    @staticmethod
-    def setup_context(ctx, inputs, output):
-        pass
-
-    @staticmethod
-    def backward(ctx, *grads):
-        raise RuntimeError("the fast oscillator solver has no second derivative: use problem.solver=reference")
-
-    @staticmethod
-    def vmap(info, in_dims, seeds, traj, u, params, full):
-        n = info.batch_size
-        s = batch_first(seeds, in_dims[0], n)  # (n, m, b, ...)
-        m, b = s.shape[1], s.shape[2]
-        if in_dims[1] is None and in_dims[2] is None:
-            # More cotangents for the same trajectories (jacrev, is_grads_batched): more seeds.
-            gx, gu = _Adjoint.apply(s.reshape(n * m, *s.shape[2:]), traj, u, params, full)
-            return (gx.reshape(n, m, b, 4), gu.reshape(n, m, b, -1)), (0, 0)
-        # Different trajectories: fold the vmapped dimension into the batch.
-        traj, u = batch_first(traj, in_dims[1], n), batch_first(u, in_dims[2], n)
-        s = s.transpose(0, 1).reshape(m, n * b, *s.shape[3:])
-        gx, gu = _Adjoint.apply(s, traj.reshape(n * b, *traj.shape[2:]), u.reshape(n * b, -1), params, full)
-        return (gx.reshape(m, n, b, 4), gu.reshape(m, n, b, -1)), (1, 1)
+KERNELS = Kernels("oscillator", _run_forward, _run_adjoint)
 
 
 def simulate(
@@ -262,8 +198,7 @@ def simulate(
     if not available(x0, u):
         return simulate_reference(x0, u, dt, coupling, control, return_trajectory)
     c1, c2 = (float(c) for c in control)
-    out, _ = _Simulate.apply(x0, u.to(x0.dtype), (float(dt), float(coupling), c1, c2), bool(return_trajectory))
-    return out
+    return run(KERNELS, x0, u.to(x0.dtype), (float(dt), float(coupling), c1, c2), bool(return_trajectory))
 
 
 def solver_jacobian(
@@ -272,7 +207,7 @@ def solver_jacobian(
     """Final states y (b, 4) and solver Jacobians A (b, 4, steps) = dy_i/du_i: one sweep, 4 seeds per sample."""
     c1, c2 = (float(c) for c in control)
     params = (float(dt), float(coupling), c1, c2)
-    traj = _run_forward(x0, u, *params)
+    traj = _run_forward(x0, u, params)
     b = traj.shape[0]
     seeds = torch.eye(4, dtype=torch.float64)[:, None, :].expand(4, b, 4)
     _, gu = _run_adjoint(traj, u, params, seeds, False)
