@@ -42,7 +42,7 @@ def njit(fn):
     if not HAVE_NUMBA:
         return fn
     cache = os.environ.get("HIGBENCH_NUMBA_CACHE", "1") != "0"
-    return numba.njit(cache=cache, nogil=True)(fn)
+    return numba.njit(cache=cache, nogil=True, error_model="numpy")(fn)
 
 
 def available(*tensors: torch.Tensor) -> bool:
@@ -74,11 +74,16 @@ class Kernels:
     """A fast solver: ``forward(x0, u, params)`` -> all states (b, steps + 1, *state) float64;
     ``adjoint(traj, u, params, seeds, full)`` -> (dL/dx0 (m, b, *state), dL/du (m, b, steps))
     for m cotangents per sample, on the final state (m, b, *state) or, if ``full``, on every
-    state (m, b, steps + 1, *state)."""
+    state (m, b, steps + 1, *state). ``batch_dim``: where the sample dimension of the
+    kernels' trajectory is (its layout is theirs; ``states`` gives (b, steps + 1, *state))."""
 
     name: str
     forward: Callable
     adjoint: Callable
+    batch_dim: int = 0
+
+    def states(self, traj: torch.Tensor) -> torch.Tensor:
+        return traj.movedim(self.batch_dim, 0)
 
 
 def run(kernels: Kernels, x0: torch.Tensor, u: torch.Tensor, params: tuple, full: bool) -> torch.Tensor:
@@ -93,7 +98,8 @@ class _Simulate(torch.autograd.Function):
     @staticmethod
     def forward(x0, u, kernels, params, full):
         traj = kernels.forward(x0, u, params)
-        out = traj if full else traj[:, -1]
+        states = kernels.states(traj)
+        out = states if full else states[:, -1]
         return out.to(x0.dtype).clone(), traj
 
     @staticmethod
@@ -117,7 +123,8 @@ class _Simulate(torch.autograd.Function):
         x0, u = batch_first(x0, in_dims[0], n), batch_first(u, in_dims[1], n)
         b = x0.shape[1]
         out, traj = _Simulate.apply(x0.reshape(n * b, *x0.shape[2:]), u.reshape(n * b, -1), kernels, params, full)
-        return (out.reshape(n, b, *out.shape[1:]), traj.reshape(n, b, *traj.shape[1:])), (0, 0)
+        bd = kernels.batch_dim
+        return (out.reshape(n, b, *out.shape[1:]), traj.unflatten(bd, (n, b))), (0, bd)
 
 
 class _Adjoint(torch.autograd.Function):
@@ -149,7 +156,9 @@ class _Adjoint(torch.autograd.Function):
             gx, gu = _Adjoint.apply(s.reshape(n * m, *s.shape[2:]), traj, u, kernels, params, full)
             return (gx.reshape(n, m, *gx.shape[1:]), gu.reshape(n, m, *gu.shape[1:])), (0, 0)
         # Different trajectories: fold the vmapped dimension into the batch.
-        traj, u = batch_first(traj, in_dims[1], n), batch_first(u, in_dims[2], n)
+        bd = kernels.batch_dim
+        traj = batch_first(traj, in_dims[1], n).movedim(0, bd).flatten(bd, bd + 1)
+        u = batch_first(u, in_dims[2], n)
         s = s.transpose(0, 1).reshape(m, n * b, *s.shape[3:])
-        gx, gu = _Adjoint.apply(s, traj.reshape(n * b, *traj.shape[2:]), u.reshape(n * b, -1), kernels, params, full)
+        gx, gu = _Adjoint.apply(s, traj, u.reshape(n * b, -1), kernels, params, full)
         return (gx.reshape(m, n, b, *gx.shape[2:]), gu.reshape(m, n, b, -1)), (1, 1)

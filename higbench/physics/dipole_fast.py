@@ -28,120 +28,147 @@ from higbench.physics.dipole import DT, DX, N
 from higbench.physics.dipole import simulate as simulate_reference
 
 
+# The kernels work on real/imaginary parts in real arithmetic (a compiled complex division is
+# several times slower than one reciprocal of |den|^2), sample-minor: arrays are
+# (..., n, 2, b) so that the innermost loop runs over independent samples and vectorises
+# (the Thomas recursion itself is sequential in k). The trajectory stays in that layout
+# (it is private to the kernels); only what leaves this module is transposed.
+
+
 @njit
 def _forward_kernel(psi0, u, dt, dx, traj):
-    """traj[i, t] = complex state after t steps of sample i (traj[i, 0] = psi0[i])."""
-    b, steps = u.shape
-    n = psi0.shape[1]
+    """psi0 (n, 2, b), u (steps, b); writes traj (steps + 1, n, 2, b), traj[0] = psi0."""
+    steps, b = u.shape
+    n = psi0.shape[0]
     a = 0.5 * dt
     alpha = a / (dx * dx)
-    beta = -1j * alpha
-    cp = np.empty(n, dtype=np.complex128)
-    rp = np.empty(n, dtype=np.complex128)
-    for i in range(b):
+    # M = 1 + i dt/2 H: diagonal 1 + i (2 alpha + a u x_k), off-diagonal beta = -i alpha.
+    cr, ci = np.zeros((n, b)), np.zeros((n, b))  # cp_k = beta / den_k
+    rr, ri = np.zeros((n, b)), np.zeros((n, b))  # rp_k = (psi_k - beta rp_{k-1}) / den_k
+    traj[0] = psi0
+    for t in range(steps):
         for k in range(n):
-            traj[i, 0, k] = psi0[i, k]
-        for t in range(steps):
-            ut = a * u[i, t]
-            den = 1.0 + 1j * (2.0 * alpha + ut * dx)
-            cp[0] = beta / den
-            rp[0] = traj[i, t, 0] / den
-            for k in range(1, n):
-                den = 1.0 + 1j * (2.0 * alpha + ut * (k + 1) * dx) - beta * cp[k - 1]
-                cp[k] = beta / den
-                rp[k] = (traj[i, t, k] - beta * rp[k - 1]) / den
-            w = rp[n - 1]
-            traj[i, t + 1, n - 1] = 2.0 * w - traj[i, t, n - 1]
-            for k in range(n - 2, -1, -1):
-                w = rp[k] - cp[k] * w
-                traj[i, t + 1, k] = 2.0 * w - traj[i, t, k]
+            xk = (k + 1) * dx
+            km = max(k - 1, 0)
+            first = 0.0 if k == 0 else 1.0
+            for i in range(b):
+                # den = d_k - beta cp_{k-1};  beta z = alpha Im z - i alpha Re z.
+                pcr, pci = first * cr[km, i], first * ci[km, i]
+                prr, pri = first * rr[km, i], first * ri[km, i]
+                dr = 1.0 - alpha * pci
+                di = 2.0 * alpha + a * u[t, i] * xk + alpha * pcr
+                q = 1.0 / (dr * dr + di * di)
+                ir, ii = dr * q, -di * q  # 1 / den
+                cr[k, i], ci[k, i] = alpha * ii, -alpha * ir  # beta / den
+                sr = traj[t, k, 0, i] - alpha * pri
+                si = traj[t, k, 1, i] + alpha * prr
+                rr[k, i], ri[k, i] = sr * ir - si * ii, sr * ii + si * ir
+        # Back substitution w_k = rp_k - cp_k w_{k+1}, in place (rr, ri then hold w = M^{-1} psi).
+        for k in range(n - 2, -1, -1):
+            for i in range(b):
+                wr, wi = rr[k + 1, i], ri[k + 1, i]
+                rr[k, i] -= cr[k, i] * wr - ci[k, i] * wi
+                ri[k, i] -= cr[k, i] * wi + ci[k, i] * wr
+        for k in range(n):
+            for i in range(b):
+                traj[t + 1, k, 0, i] = 2.0 * rr[k, i] - traj[t, k, 0, i]
+                traj[t + 1, k, 1, i] = 2.0 * ri[k, i] - traj[t, k, 1, i]
 
 
 @njit
 def _adjoint_kernel(traj, u, dt, dx, seeds, dtraj, has_dtraj, gx, gu):
-    """Reverse sweep for m complex seeds per sample: seeds (m, b, n) on the final state, dtraj
-    (m, b, steps + 1, n) on every state if has_dtraj. Writes gx (m, b, n), gu (m, b, steps)."""
-    m, b, n = seeds.shape
-    steps = u.shape[1]
+    """Reverse sweep for m seeds per sample: seeds (m, n, 2, b) on the final state, dtraj
+    (m, steps + 1, n, 2, b) on every state if has_dtraj. Writes gx (m, n, 2, b), gu (m, steps, b)."""
+    m, n, b = seeds.shape[0], seeds.shape[1], seeds.shape[3]
+    steps = u.shape[0]
     a = 0.5 * dt
     alpha = a / (dx * dx)
-    beta = 1j * alpha  # off-diagonal of conj(M)
-    cp = np.empty(n, dtype=np.complex128)
-    inv = np.empty(n, dtype=np.complex128)
-    g = np.empty((m, n), dtype=np.complex128)
-    rp = np.empty(n, dtype=np.complex128)
-    for i in range(b):
+    # conj(M): diagonal 1 - i (2 alpha + a u x_k), off-diagonal beta = +i alpha.
+    cr, ci, ir, ii = np.zeros((n, b)), np.zeros((n, b)), np.zeros((n, b)), np.zeros((n, b))
+    rr, ri = np.zeros((n, b)), np.zeros((n, b))
+    acc = np.zeros(b)
+    g = seeds.copy()
+    if has_dtraj:
+        for j in range(m):
+            g[j] += dtraj[j, steps]
+    for t in range(steps - 1, -1, -1):
+        for k in range(n):
+            xk = (k + 1) * dx
+            km = max(k - 1, 0)
+            first = 0.0 if k == 0 else 1.0
+            for i in range(b):
+                # den = d_k - beta cp_{k-1};  beta z = -alpha Im z + i alpha Re z.
+                dr = 1.0 + alpha * first * ci[km, i]
+                di = -(2.0 * alpha + a * u[t, i] * xk) - alpha * first * cr[km, i]
+                q = 1.0 / (dr * dr + di * di)
+                ir[k, i], ii[k, i] = dr * q, -di * q
+                cr[k, i], ci[k, i] = -alpha * ii[k, i], alpha * ir[k, i]
         for j in range(m):
             for k in range(n):
-                g[j, k] = seeds[j, i, k]
-                if has_dtraj:
-                    g[j, k] += dtraj[j, i, steps, k]
-        for t in range(steps - 1, -1, -1):
-            ut = a * u[i, t]
-            den = 1.0 - 1j * (2.0 * alpha + ut * dx)
-            inv[0] = 1.0 / den
-            cp[0] = beta * inv[0]
-            for k in range(1, n):
-                den = 1.0 - 1j * (2.0 * alpha + ut * (k + 1) * dx) - beta * cp[k - 1]
-                inv[k] = 1.0 / den
-                cp[k] = beta * inv[k]
-            for j in range(m):
-                rp[0] = g[j, 0] * inv[0]
-                for k in range(1, n):
-                    rp[k] = (g[j, k] - beta * rp[k - 1]) * inv[k]
-                z = rp[n - 1]
-                acc = 0.0
-                for k in range(n - 1, -1, -1):
-                    if k < n - 1:
-                        z = rp[k] - cp[k] * z
-                    w = 0.5 * (traj[i, t + 1, k] + traj[i, t, k])
-                    acc += (z.real * w.imag - z.imag * w.real) * ((k + 1) * dx)  # Im(conj(z) w) x_k
-                    g[j, k] = 2.0 * z - g[j, k]
-                    if has_dtraj:
-                        g[j, k] += dtraj[j, i, t, k]
-                gu[j, i, t] = dt * acc
-        for j in range(m):
+                km = max(k - 1, 0)
+                first = 0.0 if k == 0 else 1.0
+                for i in range(b):
+                    sr = g[j, k, 0, i] + alpha * first * ri[km, i]
+                    si = g[j, k, 1, i] - alpha * first * rr[km, i]
+                    rr[k, i] = sr * ir[k, i] - si * ii[k, i]
+                    ri[k, i] = sr * ii[k, i] + si * ir[k, i]
+            # z = conj(M)^{-1} g by back substitution in place; then dL/du_t and g_old = 2 z - g.
+            for k in range(n - 2, -1, -1):
+                for i in range(b):
+                    zr, zi = rr[k + 1, i], ri[k + 1, i]
+                    rr[k, i] -= cr[k, i] * zr - ci[k, i] * zi
+                    ri[k, i] -= cr[k, i] * zi + ci[k, i] * zr
+            acc[:] = 0.0
             for k in range(n):
-                gx[j, i, k] = g[j, k]
+                xk = (k + 1) * dx
+                for i in range(b):
+                    wr = 0.5 * (traj[t + 1, k, 0, i] + traj[t, k, 0, i])  # M^{-1} psi_old
+                    wi = 0.5 * (traj[t + 1, k, 1, i] + traj[t, k, 1, i])
+                    acc[i] += (rr[k, i] * wi - ri[k, i] * wr) * xk  # Im(conj(z) w) x_k
+                    g[j, k, 0, i] = 2.0 * rr[k, i] - g[j, k, 0, i]
+                    g[j, k, 1, i] = 2.0 * ri[k, i] - g[j, k, 1, i]
+            for i in range(b):
+                gu[j, t, i] = dt * acc[i]
+            if has_dtraj:
+                g[j] += dtraj[j, t]
+    for j in range(m):
+        gx[j] = g[j]
 
 
-def _complex(a: np.ndarray) -> np.ndarray:
-    """(..., n, 2) float64 -> (..., n) complex128 (a copy, C-contiguous)."""
-    return np.ascontiguousarray(a[..., 0] + 1j * a[..., 1])
-
-
-def _real(z: np.ndarray) -> torch.Tensor:
-    """(..., n) complex128 -> (..., n, 2) float64 tensor."""
-    return torch.from_numpy(np.ascontiguousarray(np.stack((z.real, z.imag), axis=-1)))
+def _sample_minor(x: torch.Tensor, batch_dim: int) -> np.ndarray:
+    """float64 NumPy copy with dimension ``batch_dim`` moved last (C-contiguous)."""
+    return np.ascontiguousarray(np.moveaxis(as_numpy64(x), batch_dim, -1))
 
 
 def _run_forward(psi0: torch.Tensor, u: torch.Tensor, params: tuple) -> torch.Tensor:
-    """All states (b, steps + 1, 14, 2), float64, no graph."""
+    """All states, float64, no graph, in the kernels' layout (steps + 1, 14, 2, b)."""
     (dt,) = params
-    p0, un = _complex(as_numpy64(psi0)), as_numpy64(u)
-    traj = np.empty((un.shape[0], un.shape[1] + 1, p0.shape[1]), dtype=np.complex128)
+    p0, un = _sample_minor(psi0, 0), _sample_minor(u, 0)
+    traj = np.empty((un.shape[0] + 1, *p0.shape))
     _forward_kernel(p0, un, float(dt), DX, traj)
-    return _real(traj)
+    return torch.from_numpy(traj)
 
 
 def _run_adjoint(
     traj: torch.Tensor, u: torch.Tensor, params: tuple, seeds: torch.Tensor, full: bool
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Gradients (m, b, 14, 2) w.r.t. psi0 and (m, b, steps) w.r.t. u for m cotangents per sample."""
+    """Gradients (m, b, 14, 2) w.r.t. psi0 and (m, b, steps) w.r.t. u for m cotangents per sample.
+
+    seeds: (m, b, 14, 2) on the final state, or (m, b, steps + 1, 14, 2) on every state if ``full``.
+    """
     (dt,) = params
-    tn, un, sn = _complex(as_numpy64(traj)), as_numpy64(u), _complex(as_numpy64(seeds))
-    m, b = sn.shape[0], sn.shape[1]
+    tn, un, sn = as_numpy64(traj), _sample_minor(u, 0), _sample_minor(seeds, 1)
+    m, b, n = sn.shape[0], tn.shape[-1], tn.shape[1]
     if full:
-        final, dtraj = np.zeros((m, b, tn.shape[2]), dtype=np.complex128), sn
+        final, dtraj = np.zeros((m, n, 2, b)), sn
     else:
-        final, dtraj = sn, np.zeros((1, 1, 1, tn.shape[2]), dtype=np.complex128)
-    gx = np.empty((m, b, tn.shape[2]), dtype=np.complex128)
-    gu = np.empty((m, b, un.shape[1]))
+        final, dtraj = sn, np.zeros((1, 1, n, 2, b))
+    gx, gu = np.empty((m, n, 2, b)), np.empty((m, un.shape[0], b))
     _adjoint_kernel(tn, un, float(dt), DX, final, dtraj, full, gx, gu)
-    return _real(gx), torch.from_numpy(gu)
+    return torch.from_numpy(gx).permute(0, 3, 1, 2), torch.from_numpy(gu).transpose(1, 2)
 
 
-KERNELS = Kernels("dipole", _run_forward, _run_adjoint)
+KERNELS = Kernels("dipole", _run_forward, _run_adjoint, batch_dim=3)
 
 
 def simulate(psi0: torch.Tensor, u: torch.Tensor, dt: float = DT, return_trajectory: bool = False) -> torch.Tensor:
@@ -158,8 +185,8 @@ def solver_jacobian(psi0: torch.Tensor, u: torch.Tensor, dt: float = DT) -> tupl
     """Final states y (b, 28) (real/imaginary parts interleaved, as ``simulate(...).reshape(b, -1)``)
     and solver Jacobians A (b, 28, steps) = dy_i/du_i: one sweep with 28 seeds per sample."""
     traj = _run_forward(psi0, u, (float(dt),))
-    b, n = traj.shape[0], traj.shape[2]
+    n, b = traj.shape[1], traj.shape[3]
     m = 2 * n
     seeds = torch.eye(m, dtype=torch.float64).reshape(m, 1, n, 2).expand(m, b, n, 2)
     _, gu = _run_adjoint(traj, u, (float(dt),), seeds, False)
-    return traj[:, -1].reshape(b, m).to(psi0.dtype), gu.permute(1, 0, 2).to(u.dtype)
+    return traj[-1].permute(2, 0, 1).reshape(b, m).to(psi0.dtype), gu.permute(1, 0, 2).to(u.dtype)
