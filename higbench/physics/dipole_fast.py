@@ -24,9 +24,8 @@ import numpy as np
 import torch
 
 from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, run
-from higbench.physics.dipole import DT, DX, N
+from higbench.physics.dipole import DT, DX
 from higbench.physics.dipole import simulate as simulate_reference
-
 
 # The kernels work on real/imaginary parts in real arithmetic (a compiled complex division is
 # several times slower than one reciprocal of |den|^2), sample-minor: arrays are
