@@ -160,7 +160,7 @@ TOP_RULES: dict[str, Check] = {
     "eval_unit": choice(EVAL_UNITS),
     "device": Check(_device_ok, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)"),
     "dtype": choice(DTYPES),
-    "threads": integer(1, optional=True),
+    "threads": Check(lambda v: v is None or v == "auto" or (_is_int(v) and v >= 1), "must be auto, null or an integer >= 1"),
     "init_from": string(optional=True),
     "progress": boolean(),
     "checkpoint_every": positive(optional=True),

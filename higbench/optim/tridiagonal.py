@@ -13,12 +13,12 @@ Needs SciPy's LAPACK (``dsytrd`` and the divide-and-conquer tridiagonal solver `
 SciPy, ``available()`` is False and callers use eigh. SciPy's OpenBLAS is multi-threaded
 by default, which on a shared, loaded machine is catastrophically slow (oversubscription:
 2048 took 16 s instead of 1.5 s here), so its thread count follows torch's
-(``torch.get_num_threads()``) for the duration of the call.
+(``torch.get_num_threads()``, set from the run's ``threads``) for the duration of the call,
+through threadpoolctl.
 """
 
 from __future__ import annotations
 
-import ctypes
 import functools
 from contextlib import contextmanager
 
@@ -36,52 +36,19 @@ def available() -> bool:
 
 
 @functools.lru_cache(maxsize=1)
-def _openblas_thread_controls() -> list[tuple[object, object]]:
-    """(set, get) thread-count functions of every OpenBLAS loaded in this process."""
-    import scipy.linalg.lapack  # noqa: F401  (loads SciPy's OpenBLAS)
+def _blas_controller():
+    """threadpoolctl's view of the BLAS libraries loaded (SciPy's OpenBLAS among them), once."""
+    import scipy.linalg.lapack  # noqa: F401  (loads SciPy's OpenBLAS before the scan)
+    from threadpoolctl import ThreadpoolController
 
-    paths = set()
-    try:
-        with open("/proc/self/maps") as maps:
-            for line in maps:
-                path = line.split()[-1] if len(line.split()) >= 6 else ""
-                if "openblas" in path.lower() and ".so" in path:
-                    paths.add(path)
-    except OSError:
-        return []
-    controls = []
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for prefix in ("scipy_openblas", "openblas"):
-            for suffix in ("", "64_"):
-                setter, getter = f"{prefix}_set_num_threads{suffix}", f"{prefix}_get_num_threads{suffix}"
-                if hasattr(lib, setter) and hasattr(lib, getter):
-                    set_fn, get_fn = getattr(lib, setter), getattr(lib, getter)
-                    set_fn.argtypes, set_fn.restype = [ctypes.c_int], None
-                    get_fn.argtypes, get_fn.restype = [], ctypes.c_int
-                    controls.append((set_fn, get_fn))
-                    break
-            else:
-                continue
-            break
-    return controls
+    return ThreadpoolController()
 
 
 @contextmanager
 def blas_threads(n: int):
-    """SciPy's (OpenBLAS) thread count set to n inside the block, restored after."""
-    controls = _openblas_thread_controls()
-    before = [get() for _, get in controls]
-    for set_fn, _ in controls:
-        set_fn(n)
-    try:
+    """SciPy's (and every other loaded) BLAS thread count set to n inside the block, restored after."""
+    with _blas_controller().limit(limits=n, user_api="blas"):
         yield
-    finally:
-        for (set_fn, _), value in zip(controls, before):
-            set_fn(value)
 
 
 def _apply_reflectors(c: np.ndarray, tau: np.ndarray, x: np.ndarray, transpose: bool) -> np.ndarray:
