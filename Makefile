@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed-stamp
 PRESET ?= quick
 PYTEST_ARGS ?=
 
-.PHONY: install run test test-slow test-all lint bench figures clean
+.PHONY: install run test test-slow test-all lint bench bench-time-to-loss figures clean
 
 # A virtual environment with torch pinned first (CPU build), then higbench (editable) and
 # its dev and launcher extras. Re-runs when pyproject.toml changes.
@@ -40,6 +40,12 @@ lint: install
 
 bench: install
 	$(BIN)/python scripts/bench_step.py
+
+# Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG/GN/Adam, dipole HIG/Adam,
+# paper settings, TTL_BUDGET seconds of training clock per run (the issue's 15 minutes).
+TTL_BUDGET ?= 900
+bench-time-to-loss: install
+	$(BIN)/python scripts/time_to_loss.py --budget $(TTL_BUDGET)
 
 figures: install
 	$(BIN)/python -m higbench.figures all --preset $(PRESET)
