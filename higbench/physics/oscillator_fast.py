@@ -30,17 +30,20 @@ from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, run
 from higbench.physics.oscillator import CONTROL, DT
 from higbench.physics.oscillator import simulate as simulate_reference
 
+# Arrays are sample-minor, (..., 4, b): the innermost loops run over independent samples and
+# vectorise. The trajectory stays in that layout (it is private to the kernels).
+
 
 @njit
 def _forward_kernel(x0, u, dt, k, c1, c2, traj):
-    """traj[i, t] = state after t RK4 steps of sample i (traj[i, 0] = x0[i])."""
-    b, steps = u.shape
+    """x0 (4, b), u (steps, b); writes traj (steps + 1, 4, b), traj[t] = state after t RK4 steps."""
+    steps, b = u.shape
     h2, h6 = 0.5 * dt, dt / 6.0
-    for i in range(b):
-        x1, x2, p1, p2 = x0[i, 0], x0[i, 1], x0[i, 2], x0[i, 3]
-        traj[i, 0, 0], traj[i, 0, 1], traj[i, 0, 2], traj[i, 0, 3] = x1, x2, p1, p2
-        for t in range(steps):
-            g1, g2 = c1 * u[i, t], c2 * u[i, t]
+    traj[0] = x0
+    for t in range(steps):
+        for i in range(b):
+            x1, x2, p1, p2 = traj[t, 0, i], traj[t, 1, i], traj[t, 2, i], traj[t, 3, i]
+            g1, g2 = c1 * u[t, i], c2 * u[t, i]
             d = x1 - x2
             f = k * d * d * d
             a1, a2 = x1 + f - g1, x2 - f - g2
@@ -59,53 +62,52 @@ def _forward_kernel(x0, u, dt, k, c1, c2, traj):
             d = y1 - y2
             f = k * d * d * d
             f1, f2 = y1 + f - g1, y2 - f - g2
-            x1 = x1 + h6 * (p1 + 2.0 * (q1 + r1) + s1)
-            x2 = x2 + h6 * (p2 + 2.0 * (q2 + r2) + s2)
-            p1 = p1 - h6 * (a1 + 2.0 * (b1 + e1) + f1)
-            p2 = p2 - h6 * (a2 + 2.0 * (b2 + e2) + f2)
-            traj[i, t + 1, 0], traj[i, t + 1, 1], traj[i, t + 1, 2], traj[i, t + 1, 3] = x1, x2, p1, p2
+            traj[t + 1, 0, i] = x1 + h6 * (p1 + 2.0 * (q1 + r1) + s1)
+            traj[t + 1, 1, i] = x2 + h6 * (p2 + 2.0 * (q2 + r2) + s2)
+            traj[t + 1, 2, i] = p1 - h6 * (a1 + 2.0 * (b1 + e1) + f1)
+            traj[t + 1, 3, i] = p2 - h6 * (a2 + 2.0 * (b2 + e2) + f2)
 
 
 @njit
 def _adjoint_kernel(traj, u, dt, k, c1, c2, seeds, dtraj, has_dtraj, gx, gu):
     """Reverse sweep for m seeds per sample at once.
 
-    seeds (m, b, 4): dL/d(final state); dtraj (m, b, steps + 1, 4): dL/d(every state), read
-    only if has_dtraj. Writes gx (m, b, 4) = dL/dx0 and gu (m, b, steps) = dL/du.
+    seeds (m, 4, b): dL/d(final state); dtraj (m, steps + 1, 4, b): dL/d(every state), read
+    only if has_dtraj. Writes gx (m, 4, b) = dL/dx0 and gu (m, steps, b) = dL/du.
     """
-    m, b = seeds.shape[0], seeds.shape[1]
-    steps = u.shape[1]
+    m, b = seeds.shape[0], seeds.shape[2]
+    steps = u.shape[0]
     h2, h6 = 0.5 * dt, dt / 6.0
-    lam = np.empty((m, 4))
-    for i in range(b):
+    lam = seeds.copy()
+    if has_dtraj:
         for j in range(m):
-            for c in range(4):
-                lam[j, c] = seeds[j, i, c]
-                if has_dtraj:
-                    lam[j, c] += dtraj[j, i, steps, c]
-        for t in range(steps - 1, -1, -1):
-            # Recompute the stage positions and the negated accelerations of step t.
-            x1, x2, p1, p2 = traj[i, t, 0], traj[i, t, 1], traj[i, t, 2], traj[i, t, 3]
-            g1, g2 = c1 * u[i, t], c2 * u[i, t]
+            lam[j] += dtraj[j, steps]
+    # Stiffness e = 3 k d^2 of the four stages of step t, shared by the m seeds.
+    st = np.empty((4, b))
+    for t in range(steps - 1, -1, -1):
+        for i in range(b):
+            # Recompute the stage positions of step t from its stored state.
+            x1, x2, p1, p2 = traj[t, 0, i], traj[t, 1, i], traj[t, 2, i], traj[t, 3, i]
+            g1, g2 = c1 * u[t, i], c2 * u[t, i]
             d = x1 - x2
             f = k * d * d * d
-            e_1 = 3.0 * k * d * d  # stage 1 stiffness, at Y1 = x
+            st[0, i] = 3.0 * k * d * d
             a1, a2 = x1 + f - g1, x2 - f - g2
             y1, y2 = x1 + h2 * p1, x2 + h2 * p2
             d = y1 - y2
             f = k * d * d * d
-            e_2 = 3.0 * k * d * d
+            st[1, i] = 3.0 * k * d * d
             b1, b2 = y1 + f - g1, y2 - f - g2
             q1, q2 = p1 - h2 * a1, p2 - h2 * a2
-            y1, y2 = x1 + h2 * q1, x2 + h2 * q2
-            d = y1 - y2
-            e_3 = 3.0 * k * d * d
+            d = (x1 + h2 * q1) - (x2 + h2 * q2)
+            st[2, i] = 3.0 * k * d * d
             r1, r2 = p1 - h2 * b1, p2 - h2 * b2
-            y1, y2 = x1 + dt * r1, x2 + dt * r2
-            d = y1 - y2
-            e_4 = 3.0 * k * d * d
-            for j in range(m):
-                lx1, lx2, lp1, lp2 = lam[j, 0], lam[j, 1], lam[j, 2], lam[j, 3]
+            d = (x1 + dt * r1) - (x2 + dt * r2)
+            st[3, i] = 3.0 * k * d * d
+        for j in range(m):
+            for i in range(b):
+                e_1, e_2, e_3, e_4 = st[0, i], st[1, i], st[2, i], st[3, i]
+                lx1, lx2, lp1, lp2 = lam[j, 0, i], lam[j, 1, i], lam[j, 2, i], lam[j, 3, i]
                 # Stage 4: dL/dk4 = h/6 lambda'; k4 = (v4, -a4): v-part gx, a-part -gp.
                 vx1, vx2 = h6 * lx1, h6 * lx2
                 va1, va2 = -h6 * lp1, -h6 * lp2  # dL/d(a4)
@@ -115,7 +117,7 @@ def _adjoint_kernel(traj, u, dt, k, c1, c2, seeds, dtraj, has_dtraj, gx, gu):
                 ax1, ax2 = px1, px2  # accumulated dL/dx from the stages
                 ap1, ap2 = vx1, vx2  # accumulated dL/dp
                 du = -(c1 * va1 + c2 * va2)
-                # Stage 3: v3 = r gets 2h/6 lambda'_x + h * dL/dY4pos; a3 gets -2h/6 lambda'_p - h * dL/dY4mom.
+                # Stage 3: v3 = r gets 2h/6 lambda'_x + h dL/dY4pos; a3 gets -2h/6 lambda'_p - h dL/dY4mom.
                 vx1, vx2 = 2.0 * h6 * lx1 + dt * px1, 2.0 * h6 * lx2 + dt * px2
                 va1, va2 = -2.0 * h6 * lp1 - dt * ap1, -2.0 * h6 * lp2 - dt * ap2
                 px1 = va1 + e_3 * (va1 - va2)
@@ -141,22 +143,24 @@ def _adjoint_kernel(traj, u, dt, k, c1, c2, seeds, dtraj, has_dtraj, gx, gu):
                 ax1, ax2 = ax1 + px1, ax2 + px2
                 ap1, ap2 = ap1 + vx1, ap2 + vx2
                 du -= c1 * va1 + c2 * va2
-                gu[j, i, t] = du
-                lam[j, 0], lam[j, 1] = lx1 + ax1, lx2 + ax2
-                lam[j, 2], lam[j, 3] = lp1 + ap1, lp2 + ap2
-                if has_dtraj:
-                    for c in range(4):
-                        lam[j, c] += dtraj[j, i, t, c]
-        for j in range(m):
-            for c in range(4):
-                gx[j, i, c] = lam[j, c]
+                gu[j, t, i] = du
+                lam[j, 0, i], lam[j, 1, i] = lx1 + ax1, lx2 + ax2
+                lam[j, 2, i], lam[j, 3, i] = lp1 + ap1, lp2 + ap2
+            if has_dtraj:
+                lam[j] += dtraj[j, t]
+    gx[:] = lam
+
+
+def _sample_minor(x: torch.Tensor, batch_dim: int) -> np.ndarray:
+    """float64 NumPy copy with dimension ``batch_dim`` moved last (C-contiguous)."""
+    return np.ascontiguousarray(np.moveaxis(as_numpy64(x), batch_dim, -1))
 
 
 def _run_forward(x0: torch.Tensor, u: torch.Tensor, params: tuple) -> torch.Tensor:
-    """All states (b, steps + 1, 4), float64, no graph."""
+    """All states, float64, no graph, in the kernels' layout (steps + 1, 4, b)."""
     dt, k, c1, c2 = params
-    x0n, un = as_numpy64(x0), as_numpy64(u)
-    traj = np.empty((un.shape[0], un.shape[1] + 1, 4))
+    x0n, un = _sample_minor(x0, 0), _sample_minor(u, 0)
+    traj = np.empty((un.shape[0] + 1, 4, un.shape[1]))
     _forward_kernel(x0n, un, float(dt), float(k), float(c1), float(c2), traj)
     return torch.from_numpy(traj)
 
@@ -169,18 +173,18 @@ def _run_adjoint(
     seeds: (m, b, 4) on the final state, or (m, b, steps + 1, 4) on every state if ``full``.
     """
     dt, k, c1, c2 = params
-    tn, un, sn = as_numpy64(traj), as_numpy64(u), as_numpy64(seeds)
-    m, b = sn.shape[0], sn.shape[1]
+    tn, un, sn = as_numpy64(traj), _sample_minor(u, 0), _sample_minor(seeds, 1)
+    m, b = sn.shape[0], tn.shape[-1]
     if full:
-        final, dtraj = np.zeros((m, b, 4)), sn
+        final, dtraj = np.zeros((m, 4, b)), sn
     else:
-        final, dtraj = sn, np.zeros((1, 1, 1, 4))
-    gx, gu = np.empty((m, b, 4)), np.empty((m, b, un.shape[1]))
+        final, dtraj = sn, np.zeros((1, 1, 4, b))
+    gx, gu = np.empty((m, 4, b)), np.empty((m, un.shape[0], b))
     _adjoint_kernel(tn, un, float(dt), float(k), float(c1), float(c2), final, dtraj, full, gx, gu)
-    return torch.from_numpy(gx), torch.from_numpy(gu)
+    return torch.from_numpy(gx).transpose(1, 2), torch.from_numpy(gu).transpose(1, 2)
 
 
-KERNELS = Kernels("oscillator", _run_forward, _run_adjoint)
+KERNELS = Kernels("oscillator", _run_forward, _run_adjoint, batch_dim=2)
 
 
 def simulate(
@@ -208,7 +212,7 @@ def solver_jacobian(
     c1, c2 = (float(c) for c in control)
     params = (float(dt), float(coupling), c1, c2)
     traj = _run_forward(x0, u, params)
-    b = traj.shape[0]
+    b = traj.shape[2]
     seeds = torch.eye(4, dtype=torch.float64)[:, None, :].expand(4, b, 4)
     _, gu = _run_adjoint(traj, u, params, seeds, False)
-    return traj[:, -1].to(x0.dtype), gu.permute(1, 0, 2).to(u.dtype)
+    return traj[-1].T.to(x0.dtype), gu.permute(1, 0, 2).to(u.dtype)
