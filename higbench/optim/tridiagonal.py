@@ -51,23 +51,45 @@ def blas_threads(n: int):
         yield
 
 
-def _apply_reflectors(c: np.ndarray, tau: np.ndarray, x: np.ndarray, transpose: bool) -> np.ndarray:
+def _apply_reflectors_loop(c: np.ndarray, tau: np.ndarray, x: np.ndarray, transpose: bool) -> np.ndarray:
     """Q x (transpose=False) or Q^T x for Q = H(0) H(1) ... H(n-2) from dsytrd(lower=1).
 
     H(i) = I - tau_i v_i v_i^T with v_i = (0, ..., 0, 1, c[i+2:, i]) (the 1 at index i+1).
+    ``c`` is the Fortran-ordered (column-major) output of dsytrd, so v_i is contiguous.
     """
     x = x.copy()
     n = x.shape[0]
-    order = range(n - 1) if transpose else range(n - 2, -1, -1)
-    for i in order:
+    for step in range(n - 1):
+        i = step if transpose else n - 2 - step
         t = tau[i]
         if t == 0.0:
             continue
-        v = c[i + 2 :, i]
-        s = t * (x[i + 1] + v @ x[i + 2 :])
+        s = x[i + 1]
+        for r in range(i + 2, n):
+            s += c[r, i] * x[r]
+        s *= t
         x[i + 1] -= s
-        x[i + 2 :] -= s * v
+        for r in range(i + 2, n):
+            x[r] -= s * c[r, i]
     return x
+
+
+try:  # compiled: the Python loop over n reflectors costs ~4 ms at n = 512, this ~0.3 ms
+    import numba
+
+    _apply_reflectors = numba.njit(cache=True, nogil=True)(_apply_reflectors_loop)
+except ImportError:  # pragma: no cover
+
+    def _apply_reflectors(c, tau, x, transpose):
+        x = x.copy()
+        n = x.shape[0]
+        for i in range(n - 1) if transpose else range(n - 2, -1, -1):
+            if tau[i] != 0.0:
+                v = c[i + 2 :, i]
+                s = tau[i] * (x[i + 1] + v @ x[i + 2 :])
+                x[i + 1] -= s
+                x[i + 2 :] -= s * v
+        return x
 
 
 class TridiagonalEigen:
@@ -108,9 +130,9 @@ class TridiagonalEigen:
         self.values = torch.from_numpy(np.ascontiguousarray(values)).to(self.device)
 
     def project(self, g: torch.Tensor) -> torch.Tensor:
-        h = _apply_reflectors(self.c, self.tau, g.detach().cpu().numpy().astype(np.float64), transpose=True)
+        h = _apply_reflectors(self.c, self.tau, np.ascontiguousarray(g.detach().cpu().numpy(), dtype=np.float64), True)
         return torch.from_numpy(self.W.T @ h).to(self.device)
 
     def expand(self, x: torch.Tensor) -> torch.Tensor:
         y = self.W @ x.detach().cpu().numpy().astype(np.float64)
-        return torch.from_numpy(_apply_reflectors(self.c, self.tau, y, transpose=False)).to(self.device)
+        return torch.from_numpy(_apply_reflectors(self.c, self.tau, np.ascontiguousarray(y), False)).to(self.device)
