@@ -467,6 +467,13 @@ def main(argv=None) -> None:
     parser.add_argument("--problem", nargs="+", default=["oscillator"])
     parser.add_argument("--optimizer", nargs="+", default=["adam", "hig"])
     parser.add_argument("--batch-size", nargs="+", type=int, default=None, help="default: the problem x optimizer default")
+    parser.add_argument(
+        "--pairs",
+        nargs="+",
+        default=None,
+        metavar="OPTIMIZER:B",
+        help="optimizer/batch-size pairs instead of --optimizer x --batch-size (e.g. adam:256 hig:16)",
+    )
     parser.add_argument("--jacobian", nargs="+", default=["structured"], choices=["structured", "naive"])
     parser.add_argument("--solver", nargs="+", default=["auto"], choices=["auto", "gram", "svd"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra Hydra overrides for every configuration")
@@ -502,8 +509,10 @@ def main(argv=None) -> None:
         groups = paper_configs(args.naive_all)
     else:
         configs = []
-        for problem, optimizer in itertools.product(args.problem, args.optimizer):
-            sizes = args.batch_size or [default_batch(problem, optimizer)]
+        pairs = [(p.split(":")[0], int(p.split(":")[1])) for p in args.pairs] if args.pairs else None
+        for problem, optimizer in itertools.product(args.problem, [o for o, _ in pairs] if pairs else args.optimizer):
+            sizes = [b for o, b in pairs if o == optimizer][:1] if pairs else None
+            sizes = sizes or args.batch_size or [default_batch(problem, optimizer)]
             paths = list(itertools.product(args.jacobian, args.solver)) if is_jacobian_power(optimizer) else [("-", "-")]
             for b, (jac, solver) in itertools.product(sizes, paths):
                 configs.append(Config(problem, optimizer, b, jac, solver, tuple(args.set)))
