@@ -234,7 +234,7 @@ def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str) -> 
         # Less sensitive to other processes on a shared machine: the least disturbed repeat,
         # and the CPU time of this process (with 1 thread: the time it actually ran).
         "update_min_s": min(sum(v[i] for v in t.phases.values()) for i in range(len(t.wall))),
-        "cpu_s": statistics.median(t.cpu),
+        "cpu_s": statistics.median(t.cpu) if t.cpu else float("nan"),
         "load": os.getloadavg()[0],
         "peak_mem_mb": mem,
         "repeats": len(t.wall),
