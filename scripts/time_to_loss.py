@@ -97,10 +97,11 @@ def write(rows: list[dict], out_dir: Path, note: str) -> None:
 
     out_dir.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(out_dir / "time_to_loss.csv", index=False)
-    head = ["problem", "optimizer", "b", "budget (s)", "updates", *[f"to {t:.0e} (s)" for t in THRESHOLDS], "final loss"]
+    head = ["problem", "optimizer", "b", "budget (s)", "status", "updates"]
+    head += [f"to {t:.0e} (s)" for t in THRESHOLDS] + ["final loss"]
     lines = [note, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["problem"], r["optimizer"], r["batch_size"], r["budget_s"], r["updates"]]
+        cells = [r["problem"], r["optimizer"], r["batch_size"], r["budget_s"], r["status"], r["updates"]]
         cells += [r[f"t_{t:.0e}"] for t in THRESHOLDS] + [r["final_test_loss"]]
         lines.append("| " + " | ".join(fmt(c) for c in cells) + " |")
     (out_dir / "time_to_loss.md").write_text("\n".join(lines) + "\n")
