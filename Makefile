@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed-stamp
 PRESET ?= quick
 PYTEST_ARGS ?=
 
-.PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench figures clean
+.PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench bench-time-to-loss figures clean
 
 # A virtual environment with torch pinned first (CPU build), then higbench (editable) with
 # only what `make run` needs. Re-runs when pyproject.toml changes.
@@ -63,6 +63,12 @@ lint: install-dev
 
 bench: install
 	$(BIN)/python scripts/bench_step.py
+
+# Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG/GN/Adam, dipole HIG/Adam,
+# paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes).
+TTL_BUDGET ?= 900
+bench-time-to-loss: install
+	$(BIN)/python scripts/time_to_loss.py --budget $(TTL_BUDGET)
 
 figures: install
 	$(BIN)/python -m higbench.figures all --preset $(PRESET)

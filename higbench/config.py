@@ -160,7 +160,7 @@ TOP_RULES: dict[str, Check] = {
     "eval_unit": choice(EVAL_UNITS),
     "device": Check(_device_ok, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)"),
     "dtype": choice(DTYPES),
-    "threads": integer(1, optional=True),
+    "threads": Check(lambda v: v is None or v == "auto" or (_is_int(v) and v >= 1), "must be auto, null or an integer >= 1"),
     "init_from": string(optional=True),
     "progress": boolean(),
     "checkpoint_every": positive(optional=True),
@@ -178,6 +178,9 @@ _DATA = {
     "init": choice(INIT_SCHEMES),
 }
 
+# problem.solver of the time-stepping problems: the compiled loop with its adjoint, or plain torch.
+PHYSICS_SOLVERS = ("fast", "reference")
+
 PROBLEM_RULES: dict[str, dict[str, Check]] = {
     "toy": {
         **_DATA,
@@ -193,6 +196,7 @@ PROBLEM_RULES: dict[str, dict[str, Check]] = {
         "control": real_list(2),
         "hidden": int_list(1, min_len=0),
         "activation": choice(ACTIVATIONS),
+        "solver": choice(PHYSICS_SOLVERS),
     },
     "poisson": {
         **{k: v for k, v in _DATA.items() if k != "train_size"},
@@ -211,6 +215,7 @@ PROBLEM_RULES: dict[str, dict[str, Check]] = {
         "cnn_channels": integer(1),
         "cnn_layers": integer(1, 6),  # 6 valid convolutions of kernel 3 take 14 points to 2
         "activation": choice(ACTIVATIONS),
+        "solver": choice(PHYSICS_SOLVERS),
     },
 }
 

@@ -101,6 +101,7 @@ class Config:
 @dataclass
 class Timing:
     wall: list[float] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
     phases: dict[str, list[float]] = field(default_factory=lambda: {k: [] for k in PHASES})
     finite: bool = True
 
@@ -158,11 +159,12 @@ def time_configs(configs: list[Config], repeats: int, warmup: int, dtype: torch.
     timings = {cfg: Timing() for cfg in configs}
     for r in range(repeats):
         for cfg, run in runners.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             result = run()
-            wall = time.perf_counter() - t0
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             t = timings[cfg]
             t.wall.append(wall)
+            t.cpu.append(cpu)
             t.finite &= result.finite
             for k in PHASES:
                 t.phases[k].append(result.timings.get(k, float("nan")))
@@ -229,6 +231,11 @@ def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str) -> 
         "update_s": sum(med.values()),
         **med,
         "wall_s": statistics.median(t.wall),
+        # Less sensitive to other processes on a shared machine: the least disturbed repeat,
+        # and the CPU time of this process (with 1 thread: the time it actually ran).
+        "update_min_s": min(sum(v[i] for v in t.phases.values()) for i in range(len(t.wall))),
+        "cpu_s": statistics.median(t.cpu) if t.cpu else float("nan"),
+        "load": os.getloadavg()[0],
         "peak_mem_mb": mem,
         "repeats": len(t.wall),
         "threads": threads,
@@ -290,7 +297,23 @@ def targets(rows: list[dict]) -> list[dict]:
     def ratio(name, a, b, limit, text):
         if a and b:
             value = a["update_s"] / b["update_s"]
-            out.append({"target": name, "value": value, "limit": limit, "reached": value <= limit, "how": text})
+            best = a["update_min_s"] / b["update_min_s"]
+            out.append(
+                {"target": name, "value": value, "value_min": best, "limit": limit, "reached": value <= limit, "how": text}
+            )
+
+    adam512 = find("oscillator", "adam", 512)
+    if adam512:
+        out.append(
+            {
+                "target": "oscillator Adam b=512 update (s)",
+                "value": adam512["update_s"],
+                "value_min": adam512["update_min_s"],
+                "limit": 0.017,
+                "reached": adam512["update_s"] <= 0.017,
+                "how": "update_s",
+            }
+        )
 
     ratio(
         "oscillator HIG b=128 / Adam b=512",
@@ -312,8 +335,9 @@ def targets(rows: list[dict]) -> list[dict]:
             {
                 "target": "Poisson HIG b=64 update (s)",
                 "value": p64["update_s"],
-                "limit": 8.0,
-                "reached": p64["update_s"] < 8.0,
+                "value_min": p64["update_min_s"],
+                "limit": 3.0,
+                "reached": p64["update_s"] <= 3.0,
                 "how": "update_s",
             }
         )
@@ -359,6 +383,8 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         ("solver", "solver"),
         ("peak_mem_mb", "memory (MB)"),
         ("update_s", "update (s)"),
+        ("update_min_s", "best (s)"),
+        ("cpu_s", "CPU (s)"),
         ("jacobian_s", "Jacobian (s)"),
         ("inversion_s", "inversion (s)"),
         ("paper_mem_mb", "paper memory (MB)"),
@@ -421,7 +447,16 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         parts += [
             "## Targets",
             "",
-            markdown_table(goal, [("target", "figure"), ("value", "measured"), ("limit", "target"), ("reached", "reached")]),
+            markdown_table(
+                goal,
+                [
+                    ("target", "figure"),
+                    ("value", "measured (median)"),
+                    ("value_min", "best repeat"),
+                    ("limit", "target"),
+                    ("reached", "reached"),
+                ],
+            ),
             "",
         ]
     (out_dir / "paper_tables.md").write_text("\n".join(parts))
@@ -432,12 +467,23 @@ def main(argv=None) -> None:
     parser.add_argument("--problem", nargs="+", default=["oscillator"])
     parser.add_argument("--optimizer", nargs="+", default=["adam", "hig"])
     parser.add_argument("--batch-size", nargs="+", type=int, default=None, help="default: the problem x optimizer default")
+    parser.add_argument(
+        "--pairs",
+        nargs="+",
+        default=None,
+        metavar="OPTIMIZER:B",
+        help="optimizer/batch-size pairs instead of --optimizer x --batch-size (e.g. adam:256 hig:16)",
+    )
     parser.add_argument("--jacobian", nargs="+", default=["structured"], choices=["structured", "naive"])
     parser.add_argument("--solver", nargs="+", default=["auto"], choices=["auto", "gram", "svd"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra Hydra overrides for every configuration")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--warmup", type=int, default=2)
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (1: robust on a shared machine)")
+    parser.add_argument(
+        "--threads",
+        default="1",
+        help="torch and BLAS threads: N or auto (as the runner's threads=auto); 1: robust on a shared machine",
+    )
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"])
     parser.add_argument("--no-memory", action="store_true", help="skip the per-configuration memory subprocesses")
     parser.add_argument("--paper-tables", action="store_true", help="the rows of paper tables 3-5, plus the naive path")
@@ -448,6 +494,9 @@ def main(argv=None) -> None:
     parser.add_argument("--memory-probe", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
 
+    from higbench.runner.threads import resolve_threads
+
+    args.threads = resolve_threads(args.threads if args.threads == "auto" else int(args.threads))
     torch.set_num_threads(args.threads)
     dtype = {"float32": torch.float32, "float64": torch.float64}[args.dtype]
     if args.memory_probe:
@@ -460,8 +509,10 @@ def main(argv=None) -> None:
         groups = paper_configs(args.naive_all)
     else:
         configs = []
-        for problem, optimizer in itertools.product(args.problem, args.optimizer):
-            sizes = args.batch_size or [default_batch(problem, optimizer)]
+        pairs = [(p.split(":")[0], int(p.split(":")[1])) for p in args.pairs] if args.pairs else None
+        for problem, optimizer in itertools.product(args.problem, [o for o, _ in pairs] if pairs else args.optimizer):
+            sizes = [b for o, b in pairs if o == optimizer][:1] if pairs else None
+            sizes = sizes or args.batch_size or [default_batch(problem, optimizer)]
             paths = list(itertools.product(args.jacobian, args.solver)) if is_jacobian_power(optimizer) else [("-", "-")]
             for b, (jac, solver) in itertools.product(sizes, paths):
                 configs.append(Config(problem, optimizer, b, jac, solver, tuple(args.set)))

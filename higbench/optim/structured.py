@@ -64,9 +64,19 @@ def solver_jacobian(
     * ``loop``: the same m backward passes one after another (retain_graph).
     * ``replicate``: the batch replicated m times (b*m samples) in one forward and one
       backward pass, copy k seeded with component k.
+
+    With ``batched``, a problem whose bound method ``physics`` is passed may answer directly:
+    its ``physics_jacobian(inputs, u)`` returns (y, A) (e.g. from a hand-written adjoint
+    sweep with m seeds per sample) or None to use autograd.
     """
     if method not in SOLVER_JACOBIAN_METHODS:
         raise ValueError(f"method={method!r}: expected one of {SOLVER_JACOBIAN_METHODS}")
+    direct = getattr(getattr(physics, "__self__", None), "physics_jacobian", None)
+    if method == "batched" and direct is not None:
+        found = direct(inputs, u.detach())
+        if found is not None:
+            y, A = found
+            return y.reshape(u.shape[0], -1).detach(), A.reshape(u.shape[0], y[0].numel(), -1)
     b = u.shape[0]
     u_flat_size = u[0].numel()
 

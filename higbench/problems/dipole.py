@@ -5,7 +5,10 @@ Schroedinger equation i dPsi/dt = (-Laplace + u(t) x) Psi in an infinite well on
 target state (real and imaginary parts, 28 values) and outputs one u per step; the physics
 evolves the ground state under u. Targets are real superpositions a*phi_2 + b*phi_3.
 Loss: 1 - |<Psi, Psi_target>|^2; extra curves: the low- and high-energy losses of
-figure 4c. Solver: ``higbench.physics.dipole.simulate`` (re-exported here).
+figure 4c. Solver: ``higbench.physics.dipole.simulate`` (the reference, re-exported here) or,
+with ``problem.solver=fast`` (the default), ``higbench.physics.dipole_fast.simulate``: the
+same scheme compiled, with its hand-derived adjoint and a direct route for the structured
+path's solver Jacobians (``physics_jacobian``). Off the CPU the reference runs.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from higbench.physics import dipole_fast
+from higbench.physics._adjoint import available
 from higbench.physics.dipole import N, eigenstate, energy_overlap_loss, fidelity_loss, simulate
 from higbench.problems.base import Batch, FixedDataProblem, register
 from higbench.problems.networks import ACTIVATIONS, mlp
@@ -67,9 +72,20 @@ class Dipole(FixedDataProblem):
             return DipoleCNN(int(self.cfg.cnn_channels), int(self.cfg.cnn_layers), 3, steps, self.cfg.activation)
         return mlp([2 * N, *self.cfg.hidden, steps], activation=self.cfg.activation)
 
+    @property
+    def fast(self) -> bool:
+        return self.cfg.get("solver", "fast") == "fast"
+
     def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         psi0 = self.psi0.expand(u.shape[0], N, 2)
-        return simulate(psi0, u, dt=self.cfg.dt).reshape(u.shape[0], -1)
+        solve = dipole_fast.simulate if self.fast else simulate
+        return solve(psi0, u, dt=self.cfg.dt).reshape(u.shape[0], -1)
+
+    def physics_jacobian(self, inputs: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """y (b, 28) and A_i = dy_i/du_i (b, 28, steps) from one adjoint sweep (None: use autograd)."""
+        if not (self.fast and available(u)):
+            return None
+        return dipole_fast.solver_jacobian(self.psi0.expand(u.shape[0], N, 2), u, dt=self.cfg.dt)
 
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return fidelity_loss(y.reshape(-1, N, 2), targets.reshape(-1, N, 2))
@@ -85,5 +101,6 @@ class Dipole(FixedDataProblem):
         """States (b, steps+1, 14, 2) and controls (b, steps) under the network (figure 4a)."""
         with torch.no_grad():
             u = model(batch.net_inputs)
-            states = simulate(self.psi0.expand(u.shape[0], N, 2), u, dt=self.cfg.dt, return_trajectory=True)
+            solve = dipole_fast.simulate if self.fast else simulate
+            states = solve(self.psi0.expand(u.shape[0], N, 2), u, dt=self.cfg.dt, return_trajectory=True)
         return states, u

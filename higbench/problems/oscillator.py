@@ -3,7 +3,10 @@
 The network sees the target state (= the initial state) and outputs one control value u
 per RK4 step; the physics integrates the chain from that initial state, and the loss is
 the squared distance of the final state to the target (sum over the 4 components).
-The solver itself is ``higbench.physics.oscillator.simulate`` (re-exported here).
+The solver is ``higbench.physics.oscillator.simulate`` (the reference, re-exported here) or,
+with ``problem.solver=fast`` (the default), ``higbench.physics.oscillator_fast.simulate``:
+the same RK4 scheme compiled, with its hand-derived adjoint, and a direct route for the
+structured path's solver Jacobians (``physics_jacobian``). Off the CPU the reference runs.
 """
 
 from __future__ import annotations
@@ -11,6 +14,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from higbench.physics import oscillator_fast
+from higbench.physics._adjoint import available
 from higbench.physics.oscillator import energy, simulate
 from higbench.problems.base import Batch, FixedDataProblem, register
 from higbench.problems.networks import mlp
@@ -34,8 +39,21 @@ class Oscillator(FixedDataProblem):
     def make_model(self) -> nn.Module:
         return mlp([4, *self.cfg.hidden, int(self.cfg.steps)], activation=self.cfg.activation)
 
+    @property
+    def fast(self) -> bool:
+        return self.cfg.get("solver", "fast") == "fast"
+
     def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        return simulate(inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control))
+        solve = oscillator_fast.simulate if self.fast else simulate
+        return solve(inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control))
+
+    def physics_jacobian(self, inputs: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """y (b, 4) and A_i = dy_i/du_i (b, 4, steps) from one adjoint sweep (None: use autograd)."""
+        if not (self.fast and available(inputs, u)):
+            return None
+        return oscillator_fast.solver_jacobian(
+            inputs, u, dt=self.cfg.dt, coupling=self.cfg.coupling, control=tuple(self.cfg.control)
+        )
 
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return ((y - targets) ** 2).sum(dim=1)
@@ -44,7 +62,8 @@ class Oscillator(FixedDataProblem):
         """States (b, steps+1, 4) and controls (b, steps) under the network (figure 2a)."""
         with torch.no_grad():
             u = model(batch.net_inputs)
-            states = simulate(
+            solve = oscillator_fast.simulate if self.fast else simulate
+            states = solve(
                 batch.inputs,
                 u,
                 dt=self.cfg.dt,

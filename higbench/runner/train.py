@@ -46,6 +46,7 @@ from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, memory_guard
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
+from higbench.runner.threads import resolve_threads
 from higbench.runner.updates import JacobianPowerUpdate, build_update
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -188,8 +189,9 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
 def _setup(cfg: DictConfig, device: torch.device | None = None):
     device = resolve_device(cfg.device) if device is None else device
     dtype = DTYPES[cfg.dtype]
-    if cfg.get("threads"):
-        torch.set_num_threads(int(cfg.threads))
+    threads = resolve_threads(cfg.get("threads"))
+    if threads:
+        torch.set_num_threads(threads)
     torch.manual_seed(cfg.seed)
     problem = build_problem(cfg.problem, dtype=dtype, device=device, seed=cfg.seed)
     return device, problem

@@ -1,4 +1,8 @@
-"""Physics of the coupled-oscillator solver: RK4 order, conservation laws, reference ODE solver, autograd."""
+"""Physics of the coupled-oscillator solver: RK4 order, conservation laws, reference ODE solver, autograd.
+
+Every test that integrates runs on both implementations (``problem.solver``): the reference
+torch solver and the compiled loop with its hand-derived adjoint (``simulate`` fixture).
+"""
 
 import math
 
@@ -7,9 +11,15 @@ import pytest
 import torch
 from scipy.integrate import solve_ivp
 
-from higbench.physics.oscillator import energy, simulate
+from higbench.physics import oscillator, oscillator_fast
+from higbench.physics.oscillator import energy
 
 F64 = torch.float64
+
+
+@pytest.fixture(params=["reference", "fast"])
+def simulate(request):
+    return {"reference": oscillator.simulate, "fast": oscillator_fast.simulate}[request.param]
 
 
 def states(b, seed=0, dtype=F64):
@@ -34,7 +44,7 @@ def scipy_reference(x0, u, dt, k=1.0, c=(0.0, 3.0)):
     return y
 
 
-def test_shapes_and_trajectory():
+def test_shapes_and_trajectory(simulate):
     x0, u = states(3), controls(3, 7)
     out = simulate(x0, u)
     traj = simulate(x0, u, return_trajectory=True)
@@ -44,7 +54,7 @@ def test_shapes_and_trajectory():
     assert simulate(x0.float(), u.float()).dtype == torch.float32
 
 
-def test_rk4_fourth_order():
+def test_rk4_fourth_order(simulate):
     # Constant control keeps the ODE autonomous, so only the integrator's error is measured.
     x0, u = states(4), 0.5 * torch.ones(4, 1, dtype=F64)
     t_end = 3.0
@@ -57,7 +67,7 @@ def test_rk4_fourth_order():
     assert all(3.5 < p < 4.5 for p in orders), (errs, orders)
 
 
-def test_uncoupled_energy_per_oscillator_conserved():
+def test_uncoupled_energy_per_oscillator_conserved(simulate):
     x0, u = states(8), torch.zeros(8, 96, dtype=F64)
     traj = simulate(x0, u, coupling=0.0, return_trajectory=True)
     e = 0.5 * (traj[..., :2] ** 2 + traj[..., 2:] ** 2)  # (b, steps+1, 2)
@@ -69,7 +79,7 @@ def test_uncoupled_energy_per_oscillator_conserved():
     assert 1.0 - expected[-1] < 1e-5
 
 
-def test_coupled_hamiltonian_conserved():
+def test_coupled_hamiltonian_conserved(simulate):
     x0 = states(8)
     traj = simulate(x0, torch.zeros(8, 96, dtype=F64), coupling=1.0, return_trajectory=True)
     h = energy(traj, coupling=1.0)
@@ -105,14 +115,14 @@ def numpy_rk4(x0, u, dt, k=1.0, c=(0.0, 3.0)):
 
 
 @pytest.mark.parametrize("k,c,dt", [(1.0, (0.0, 3.0), 0.125), (0.5, (1.0, -2.0), 0.05), (0.0, (0.0, 3.0), 0.2)])
-def test_is_classic_rk4(k, c, dt):
+def test_is_classic_rk4(simulate, k, c, dt):
     x0, u = states(3, seed=7), controls(3, 6, seed=8)
     out = simulate(x0, u, dt=dt, coupling=k, control=c, return_trajectory=True)
     for i in range(3):
         np.testing.assert_allclose(out[i].numpy(), numpy_rk4(x0[i].numpy(), u[i].numpy(), dt, k, c), atol=1e-14, rtol=0)
 
 
-def test_converges_to_scipy_with_piecewise_constant_control():
+def test_converges_to_scipy_with_piecewise_constant_control(simulate):
     # One control value per 0.125 time units, held constant; finer RK4 steps repeat it.
     x0, u = states(2, seed=3), controls(2, 24, seed=4)
     ref = np.stack([scipy_reference(x0[i].numpy(), u[i].numpy(), 0.125) for i in range(2)])
@@ -122,7 +132,7 @@ def test_converges_to_scipy_with_piecewise_constant_control():
     assert all(3.5 < p < 4.5 for p in orders), (errs, orders)
 
 
-def test_matches_scipy_full_horizon():
+def test_matches_scipy_full_horizon(simulate):
     # The paper's setting: 96 steps of 0.125. The global RK4 error over 12 time units is
     # ~1e-4 (u = 0) to ~1e-3 (u ~ 0.3 N(0,1)), grown from ~1e-7 local errors by the dynamics.
     x0, u = states(2, seed=3), 0.3 * controls(2, 96, seed=4)
@@ -131,14 +141,14 @@ def test_matches_scipy_full_horizon():
         np.testing.assert_allclose(out[i].numpy(), scipy_reference(x0[i].numpy(), u[i].numpy(), 0.125), atol=3e-3, rtol=0)
 
 
-def test_float32_matches_float64():
+def test_float32_matches_float64(simulate):
     x0, u = states(16), controls(16, 96)
     out64 = simulate(x0, u)
     out32 = simulate(x0.float(), u.float())
     torch.testing.assert_close(out32.double(), out64, atol=1e-4, rtol=1e-4)
 
 
-def test_batch_independence():
+def test_batch_independence(simulate):
     x0, u = states(6), controls(6, 20)
     full = simulate(x0, u)
     for i in (0, 4):
@@ -149,13 +159,13 @@ def test_batch_independence():
     assert off.abs().max() == 0.0 and jac.abs().max() > 0.0
 
 
-def test_gradcheck():
+def test_gradcheck(simulate):
     x0 = states(2).requires_grad_()
     u = controls(2, 3).requires_grad_()
     assert torch.autograd.gradcheck(lambda a, b: simulate(a, b, dt=0.2), (x0, u))
 
 
-def test_torch_func_per_sample_jacobian():
+def test_torch_func_per_sample_jacobian(simulate):
     # The HIG Jacobian code runs the physics under vmap(jacrev(...)) with a batch of one.
     x0, u = states(3), controls(3, 8)
 

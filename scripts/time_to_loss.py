@@ -1,0 +1,144 @@
+"""Training-clock seconds to reach test losses 1e-3 .. 1e-7 (issue: "time to loss").
+
+Runs ``higbench problem=P optimizer=O`` at the paper's settings (the pair's defaults in
+conf/problem_optimizer/) for a training-clock budget, one run after another (so runs do
+not compete for the cores), then reads each run file's curves and reports, per threshold,
+the training clock (``wall_time``: evaluations excluded, as in the paper) of the first
+evaluation whose test loss is at or below it. The resolution is the evaluation interval
+(``--eval-every``, seconds of training clock).
+
+    python scripts/time_to_loss.py                         # 900 s per run (make bench-time-to-loss)
+    python scripts/time_to_loss.py --budget 120 --runs oscillator:hig oscillator:adam
+    python scripts/time_to_loss.py --from-runs outputs/bench/time_to_loss   # re-read, no new runs
+
+Writes ``<out>/time_to_loss.csv`` and ``.md``; prints one JSON line per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+THRESHOLDS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+DEFAULT_RUNS = ("oscillator:hig", "oscillator:gn", "oscillator:adam", "dipole:hig", "dipole:adam")
+
+
+def time_to(curves, threshold: float) -> float | None:
+    """Training clock of the first evaluation with test loss <= threshold (None: not reached)."""
+    hit = curves[curves["test_loss"] <= threshold]
+    return None if hit.empty else float(hit["wall_time"].iloc[0])
+
+
+def summarise(run_file: Path) -> dict:
+    from higbench.runfile.reader import load_run
+
+    meta, curves = load_run(run_file)
+    cfg = meta["config"]
+    out = {
+        "problem": cfg["problem"]["name"] if cfg["problem"].get("model", "mlp") == "mlp" else "dipole_cnn",
+        "optimizer": cfg["optimizer"]["name"],
+        "batch_size": cfg["batch_size"],
+        "lr": cfg["optimizer"].get("lr"),
+        "budget_s": cfg["budget"]["seconds"],
+        "threads": meta.get("env", {}).get("torch_threads"),
+        "status": meta.get("status"),
+        "updates": int(curves["step"].iloc[-1]) if len(curves) else 0,
+        "clock_s": float(curves["wall_time"].iloc[-1]) if len(curves) else 0.0,
+        "final_test_loss": float(curves["test_loss"].iloc[-1]) if len(curves) else math.nan,
+        "best_test_loss": float(curves["test_loss"].min()) if len(curves) else math.nan,
+        "run_file": str(run_file),
+    }
+    for thr in THRESHOLDS:
+        out[f"t_{thr:.0e}"] = time_to(curves, thr)
+    return out
+
+
+def launch(problem: str, optimizer: str, budget: float, eval_every: float, out_dir: Path, extra: list[str]) -> Path:
+    run_dir = out_dir / f"{problem}_{optimizer}"
+    if run_dir.exists():
+        run_dir = out_dir / f"{problem}_{optimizer}_{time.strftime('%Y%m%d-%H%M%S')}"  # never overwrite a run
+    cmd = [
+        sys.executable,
+        "-m",
+        "higbench.cli",
+        f"problem={problem}",
+        f"optimizer={optimizer}",
+        f"budget.seconds={budget}",
+        f"eval_every={eval_every}",
+        "progress=false",
+        f"hydra.run.dir={run_dir}",
+        *extra,
+    ]
+    print("running:", " ".join(cmd[3:]), file=sys.stderr, flush=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    for line in proc.stdout.splitlines():
+        if line.startswith("run file: "):
+            return Path(line[len("run file: ") :].strip())
+    raise RuntimeError(f"{problem}/{optimizer} failed (exit {proc.returncode}): {proc.stderr.strip()[-500:]}")
+
+
+def fmt(x) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float):
+        return f"{x:.3g}"
+    return str(x)
+
+
+def write(rows: list[dict], out_dir: Path, note: str) -> None:
+    import pandas as pd
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows).to_csv(out_dir / "time_to_loss.csv", index=False)
+    head = ["problem", "optimizer", "b", "budget (s)", "status", "updates"]
+    head += [f"to {t:.0e} (s)" for t in THRESHOLDS] + ["final loss"]
+    lines = [note, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["problem"], r["optimizer"], r["batch_size"], r["budget_s"], r["status"], r["updates"]]
+        cells += [r[f"t_{t:.0e}"] for t in THRESHOLDS] + [r["final_test_loss"]]
+        lines.append("| " + " | ".join(fmt(c) for c in cells) + " |")
+    (out_dir / "time_to_loss.md").write_text("\n".join(lines) + "\n")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description="Training-clock seconds to reach test losses 1e-3..1e-7 (see docstring).")
+    parser.add_argument("--budget", type=float, default=900.0, help="training-clock seconds per run (issue: 900)")
+    parser.add_argument("--eval-every", type=float, default=5.0, help="seconds of training clock between evaluations")
+    parser.add_argument("--runs", nargs="+", default=list(DEFAULT_RUNS), metavar="PROBLEM:OPTIMIZER")
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra overrides for every run")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench" / "time_to_loss")
+    parser.add_argument("--from-runs", type=Path, default=None, help="summarise the run files under this folder, run nothing")
+    args = parser.parse_args(argv)
+
+    if args.from_runs is not None:
+        files = sorted(args.from_runs.rglob("*.h5"))
+    else:
+        files = []
+        for spec in args.runs:
+            problem, _, optimizer = spec.partition(":")
+            if not optimizer:
+                parser.error(f"--runs {spec}: expected PROBLEM:OPTIMIZER")
+            files.append(launch(problem, optimizer, args.budget, args.eval_every, args.out, args.set))
+    rows = []
+    for f in files:
+        row = summarise(f)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    load = os.getloadavg()[0]
+    note = (
+        f"Time to loss, measured {time.strftime('%Y-%m-%d %H:%M')} (load at the end {load:.1f}); "
+        f"training clock of the first evaluation at or below each test loss ('-': not within the budget)."
+    )
+    write(rows, args.out if args.from_runs is None else args.from_runs, note)
+    print(f"wrote {(args.out if args.from_runs is None else args.from_runs) / 'time_to_loss.md'}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
