@@ -43,7 +43,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import ConfigError, to_plain, validate
+from higbench.config import ConfigError, check_hydra_references, to_plain, validate
 
 RUN_FILE_NAME = "run.h5"
 EXIT_BAD_INPUT = 2
@@ -213,6 +213,9 @@ def precheck(argv: list[str]) -> list[str]:
                 cfg = compose(config_name, overrides=job, return_hydra_config=True)
             except (HydraException, OmegaConfBaseException) as exc:
                 raise _composition_error(exc, job, config_name) from None
+            with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
+                HydraConfig.instance().set_config(cfg)
+            check_hydra_references(cfg)
             task = to_plain(cfg)
             validate(task)
             configs.append((job, cfg, task))

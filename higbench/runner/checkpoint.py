@@ -115,6 +115,7 @@ def load(run_path: str | Path) -> dict[str, Any]:
 
 def remove(run_path: str | Path) -> None:
     checkpoint_path(run_path).unlink(missing_ok=True)
+    remove_stale_temporaries(run_path)
 
 
 def remove_stale_temporaries(run_path: str | Path) -> None:
@@ -134,6 +135,12 @@ def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> Non
 
     with h5py.File(run_file, "r", locking=False) as f:
         file_id = run_id_of(f)
+        short = [
+            f"{group}/{name} has {f[group][name].shape[0] if group in f and name in f[group] else 0}, the checkpoint {n}"
+            for group, names in (state.get("rows") or {}).items()
+            for name, n in names.items()
+            if (f[group][name].shape[0] if group in f and name in f[group] else 0) < n
+        ]
     ckpt_id = str(state.get("run_id") or "")
     if ckpt_id != file_id:
         raise ConfigError(
@@ -141,6 +148,10 @@ def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> Non
             resume_value,
             f"checkpoint {checkpoint_path(run_file).name} belongs to another run "
             f"(its run id {ckpt_id or '<none>'}, the run file's {file_id or '<none>'}); refusing to resume from it",
+        )
+    if short:
+        raise ConfigError(
+            "resume", resume_value, f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
         )
 
 

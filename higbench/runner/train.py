@@ -152,6 +152,11 @@ def check_init_from(model: torch.nn.Module, path: str, problem_name: str) -> dic
         theirs = {k: tuple(v.shape) for k, v in weights.items()}
         ours = {k: tuple(v.shape) for k, v in state.items()}
         raise ConfigError("init_from", path, f"network does not match (run has {theirs}, this config builds {ours})")
+    bad = sorted(k for k, v in weights.items() if not np.isfinite(v).all())
+    if bad:
+        raise ConfigError(
+            "init_from", path, f"final weights hold NaN or inf ({', '.join(bad)}); a diverged run cannot start another"
+        )
     return weights
 
 
