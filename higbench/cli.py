@@ -19,9 +19,17 @@ refused (exit 2, before Hydra touches the directory), and of two runs racing for
 directory the second fails to create the file ("w-") and exits 2. The only way to write
 into an existing run file is ``resume=`` (see ``higbench.runner.checkpoint``).
 
+Output locations are checked too (``higbench.runner.outputs``): a directory that is a
+file, read-only, too long a name, too little free space, a ``run.h5`` that is a link.
+A run dir whose run recorded nothing (``checkpoint.recorded_nothing``) is started again in
+place, its dead file moved aside. A multirun into an existing sweep directory keeps every
+job that already has a run (``resume=true`` resumes the interrupted and failed ones), and
+Hydra's files for such a job go to ``.hydra/rerun-<time>`` (``_output_subdir``).
+
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
-status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``).
+status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``;
+a file-system fault such as a full disk is one line, ``RunFileFault``).
 """
 
 from __future__ import annotations
