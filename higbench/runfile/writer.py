@@ -127,6 +127,7 @@ class RunFileWriter:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._unflushed = 0
+        self._inode = None
         self.check_space()
         try:
             # "w-": never overwrite an existing run's file.
@@ -172,6 +173,7 @@ class RunFileWriter:
         self = cls.__new__(cls)
         self.path = Path(path)
         self._unflushed = 0
+        self._inode = None
         self.check_space()
         try:
             self.f = h5py.File(self.path, "r+")
@@ -223,6 +225,8 @@ class RunFileWriter:
 
     def check_space(self, extra: int = 0) -> None:
         """Raise DiskFull unless the unflushed data, ``extra`` bytes and the reserve fit."""
+        if self._inode is not None:
+            self.check_file()  # a file that is gone has no disk to fill
         size = self.path.stat().st_size if self.path.exists() else 0
         need = 2 * (self._unflushed + extra) + RESERVE_BYTES
         free = free_bytes(self.path, size)

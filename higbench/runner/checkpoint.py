@@ -288,15 +288,21 @@ def recorded_nothing(run_file: Path) -> str | None:
     run_file = Path(run_file)
     if not run_file.is_file() or checkpoint_path(run_file).exists():
         return None
-    try:
-        with h5py.File(run_file, "r") as f:  # with file locking: a live writer holds it
+    def read(locking: bool) -> tuple[str, int]:
+        with h5py.File(run_file, "r", locking=locking) as f:
             status = _attr(f.attrs.get("status", ""))
-            updates = f["updates"]["step"].shape[0] if "updates" in f and "step" in f["updates"] else 0
+            return status, f["updates"]["step"].shape[0] if "updates" in f and "step" in f["updates"] else 0
+
+    try:
+        status, updates = read(locking=True)  # a live writer on this host holds the lock
     except BlockingIOError:
         return None
-    except Exception:  # noqa: BLE001 - not HDF5, truncated header
-        if run_file.stat().st_size <= EMPTY_FILE_BYTES:
-            return f"unreadable {run_file.stat().st_size}-byte file, killed while it was being created"
+    except Exception:  # noqa: BLE001
+        try:  # readable without locking (a file system without locks): judged by its content
+            read(locking=False)
+        except Exception:  # noqa: BLE001 - not HDF5, truncated header
+            if run_file.stat().st_size <= EMPTY_FILE_BYTES:
+                return f"unreadable {run_file.stat().st_size}-byte file, killed while it was being created"
         return None
     if status in RESUMABLE_STATUSES and updates == 0:
         return f"status {status}, no update recorded, no checkpoint"

@@ -404,13 +404,17 @@ def test_interrupted_sweep_is_completed_in_place(tmp_path):
 # -- 6. run file deleted or replaced under a live run ----------------------------------------
 
 
-@pytest.mark.parametrize("how", ["deleted", pytest.param("replaced", marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "how", ["deleted", pytest.param("replaced", marks=pytest.mark.slow), pytest.param("dir-renamed", marks=pytest.mark.slow)]
+)
 def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
     proc = start_cli([*LONG_RUN, "checkpoint_every=null", f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path)
     run_file = tmp_path / "run" / "run.h5"
     wait_for_rows(run_file, 3, proc)
     if how == "deleted":
         run_file.unlink()
+    elif how == "dir-renamed":
+        os.rename(run_file.parent, tmp_path / "moved")
     else:
         other = tmp_path / "other.h5"
         shutil.copy(run_file, other)
@@ -419,9 +423,12 @@ def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
     out, err = proc.communicate(timeout=90)
     assert proc.returncode == 1, (out, err)
     line = one_error_line(err)
-    assert f"was {how if how == 'deleted' else 'replaced by another file'}" in line, line
+    assert f"was {'replaced by another file' if how == 'replaced' else 'deleted'}" in line, line
     assert "completed" not in out and "run file:" not in out
-    if how == "deleted":
+    if how == "dir-renamed":  # the file went with its directory: readable, failed, rows kept
+        meta, curves = load_run(tmp_path / "moved" / "run.h5")
+        assert meta["status"] == "failed" and len(curves) >= 3
+    elif how == "deleted":
         assert not run_file.exists()
     else:
         assert digest(run_file) == replacement, "the run wrote into the file that replaced its own"
@@ -504,6 +511,18 @@ def test_dangling_symlink_named_run_file(tmp_path, monkeypatch, capsys):
     line = _refused([f"hydra.run.dir={d}"], tmp_path, monkeypatch, capsys, "hydra.run.dir")
     assert "dangling symbolic link" in line
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_run_file_symlink_to_an_existing_run_and_run_dir_a_dangling_link(tmp_path, monkeypatch, capsys):
+    src = tmp_path / "src.h5"
+    src.write_bytes(b"a run file")
+    (tmp_path / "y").mkdir()
+    (tmp_path / "y" / "run.h5").symlink_to(src)
+    line = _refused([f"hydra.run.dir={tmp_path}/y"], tmp_path, monkeypatch, capsys, "hydra.run.dir")
+    assert "is a symbolic link" in line and src.read_bytes() == b"a run file"
+    (tmp_path / "z").symlink_to(tmp_path / "nowhere")
+    line = _refused([f"hydra.run.dir={tmp_path}/z"], tmp_path, monkeypatch, capsys, "hydra.run.dir")
+    assert "dangling symbolic link" in line and not (tmp_path / "nowhere").exists()
 
 
 def test_threads_from_a_missing_launcher_key(tmp_path, monkeypatch, capsys):
