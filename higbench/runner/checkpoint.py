@@ -288,6 +288,7 @@ def recorded_nothing(run_file: Path) -> str | None:
     run_file = Path(run_file)
     if not run_file.is_file() or checkpoint_path(run_file).exists():
         return None
+
     def read(locking: bool) -> tuple[str, int]:
         with h5py.File(run_file, "r", locking=locking) as f:
             status = _attr(f.attrs.get("status", ""))
