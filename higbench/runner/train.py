@@ -21,6 +21,10 @@ Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
   while the file is being closed.
 * ``checkpoint_every`` (seconds of training clock; null: off): periodic checkpoints, so a
   run killed with SIGKILL loses at most that much work; ``resume=...`` continues it.
+  A checkpoint carries its run file's ``run_id``; resume refuses one of another run.
+* Any other failure, including one while the file is being closed (final weights, a full
+  disk, the file deleted under the run: ``RunFileFault``), closes the file as ``failed``
+  and re-raises; rows not yet written are dropped only after a file-system fault.
 """
 
 from __future__ import annotations
