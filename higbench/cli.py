@@ -425,6 +425,8 @@ def _run_job(cfg: DictConfig) -> float:
     except RunFileBusy as exc:
         raise ConfigError("resume", str(run_path), str(exc)) from None
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
+        if not os.path.lexists(run_path):  # refused before its file existed: leave nothing behind
+            remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
         if multirun:
             print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
             return math.inf
