@@ -370,7 +370,7 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 
 
 def _run_job(cfg: DictConfig) -> float:
-    from higbench.runfile.writer import RunFileBusy, RunFileExists, RunFileFault
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner import checkpoint
     from higbench.runner.train import train
 
@@ -425,7 +425,7 @@ def _run_job(cfg: DictConfig) -> float:
     except RunFileBusy as exc:
         raise ConfigError("resume", str(run_path), str(exc)) from None
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
-        if not os.path.lexists(run_path):  # refused before its file existed: leave nothing behind
+        if isinstance(exc, DiskFull) and not os.path.lexists(run_path):  # refused before its file existed
             remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
         if multirun:
             print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)

@@ -430,6 +430,7 @@ def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
         assert meta["status"] == "failed" and len(curves) >= 3
     elif how == "deleted":
         assert not run_file.exists()
+        assert (run_file.parent / ".hydra" / "config.yaml").is_file(), "the run's other files went with it"
     else:
         assert digest(run_file) == replacement, "the run wrote into the file that replaced its own"
 
@@ -488,6 +489,7 @@ def test_output_disk_full_at_start(tmpfs, tmp_path, monkeypatch, capsys):
     assert not (tmpfs / "run").exists()
 
 
+@pytest.mark.slow
 def test_output_disk_full_at_start_by_file_size_limit(tmp_path):
     """No root needed: RLIMIT_FSIZE of the CLI process below what a run needs."""
     limit = 512 * 1024
