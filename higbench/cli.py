@@ -19,9 +19,17 @@ refused (exit 2, before Hydra touches the directory), and of two runs racing for
 directory the second fails to create the file ("w-") and exits 2. The only way to write
 into an existing run file is ``resume=`` (see ``higbench.runner.checkpoint``).
 
+Output locations are checked too (``higbench.runner.outputs``): a directory that is a
+file, read-only, too long a name, too little free space, a ``run.h5`` that is a link.
+A run dir whose run recorded nothing (``checkpoint.recorded_nothing``) is started again in
+place, its dead file moved aside. A multirun into an existing sweep directory keeps every
+job that already has a run (``resume=true`` resumes the interrupted and failed ones), and
+Hydra's files for such a job go to ``.hydra/rerun-<time>`` (``_output_subdir``).
+
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
-status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``).
+status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``;
+a file-system fault such as a full disk is one line, ``RunFileFault``).
 """
 
 from __future__ import annotations
@@ -30,6 +38,8 @@ import contextlib
 import io
 import logging
 import math
+import os
+import shlex
 import signal
 import sys
 import time
@@ -41,7 +51,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import ConfigError, to_plain, validate
+from higbench.config import ConfigError, check_hydra_references, to_plain, validate
 
 RUN_FILE_NAME = "run.h5"
 EXIT_BAD_INPUT = 2
@@ -56,13 +66,29 @@ def config_dir() -> str:
     return str(resources.files("higbench") / "conf")
 
 
-def fail(exc: BaseException | str) -> None:
+def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
     from higbench.runner.progress import clear_transient
 
     clear_transient()  # the terminal's "checking" line: the error replaces it
     message = " ".join(str(exc).split())  # one line, whatever the cause
     print(f"higbench: error: {message}", file=sys.stderr, flush=True)
-    sys.exit(EXIT_BAD_INPUT)
+    sys.exit(code)
+
+
+def _output_subdir(*, _root_: DictConfig) -> str:
+    """``hydra.output_subdir`` of a job: ``.hydra``, or a new subfolder where a run already is.
+
+    Hydra writes the job's config files before the job starts; for a job directory that
+    already holds a run (a sweep run again into its directory), they go to
+    ``.hydra/rerun-<time>`` so the run's own ``.hydra/`` keeps describing the run.
+    """
+    output_dir = OmegaConf.select(_root_, "hydra.runtime.output_dir", default=None, throw_on_missing=False)
+    if output_dir is not None and os.path.lexists(Path(str(output_dir)) / RUN_FILE_NAME):
+        return f".hydra/rerun-{time.strftime('%Y%m%d-%H%M%S')}-{time.time_ns() % 1_000_000:06d}"
+    return ".hydra"
+
+
+OmegaConf.register_new_resolver("higbench_output_subdir", _output_subdir, replace=True)
 
 
 # -- checks before Hydra creates anything ---------------------------------------------------
@@ -214,6 +240,9 @@ def precheck(argv: list[str]) -> list[str]:
                 cfg = compose(config_name, overrides=job, return_hydra_config=True)
             except (HydraException, OmegaConfBaseException) as exc:
                 raise _composition_error(exc, job, config_name) from None
+            with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
+                HydraConfig.instance().set_config(cfg)
+            check_hydra_references(cfg)
             task = to_plain(cfg)
             validate(task)
             configs.append((job, cfg, task))
@@ -223,9 +252,13 @@ def precheck(argv: list[str]) -> list[str]:
 
             task0 = configs[0][2]
             announce(task0.get("progress", True), start_text(OmegaConf.create(task0)) + " - checking", transient=True)
+        from higbench.runner.outputs import check_output_dir
         from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
 
         if args.multirun:
+            sweep_dir = Path(str(OmegaConf.select(configs[0][1], "hydra.sweep.dir")))
+            check_output_dir(sweep_dir, "hydra.sweep.dir")
+            _remember_multirun_yaml(sweep_dir)
             if any(task.get("resume") for _, _, task in configs):
                 return argv  # which jobs resume is known only in their directories: checked in-job
             seen = set()
@@ -247,12 +280,20 @@ def precheck(argv: list[str]) -> list[str]:
             from higbench.runner import checkpoint
 
             run_file = checkpoint.run_file_of(task["resume"], run_dir)
-            _status, stored_yaml = checkpoint.inspect_run(run_file, task["resume"])
-            merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
-            validate(merged)
-            merged["init_from"] = None  # the weights come from the checkpoint
-            preflight(OmegaConf.create(merged))
-            checkpoint.load(run_file)  # readable, and of this format
+            check_output_dir(run_file.parent, "resume")
+            if checkpoint.recorded_nothing(run_file):
+                stored_yaml = _stored_config(run_file, task["resume"])  # started again in the job
+                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
+                validate(merged)
+                preflight(OmegaConf.create(merged))
+            else:
+                _status, stored_yaml = checkpoint.inspect_run(run_file, task["resume"])
+                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
+                validate(merged)
+                merged["init_from"] = None  # the weights come from the checkpoint
+                preflight(OmegaConf.create(merged))
+                state = checkpoint.load(run_file)  # readable, and of this format
+                checkpoint.check_owner(state, run_file, task["resume"])  # and of this run
             extra = []
             if run_dir is None:
                 extra.append(f"hydra.run.dir={run_file.parent}")
@@ -261,7 +302,10 @@ def precheck(argv: list[str]) -> list[str]:
                 extra.append(f"hydra.output_subdir={subdir}/resume-{time.strftime('%Y%m%d-%H%M%S')}")
             return argv + extra
         out = Path(str(cfg.hydra.run.dir))
-        if (out / RUN_FILE_NAME).exists():
+        check_output_dir(out, "hydra.run.dir", RUN_FILE_NAME)
+        from higbench.runner import checkpoint
+
+        if (out / RUN_FILE_NAME).exists() and not checkpoint.recorded_nothing(out / RUN_FILE_NAME):
             raise ConfigError(
                 "hydra.run.dir",
                 str(out),
@@ -270,6 +314,46 @@ def precheck(argv: list[str]) -> list[str]:
             )
         preflight(OmegaConf.create(task))
     return argv
+
+
+def _stored_config(run_file: Path, resume_value) -> str:
+    """Config YAML of a run: from its run file, else (a file killed at creation) Hydra's copy."""
+    import h5py
+
+    try:
+        with h5py.File(run_file, "r", locking=False) as f:
+            stored = f.attrs.get("config", "")
+            stored = stored.decode() if isinstance(stored, bytes) else str(stored)
+        if stored:
+            return stored
+    except Exception:  # noqa: BLE001
+        pass
+    saved = run_file.parent / ".hydra" / "config.yaml"
+    if saved.is_file():
+        return saved.read_text()
+    raise ConfigError("resume", resume_value, f"{run_file} recorded nothing and its config is unknown (no .hydra/config.yaml)")
+
+
+_MULTIRUN_YAML: tuple[Path, bytes] | None = None
+
+
+def _remember_multirun_yaml(sweep_dir: Path) -> None:
+    """A sweep run again into its directory: keep the sweep's own multirun.yaml (see main)."""
+    global _MULTIRUN_YAML
+    existing = sweep_dir / "multirun.yaml"
+    _MULTIRUN_YAML = (existing, existing.read_bytes()) if existing.is_file() else None
+
+
+def _restore_multirun_yaml() -> None:
+    """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-<time>.yaml."""
+    if _MULTIRUN_YAML is None:
+        return
+    path, original = _MULTIRUN_YAML
+    with contextlib.suppress(OSError):
+        if path.is_file() and path.read_bytes() != original:
+            os.replace(path, path.with_name(f"multirun-rerun-{time.strftime('%Y%m%d-%H%M%S')}.yaml"))
+        if not path.exists():
+            path.write_bytes(original)
 
 
 # -- the job ---------------------------------------------------------------------------------
@@ -313,7 +397,7 @@ def _run_job(cfg: DictConfig) -> float:
     from higbench.runner.progress import announce, start_text
 
     announce(cfg.get("progress", True), start_text(cfg))  # replaces precheck's transient line
-    from higbench.runfile.writer import RunFileBusy, RunFileExists
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner import checkpoint
     from higbench.runner.train import train
 
@@ -323,36 +407,61 @@ def _run_job(cfg: DictConfig) -> float:
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     resume = False
     run_path = output_dir / RUN_FILE_NAME
+    empty = None
     if cfg.get("resume"):
         run_path = checkpoint.run_file_of(cfg.resume, output_dir)
+        empty = checkpoint.recorded_nothing(run_path)
         if multirun and not run_path.exists():
             cfg.resume = None  # a job of a resumed sweep that never started: start it
+        elif empty:
+            stored = cfg if multirun else OmegaConf.create(_stored_config(run_path, cfg.resume))
+            merged = checkpoint.resume_config(OmegaConf.to_container(stored, resolve=True), to_plain(cfg), overrides)
+            validate(merged)
+            cfg = OmegaConf.create(merged)  # started again from the beginning, below
         else:
             try:
                 status, stored_yaml = checkpoint.inspect_run(run_path, cfg.resume)
-            except ConfigError:
+                if multirun:
+                    checkpoint.check_owner(checkpoint.load(run_path), run_path, cfg.resume)
+            except ConfigError as exc:
                 if multirun and run_path.exists():
-                    print(f"higbench: {run_path} is not resumable, skipped", file=sys.stderr)
-                    return math.inf
+                    return _kept(run_path, str(exc).split(": ", 1)[-1])
                 raise
             merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), to_plain(cfg), overrides)
             validate(merged)
             cfg = OmegaConf.create(merged)
             resume = True
-    if not resume and run_path.exists():
-        raise ConfigError(
-            "hydra.run.dir", str(output_dir), f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it"
-        )
+    elif os.path.lexists(run_path):
+        empty = checkpoint.recorded_nothing(run_path)
+        if not empty:
+            if multirun:  # a sweep run again into its directory: its runs stay as they are
+                return _kept(run_path, "already holds a run (resume=true completes interrupted and failed jobs)")
+            raise ConfigError(
+                "hydra.run.dir", str(output_dir), f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it"
+            )
+    if empty and not resume:
+        aside = checkpoint.move_aside(run_path, "empty")
+        print(f"higbench: {run_path} recorded nothing ({empty}); moved to {aside.name}, starting the run again", file=sys.stderr)
+    if not resume and checkpoint.checkpoint_path(run_path).exists():  # never adopt another run's checkpoint
+        aside = checkpoint.move_aside(checkpoint.checkpoint_path(run_path), "stray")
+        print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
     try:
         summary = train(cfg, run_path, overrides=overrides, resume=resume)
     except RunFileExists as exc:
         raise ConfigError("hydra.run.dir", str(output_dir), str(exc)) from None
     except RunFileBusy as exc:
         raise ConfigError("resume", str(run_path), str(exc)) from None
+    except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
+        if isinstance(exc, DiskFull) and not os.path.lexists(run_path):  # refused before its file existed
+            remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
+        if multirun:
+            print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+            return math.inf
+        fail(exc, code=1)
     for line in summary_lines(summary, cfg):  # through logging: the console and <run dir>/higbench.log
         log.info(line)
     if summary.status == "interrupted":
-        print(f"resume with: higbench resume={summary.path.parent}", file=sys.stderr)
+        print(f"resume with: higbench {shlex.quote(f'resume={summary.path.parent}')}", file=sys.stderr)
         signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
         sys.stdout.flush()
         sys.exit(128 + int(signum))
@@ -387,6 +496,20 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     return lines
 
 
+def _kept(run_path: Path, why: str) -> float:
+    """A sweep job whose directory holds a run that is not continued: leave it, report its result."""
+    from higbench.runfile.reader import load_run
+
+    try:
+        meta, curves = load_run(run_path)
+        status = meta.get("status", "?")
+        loss = float(curves["test_loss"].iloc[-1]) if status == "completed" and len(curves) else math.inf
+    except Exception:  # noqa: BLE001
+        status, loss = "unreadable", math.inf
+    print(f"higbench: {run_path} ({status}) kept as it is: {why}", file=sys.stderr, flush=True)
+    return loss if math.isfinite(loss) else math.inf
+
+
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _hydra_main(cfg: DictConfig) -> float:
     hydra_cfg = HydraConfig.get()
@@ -414,7 +537,10 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         GlobalHydra.instance().clear()
     sys.argv = [sys.argv[0], *argv]
-    _hydra_main()
+    try:
+        _hydra_main()
+    finally:
+        _restore_multirun_yaml()
 
 
 if __name__ == "__main__":

@@ -398,11 +398,11 @@ def to_plain(cfg: DictConfig | dict) -> dict:
         data = OmegaConf.to_container(cfg, resolve=True)
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None) or "?"
-        raise ConfigError(
-            str(key),
-            OmegaConf.select(cfg, str(key), default="?") if key != "?" else "?",
-            f"cannot be resolved ({exc.msg if hasattr(exc, 'msg') else exc})",
-        ) from None
+        raw = OmegaConf.to_container(cfg, resolve=False)  # the value as written, unresolved
+        for part in str(key).split("."):
+            raw = raw.get(part, "?") if isinstance(raw, dict) else "?"
+        message = " ".join(str(exc.msg if hasattr(exc, "msg") else exc).split())
+        raise ConfigError(str(key), raw if key != "?" else "?", f"cannot be resolved ({message})") from None
     assert isinstance(data, dict)
     data.pop("hydra", None)
     return data
@@ -528,3 +528,37 @@ def check_init_from_file(path: str, problem_name: str) -> None:
 def init_from_path(path: str) -> Path:
     p = Path(path)
     return p / "run.h5" if p.is_dir() else p
+
+
+_HYDRA_REFERENCE = re.compile(r"\$\{hydra:([^}]+)\}")
+
+
+def check_hydra_references(cfg: DictConfig) -> None:
+    """Refuse ``${hydra:<key>}`` in the task config where this job's Hydra config has no such key.
+
+    Hydra resolves a missing key to None (``threads='${hydra:launcher.cpus_per_task}'`` with
+    a launcher that has no ``cpus_per_task`` would silently become ``threads=null``).
+    """
+    raw = OmegaConf.to_container(cfg, resolve=False)
+    raw.pop("hydra", None)
+    launcher = OmegaConf.select(cfg, "hydra.launcher._target_", default="?")
+
+    def walk(node, prefix):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                walk(v, f"{prefix}{k}.")
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                walk(v, f"{prefix}{i}.")
+        elif isinstance(node, str):
+            for ref in _HYDRA_REFERENCE.findall(node):
+                missing = object()
+                found = OmegaConf.select(
+                    cfg, f"hydra.{ref.strip()}", default=missing, throw_on_missing=False, throw_on_resolution_failure=False
+                )
+                if found is missing:
+                    raise ConfigError(
+                        prefix[:-1], node, f"hydra.{ref.strip()} does not exist in this job's Hydra config (launcher {launcher})"
+                    )
+
+    walk(raw, "")

@@ -276,6 +276,8 @@ def _run_file(path: str) -> Path:
 
 
 def _read_head(path: Path) -> IndexedRun | None:
+    if not path.is_file():  # a FIFO or device named *.h5 would block the open forever
+        return None
     try:
         with h5py.File(path, "r", locking=False) as f:
             attrs = f.attrs

@@ -121,8 +121,13 @@ def _columns(f: h5py.File, group: str, names: Sequence[str] | None = None) -> di
         cols[name] = values
     if cols:
         n = min(len(v) for v in cols.values())
+        if any(len(v) != n for v in cols.values()):  # said in the row's `error` (see _summarise)
+            _RAGGED[group] = {k: len(v) for k, v in cols.items() if len(v) != n} | {"kept": n}
         cols = {k: v[:n] for k, v in cols.items()}
     return cols
+
+
+_RAGGED: dict[str, dict] = {}  # tables of the file being summarised whose columns differ in length
 
 
 def _mean(values: np.ndarray | None) -> float:
@@ -163,7 +168,13 @@ def _summarise(f: h5py.File, thresholds: Sequence[float], want_curves: bool) -> 
         if key in attrs:
             row[key] = attrs[key]
 
+    _RAGGED.clear()
     curves = _columns(f, "curves", None if want_curves else ("step", "wall_time", "train_loss", "test_loss"))
+    if "curves" in _RAGGED:  # a writer stopped between columns: the last full row is the final one
+        ragged = dict(_RAGGED["curves"])
+        kept = ragged.pop("kept")
+        longer = ", ".join(f"{k} ({v})" for k, v in sorted(ragged.items()))
+        row["curves_note"] = f"curve columns differ in length: {longer}; final values taken at row {kept} of each"
     test = curves.get("test_loss")
     n_evals = 0 if test is None else len(test)
     row["n_evals"] = n_evals
@@ -218,12 +229,14 @@ def read_run_summary(
     try:
         with h5py.File(path, "r") as f:
             summary, columns = _summarise(f, thresholds, curves)
+        note = summary.pop("curves_note", "")
         row.update(summary)
         if row.get("status") == "running":
             if os.environ.get("HDF5_USE_FILE_LOCKING", "").upper() in ("FALSE", "0"):
                 row["error"] = "status is running (HDF5 file locking is off: a live writer and a killed one look alike)"
             else:  # we could take the file lock, so no process on this host is writing it
                 row["error"] = "status is running but no writer holds the file: still running on another host, or killed"
+        row["error"] = "; ".join(x for x in (row["error"], note) if x)
         return row, columns
     except BlockingIOError as exc:
         if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):

@@ -67,10 +67,19 @@ def load_run(path: str | Path) -> tuple[dict, pd.DataFrame]:
         return read_meta(f), _table(f, "curves")
 
 
+UPDATE_COLUMNS = ("step", "wall_time", "loss", "jacobian_s", "inversion_s", "apply_s", "update_s")
+
+
 def load_updates(path: str | Path) -> pd.DataFrame:
-    """Per-update table: step, wall_time, loss, jacobian_s, inversion_s, apply_s, update_s."""
+    """Per-update table: step, wall_time, loss, jacobian_s, inversion_s, apply_s, update_s.
+
+    A run stopped before its first update gives an empty table with these columns.
+    """
     with _open(path) as f:
-        return _table(f, "updates")
+        df = _table(f, "updates")
+    if df.empty and "step" not in df:
+        df = pd.DataFrame({c: pd.Series(dtype="int64" if c == "step" else "float64") for c in UPDATE_COLUMNS})
+    return df
 
 
 def load_logs(path: str | Path) -> dict[str, np.ndarray]:

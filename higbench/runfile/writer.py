@@ -33,6 +33,21 @@ SWMR would close it but is not used: a SWMR file killed mid-run cannot be reopen
 writing (resume) without ``h5clear``, holds no lock a reader could test for liveness, and
 needs ``swmr=True`` in every reader.
 
+Faults of the file system (see ``RunFileFault``). HDF5 cannot recover from a failed write:
+after one, its caches are inconsistent, further calls fail ("Slist already enabled?") or
+crash the process, and what reaches the disk references space that was never written
+("addr overflow"). So the writer never lets a write fail for lack of space: before every
+write it checks the free space of the file's file system and the process's file-size
+limit (RLIMIT_FSIZE) against what is not yet flushed plus a reserve for closing
+(``RESERVE_BYTES``); short of it, it raises ``DiskFull`` before touching the file, and the
+runner closes the file as ``failed`` inside the reserve. The file then holds every row
+up to its last flush. (What remains: another process filling the disk between the check
+and the write.) At every flush the writer also checks that the path still names the file
+it writes (``RunFileLost``: deleted or replaced under a live run).
+
+Identity: every run file carries a random ``run_id`` (root attribute); its checkpoints
+carry the same id, and resume refuses a checkpoint whose id differs.
+
 Never overwriting: a new run file is created with mode ``"w-"`` (fails if the file
 exists). The only writer that opens an existing file is ``RunFileWriter.reopen``, used by
 ``resume=...``: it truncates every table to the rows recorded by the checkpoint it resumes
@@ -41,8 +56,12 @@ from and appends from there.
 
 from __future__ import annotations
 
+import errno
 import json
+import os
+import resource
 import time
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -51,6 +70,8 @@ import numpy as np
 
 FORMAT_VERSION = 1
 STATUSES = ("running", "completed", "diverged", "interrupted", "failed")
+# Room kept free for closing a run (pending rows, status, weights' metadata, HDF5's caches).
+RESERVE_BYTES = 1 << 20
 
 
 class RunFileExists(FileExistsError):
@@ -59,6 +80,43 @@ class RunFileExists(FileExistsError):
 
 class RunFileBusy(OSError):
     """Another process holds the run file open (a live writer)."""
+
+
+class RunFileFault(OSError):
+    """The file system cannot take the run's writes (full, gone, failing): the run stops (exit 1)."""
+
+
+class DiskFull(RunFileFault):
+    def __init__(self, message: str):
+        super().__init__(errno.ENOSPC, message)
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
+class RunFileLost(RunFileFault):
+    def __str__(self) -> str:
+        return self.args[0] if self.args else "run file lost"
+
+
+def free_bytes(path: str | Path, file_size: int = 0) -> int:
+    """Bytes that can still be written into ``path`` (a file, or a directory to create one in).
+
+    The smaller of the free space of its file system (what an unprivileged user may use)
+    and what the process's file-size limit leaves to a file of ``file_size`` bytes.
+    """
+    path = Path(path)
+    probe = path if path.exists() else path.parent
+    st = os.statvfs(probe)
+    free = st.f_bavail * st.f_frsize
+    soft, _hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY:
+        free = min(free, max(0, soft - file_size))
+    return int(free)
+
+
+def new_run_id() -> str:
+    return uuid.uuid4().hex
 
 
 TABLES = ("curves", "logs", "updates")
@@ -98,6 +156,9 @@ class RunFileWriter:
     def __init__(self, path: str | Path, config_yaml: str, overrides: list[str], env: Mapping, meta: Mapping):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._unflushed = 0
+        self._inode = None
+        self.check_space()
         try:
             # "w-": never overwrite an existing run's file.
             # libver low bound "earliest" (HDF5's default): a low bound of v110 or later writes
@@ -107,7 +168,10 @@ class RunFileWriter:
             if self.path.exists():
                 raise RunFileExists(f"run file {self.path} already exists; refusing to overwrite it") from exc
             raise
+        self._inode = self._stat_key()
+        self.run_id = new_run_id()
         self.f.attrs["format_version"] = FORMAT_VERSION
+        self.f.attrs["run_id"] = self.run_id
         self.f.attrs["config"] = config_yaml
         self.f.attrs["overrides"] = json.dumps(list(overrides))
         self.f.attrs["started"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
@@ -138,10 +202,15 @@ class RunFileWriter:
         """
         self = cls.__new__(cls)
         self.path = Path(path)
+        self._unflushed = 0
+        self._inode = None
+        self.check_space()
         try:
             self.f = h5py.File(self.path, "r+")
         except BlockingIOError as exc:
             raise RunFileBusy(f"run file {self.path} is open in another process (is that run still going?)") from exc
+        self._inode = self._stat_key()
+        self.run_id = run_id_of(self.f)
         for group, names in rows.items():  # check everything before changing anything
             for name, n in names.items():
                 have = self.f[group][name].shape[0] if group in self.f and name in self.f[group] else 0
@@ -176,6 +245,33 @@ class RunFileWriter:
         self.flush()
         return self
 
+    # -- faults of the file system --
+    def _stat_key(self) -> tuple[int, int] | None:
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return (st.st_dev, st.st_ino)
+
+    def check_space(self, extra: int = 0) -> None:
+        """Raise DiskFull unless the unflushed data, ``extra`` bytes and the reserve fit."""
+        if self._inode is not None:
+            self.check_file()  # a file that is gone has no disk to fill
+        size = self.path.stat().st_size if self.path.exists() else 0
+        need = 2 * (self._unflushed + extra) + RESERVE_BYTES
+        free = free_bytes(self.path, size)
+        if free < need:
+            raise DiskFull(
+                f"no space left for {self.path} ({free // 1024} KiB free, the next write needs about {need // 1024} KiB "
+                "with the reserve for closing the file); run stopped before writing"
+            )
+
+    def check_file(self) -> None:
+        """Raise RunFileLost if the path no longer names the file this writer writes."""
+        if self._stat_key() != self._inode:
+            what = "deleted" if not os.path.lexists(self.path) else "replaced by another file"
+            raise RunFileLost(f"run file {self.path} was {what} while the run was writing it; run stopped")
+
     def row_counts(self) -> dict[str, dict[str, int]]:
         """{group: {dataset: rows}} of the tables now (recorded by checkpoints)."""
         return {group: {name: int(ds.shape[0]) for name, ds in self.f[group].items()} for group in TABLES if group in self.f}
@@ -191,6 +287,8 @@ class RunFileWriter:
     # -- appends --
     def _append(self, group: str, name: str, values: np.ndarray) -> None:
         values = np.asarray(values)
+        self.check_space(values.nbytes + 4096)
+        self._unflushed += values.nbytes + 4096
         g = self.f[group]
         if name not in g:
             ds = g.create_dataset(name, data=values, maxshape=(None, *values.shape[1:]), chunks=True)
@@ -222,6 +320,7 @@ class RunFileWriter:
             self.f[group].attrs[k] = v
 
     def write_weights(self, state: Mapping[str, np.ndarray], step: int) -> None:
+        self.check_space(sum(np.asarray(v).nbytes + 4096 for v in state.values()))
         if "weights" in self.f:
             del self.f["weights"]
         g = self.f.create_group("weights")
@@ -230,12 +329,24 @@ class RunFileWriter:
             g.create_dataset(name, data=np.asarray(value))
 
     def flush(self) -> None:
+        self.check_file()
+        self.check_space()
         self.f.flush()
+        self._unflushed = 0
 
     def close(self, status: str | None = None, reason: str = "", step: int = -1) -> None:
+        """Write the final status and close; the file is closed whatever happens."""
         if not self.f.id.valid:
             return
-        if status is not None:
-            self.set_status(status, reason, step)
-        self.f.attrs["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        self.f.close()
+        try:
+            if status is not None:
+                self.set_status(status, reason, step)
+            self.f.attrs["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        finally:
+            self.f.close()
+
+
+def run_id_of(f: h5py.File) -> str:
+    """The ``run_id`` attribute of an open run file ("" for files written before it existed)."""
+    v = f.attrs.get("run_id", "")
+    return v.decode() if isinstance(v, bytes) else str(v)

@@ -12,7 +12,14 @@ loop needs to continue as if never stopped:
   original one), the global torch RNG state, the next evaluation time, the training-loss
   accumulator, the training clock,
 * the number of rows of every table of the run file at that moment: resume cuts the
-  tables back to them, so nothing written after the checkpoint is duplicated.
+  tables back to them, so nothing written after the checkpoint is duplicated,
+* the ``run_id`` of its run file: ``resume=`` refuses a checkpoint of another run (a
+  stray ``run.h5.ckpt`` copied or left in the directory), and a new run never adopts one.
+
+The checkpoint is serialised in memory first and written only if it fits on the disk
+beside the run file's reserve (``writer.DiskFull`` otherwise; the previous one stays).
+Temporary files of a writer killed mid-save (``run.h5.ckpt.tmp<pid>``) are removed by the
+next save and by resume.
 
 The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
 and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
@@ -24,12 +31,14 @@ device, memory cap) may be changed on the command line.
 
 from __future__ import annotations
 
+import io
 import os
 import time
 from pathlib import Path
 from typing import Any
 
 from higbench.config import ConfigError, show
+from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
 RUN_FILE_NAME = "run.h5"
 SUFFIX = ".ckpt"
@@ -48,16 +57,29 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
     import torch
 
     final = checkpoint_path(run_path)
+    remove_stale_temporaries(run_path)
     tmp = final.with_name(f"{final.name}.tmp{os.getpid()}")
     state = {"format": FORMAT, "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **state}
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    data = buffer.getbuffer()
+    free = free_bytes(final.parent)
+    if free < len(data) + RESERVE_BYTES:
+        raise DiskFull(
+            f"no space left for checkpoint {final} ({free // 1024} KiB free, it needs {len(data) // 1024} KiB "
+            "plus the reserve for closing the run file); run stopped before writing"
+        )
     try:
         with open(tmp, "wb") as f:
-            torch.save(state, f)
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, final)
-    except BaseException:
+    except OSError as exc:
         tmp.unlink(missing_ok=True)  # the previous checkpoint stays as it was
+        raise RunFileFault(exc.errno, f"cannot write checkpoint {final} ({exc.strerror or exc}); run stopped") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
         raise
     try:  # make the rename itself durable
         fd = os.open(final.parent, os.O_RDONLY)
@@ -93,6 +115,44 @@ def load(run_path: str | Path) -> dict[str, Any]:
 
 def remove(run_path: str | Path) -> None:
     checkpoint_path(run_path).unlink(missing_ok=True)
+    remove_stale_temporaries(run_path)
+
+
+def remove_stale_temporaries(run_path: str | Path) -> None:
+    """Temporary files of checkpoint writers that died mid-save (a run file has one writer)."""
+    final = checkpoint_path(run_path)
+    own = f"{final.name}.tmp{os.getpid()}"
+    for p in final.parent.glob(f"{final.name}.tmp*"):
+        if p.name != own:
+            p.unlink(missing_ok=True)
+
+
+def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> None:
+    """Refuse a checkpoint that is not of ``run_file`` (its run_id differs)."""
+    import h5py
+
+    from higbench.runfile.writer import run_id_of
+
+    with h5py.File(run_file, "r", locking=False) as f:
+        file_id = run_id_of(f)
+        short = [
+            f"{group}/{name} has {f[group][name].shape[0] if group in f and name in f[group] else 0}, the checkpoint {n}"
+            for group, names in (state.get("rows") or {}).items()
+            for name, n in names.items()
+            if (f[group][name].shape[0] if group in f and name in f[group] else 0) < n
+        ]
+    ckpt_id = str(state.get("run_id") or "")
+    if ckpt_id != file_id:
+        raise ConfigError(
+            "resume",
+            resume_value,
+            f"checkpoint {checkpoint_path(run_file).name} belongs to another run "
+            f"(its run id {ckpt_id or '<none>'}, the run file's {file_id or '<none>'}); refusing to resume from it",
+        )
+    if short:
+        raise ConfigError(
+            "resume", resume_value, f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
+        )
 
 
 # -- resolving what to resume ----------------------------------------------------------------
@@ -128,12 +188,25 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
             "resume", resume_value, f"run is {status}, nothing to resume (resumable: {', '.join(RESUMABLE_STATUSES)})"
         )
     if not checkpoint_path(run_file).is_file():
-        raise ConfigError(
-            "resume", resume_value, f"no checkpoint next to {run_file} (set checkpoint_every to make runs resumable)"
+        every = _checkpoint_every(config)
+        why = (
+            "set checkpoint_every to make runs resumable"
+            if every is None
+            else f"it stopped before its first checkpoint, due after {every} s of training clock"
         )
+        raise ConfigError("resume", resume_value, f"no checkpoint next to {run_file} ({why})")
     if not config:
         raise ConfigError("resume", resume_value, f"{run_file} holds no config")
     return status, config
+
+
+def _checkpoint_every(config_yaml: str):
+    import yaml
+
+    try:
+        return (yaml.safe_load(config_yaml) or {}).get("checkpoint_every")
+    except Exception:  # noqa: BLE001
+        return None
 
 
 def _attr(v):
@@ -195,3 +268,55 @@ def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
             )
     merged["resume"] = None
     return merged
+
+
+# -- run dirs that recorded nothing ----------------------------------------------------------
+
+EMPTY_FILE_BYTES = 64 * 1024  # an unopenable file this small was killed while being created
+
+
+def recorded_nothing(run_file: Path) -> str | None:
+    """Why ``run_file`` holds nothing worth keeping, or None (it does, or a process holds it).
+
+    Nothing worth keeping: a file that is not an openable HDF5 file and is at most a few
+    KiB (a run killed while it was being created), or a run that stopped (status running,
+    interrupted or failed, no writer alive) before recording a single update and left no
+    checkpoint. Such a run may be started again in place; its file is moved aside first.
+    """
+    import h5py
+
+    run_file = Path(run_file)
+    if not run_file.is_file() or checkpoint_path(run_file).exists():
+        return None
+
+    def read(locking: bool) -> tuple[str, int]:
+        with h5py.File(run_file, "r", locking=locking) as f:
+            status = _attr(f.attrs.get("status", ""))
+            return status, f["updates"]["step"].shape[0] if "updates" in f and "step" in f["updates"] else 0
+
+    try:
+        status, updates = read(locking=True)  # a live writer on this host holds the lock
+    except BlockingIOError:
+        return None
+    except Exception:  # noqa: BLE001
+        try:  # readable without locking (a file system without locks): judged by its content
+            read(locking=False)
+        except Exception:  # noqa: BLE001 - not HDF5, truncated header
+            if run_file.stat().st_size <= EMPTY_FILE_BYTES:
+                return f"unreadable {run_file.stat().st_size}-byte file, killed while it was being created"
+        return None
+    if status in RESUMABLE_STATUSES and updates == 0:
+        return f"status {status}, no update recorded, no checkpoint"
+    return None
+
+
+def move_aside(path: Path, label: str) -> Path:
+    """Rename ``path`` to ``<name>.<label>-<time>`` beside it (never deleted: nothing is lost)."""
+    path = Path(path)
+    target = path.with_name(f"{path.name}.{label}-{time.strftime('%Y%m%d-%H%M%S')}")
+    n = 1
+    while target.exists():
+        target = path.with_name(f"{path.name}.{label}-{time.strftime('%Y%m%d-%H%M%S')}-{n}")
+        n += 1
+    os.replace(path, target)
+    return target

@@ -21,6 +21,10 @@ Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
   while the file is being closed.
 * ``checkpoint_every`` (seconds of training clock; null: off): periodic checkpoints, so a
   run killed with SIGKILL loses at most that much work; ``resume=...`` continues it.
+  A checkpoint carries its run file's ``run_id``; resume refuses one of another run.
+* Any other failure, including one while the file is being closed (final weights, a full
+  disk, the file deleted under the run: ``RunFileFault``), closes the file as ``failed``
+  and re-raises; rows not yet written are dropped only after a file-system fault.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from omegaconf import DictConfig, OmegaConf
 from higbench.config import ConfigError, init_from_path
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
-from higbench.runfile.writer import RunFileWriter
+from higbench.runfile.writer import RunFileFault, RunFileWriter
 from higbench.runner import checkpoint, memory_guard
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
@@ -153,6 +157,11 @@ def check_init_from(model: torch.nn.Module, path: str, problem_name: str) -> dic
         theirs = {k: tuple(v.shape) for k, v in weights.items()}
         ours = {k: tuple(v.shape) for k, v in state.items()}
         raise ConfigError("init_from", path, f"network does not match (run has {theirs}, this config builds {ours})")
+    bad = sorted(k for k, v in weights.items() if not np.isfinite(v).all())
+    if bad:
+        raise ConfigError(
+            "init_from", path, f"final weights hold NaN or inf ({', '.join(bad)}); a diverged run cannot start another"
+        )
     return weights
 
 
@@ -228,6 +237,23 @@ def preflight(cfg: DictConfig) -> None:
 # -- the loop --------------------------------------------------------------------------------
 
 
+def _close_failed(writer: RunFileWriter, exc: BaseException, step: int, flush_pending=None) -> None:
+    """Close the run file as ``failed``, whatever else goes wrong on the way.
+
+    Pending rows are written if the file can still take them (not after a file-system
+    fault: the file then keeps what its last flush holds).
+    """
+    if flush_pending is not None and not isinstance(exc, RunFileFault):
+        try:
+            flush_pending()
+        except Exception:  # noqa: BLE001 - the original error is the one to report
+            pass
+    try:
+        writer.close("failed", f"{type(exc).__name__}: {exc}", step)
+    except Exception:  # noqa: BLE001
+        pass
+
+
 def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *, resume: bool = False) -> RunSummary:
     """Run one experiment described by a validated config; write ``run_path``.
 
@@ -237,6 +263,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     run_path = Path(run_path)
     name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     state = checkpoint.load(run_path) if resume else None
+    if state is not None:
+        checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
     device, problem = _setup(cfg)
     test = problem.test_set()
 
@@ -353,6 +381,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
                 "cuda_rng": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
                 "rows": writer.row_counts(),
                 "peak_rss_mb": memory.peak_rss_mb,
+                "run_id": writer.run_id,
             },
         )
         last_ckpt = clock()
@@ -418,22 +447,34 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     except Interrupted as exc:
         signals.ignore()
         status, reason = "interrupted", str(exc)
-        if signals.signum is not None and "second signal" not in reason:
-            save_checkpoint()  # a clean stop between updates: resumable from exactly here
-        else:
-            flush_pending()
+        try:
+            if signals.signum is not None and "second signal" not in reason:
+                save_checkpoint()  # a clean stop between updates: resumable from exactly here
+            else:
+                flush_pending()
+        except BaseException as fault:  # the disk or file failed on the way out
+            _close_failed(writer, fault, step, flush_pending)
+            progress.close()
+            signals.restore()
+            raise
     except BaseException as exc:
         signals.ignore()
-        flush_pending()
-        writer.close("failed", f"{type(exc).__name__}: {exc}", step)
+        _close_failed(writer, exc, step, flush_pending)
         progress.close()
         signals.restore()
         raise
     progress.close()
-    writer.set_attrs("memory", memory.summary())
-    writer.write_weights({k: v.detach().cpu().numpy() for k, v in model.state_dict().items()}, step)
-    writer.f.attrs["steps"] = step
-    writer.f.attrs["wall_time"] = clock()
+    try:
+        writer.set_attrs("memory", memory.summary())
+        writer.write_weights({k: v.detach().cpu().numpy() for k, v in model.state_dict().items()}, step)
+        writer.f.attrs["steps"] = step
+        writer.f.attrs["wall_time"] = clock()
+        writer.check_file()
+    except BaseException as exc:  # a failure while closing: the file says failed, not running
+        signals.ignore()
+        _close_failed(writer, exc, step)
+        signals.restore()
+        raise
     writer.close(status, reason, step)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume

@@ -176,6 +176,7 @@ def _run_file(path, *, problem="toy", hidden=7, status="completed", weights=True
         meta={"problem": config["problem"]["name"], "optimizer": config["optimizer"]["name"]},
     )
     w.append_row("curves", {"step": 0, "epoch": 0, "wall_time": 0.0, "train_loss": 1.0, "test_loss": 1.0})
+    w.append_rows("updates", {"step": [1, 2], "loss": [1.0, 0.9]})  # a run that recorded something
     if weights:
         w.write_weights(
             {
