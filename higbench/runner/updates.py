@@ -40,7 +40,7 @@ def _sync(device: torch.device) -> None:
 
 
 class FirstOrderUpdate:
-    """Any torch.optim optimizer on the batch-mean loss."""
+    """Any torch.optim optimizer on the problem's objective (batch mean or sum, ``problem.loss_reduction``)."""
 
     def __init__(self, problem: Problem, model: nn.Module, optimizer: torch.optim.Optimizer):
         self.problem, self.model, self.optimizer = problem, model, optimizer
@@ -49,8 +49,9 @@ class FirstOrderUpdate:
         dev = self.problem.device
         t0 = time.perf_counter()
         self.optimizer.zero_grad(set_to_none=True)
-        loss = self.problem.loss(self.problem.outputs(self.model, batch), batch.targets).mean()
-        loss.backward()
+        per_sample = self.problem.loss(self.problem.outputs(self.model, batch), batch.targets)
+        loss = per_sample.mean()  # logged; the gradient is that of the problem's objective (mean or sum)
+        self.problem.objective(per_sample).backward()
         _sync(dev)
         t1 = time.perf_counter()
         value = loss.item()
@@ -91,22 +92,24 @@ class JacobianPowerUpdate:
         return type(self.problem).outputs is Problem.outputs
 
     def derivatives(self, batch: Batch):
-        """(loss, g, J): the batch-mean loss, g = d loss / d y (rows,), J (structured or a tensor)."""
+        """(loss, g, J): the batch-mean loss, g = d objective / d y (rows,), J (structured or a tensor)."""
         opt = self.optimizer
         if self.structured:
             with torch.no_grad():
                 u = self.model(batch.net_inputs)
             y, A = solver_jacobian(self.problem.physics, batch.inputs, u)
             y = y.requires_grad_(True)
-            loss = self.problem.loss(y, batch.targets).mean()  # g is the gradient of the batch mean
-            (grad_y,) = torch.autograd.grad(loss, y)
+            per_sample = self.problem.loss(y, batch.targets)
+            loss = per_sample.mean()  # logged; g is the gradient of the objective (problem.loss_reduction)
+            (grad_y,) = torch.autograd.grad(self.problem.objective(per_sample), y)
             if not torch.isfinite(loss) or not torch.isfinite(A).all():
                 return loss, grad_y, None
             J = network_jacobian(self.model, opt.params, batch.net_inputs, A, opt.group["precision"])
             return loss, grad_y, J
         y = self.problem.outputs(self.model, batch)
-        loss = self.problem.loss(y, batch.targets).mean()
-        (grad_y,) = torch.autograd.grad(loss, y)
+        per_sample = self.problem.loss(y, batch.targets)
+        loss = per_sample.mean()
+        (grad_y,) = torch.autograd.grad(self.problem.objective(per_sample), y)
         if not torch.isfinite(loss):
             return loss, grad_y, None
         J = per_sample_jacobian(self.model, self.problem.physics, batch.inputs, batch.net_inputs)
