@@ -150,6 +150,7 @@ class FigureData:
     budgets: dict[str, str] = field(default_factory=dict)
     rows: list[dict] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    sidecar: dict = field(default_factory=dict)  # extra entries a plot puts into <id>.json
 
     def runs(self, sweep: str | None = None, only_ok: bool = True, **where: Any) -> list[RunData]:
         """Runs of a sweep (all sweeps if None) whose resolved config matches ``where``
@@ -302,6 +303,7 @@ class FigureData:
                 }
                 for j in self.jobs
             ],
+            **self.sidecar,
             **(extra or {}),
         }
         (self.out_dir / f"{self.figure.id}.json").write_text(json.dumps(info, indent=1, default=str) + "\n")
