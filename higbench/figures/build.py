@@ -167,6 +167,8 @@ class Builder:
                     f"rule would say '{verdict}'. {why}"
                 )
                 verdict = "n/a"
+            if verdict in ("not", "partly") and not cause:
+                cause = ("open", "no targeted run has examined this verdict yet")
             budgets = "; ".join(sorted({b for d in datas.values() for b in d.budgets.values()}))
             out.append(
                 {
