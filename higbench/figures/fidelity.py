@@ -15,12 +15,13 @@ PAPER = 1800.0  # claims on final levels after the paper's hour: half of it at l
 FIDELITY: dict[str, dict] = {
     "toy-1": {"min_seconds": 20},
     "toy-2": {
-        "min_seconds": 60,
+        "min_seconds": 30,
         "min_seeds": 3,
         "cause": (
-            "budget",
-            "a stall is only a stall once the run has had time to leave it; at 30 s Adam and GN are still decreasing "
-            "(see the 90 s probe in docs/figures.md, 'Root causes')",
+            "disagreement",
+            "90 s probes at the spec's settings (seed 0, load 5-7): Adam (eta=0.3) passes 0.2 at 5 s and goes on to "
+            "5.2e-2 (10 s), 8.7e-3 (20 s), then a noisy plateau at 4-7e-3 from 40 s to 90 s; GN reaches 5.7e-2 at "
+            "20 s and stays exactly there to 90 s. Both stall, but 40x (Adam) and 3-4x (GN) below the paper's ~0.2",
         ),
     },
     "toy-3": {"min_seconds": 20, "min_seeds": 3},
@@ -62,8 +63,10 @@ FIDELITY: dict[str, dict] = {
         "cause": (
             "deviation",
             "HIG runs at b=16 (quick) instead of 64: one b=64 update takes ~30 s on 2 loaded cores (2 updates in "
-            "62 s); at b=16 with the reference's batch-sum gradient HIG makes 63 updates in 60 s (64.8 -> 59.9) "
-            "against Adam continued 64.8 -> 25.6",
+            "62 s, 64.8 -> 64.2). From the same Adam weights (60 s, 440 -> 64.8), with the reference's batch-sum "
+            "gradient at b=16: eta=0.02 makes 63 updates in 60 s to 59.9 while Adam continued reaches 25.6; in 20 s "
+            "eta=0.005 -> 64.2, 0.1 -> 93 (rises), 0.5 -> 1.4e6: no eta of this grid lets 1-2 s HIG updates keep up "
+            "with Adam's ~20 updates/s within minutes",
         ),
     },
     "poi-3": {"min_seconds": 300},
@@ -91,8 +94,10 @@ FIDELITY: dict[str, dict] = {
         "min_seconds": 120,
         "cause": (
             "budget",
-            "beta < 0 scales HIG's step by max(s)^beta, i.e. a smaller learning rate: at 30 s the spread is a speed "
-            "difference (see the 120 s probe in docs/figures.md)",
+            "beta < 0 multiplies HIG's step by max(s)^beta; max(s) of the oscillator's J (512 x 2956) is 44 at "
+            "initialisation, so beta=-0.5 is eta x 0.15. 120 s probes (load 4-5): beta=0 at 30/60/120 s 8.6e-3/3.9e-3/"
+            "1.5e-3, beta=-0.5 0.64/0.51/0.32, still falling steadily: a slower start, not a different end point "
+            "within what 2 minutes can show (the paper's runs are an hour)",
         ),
     },
     "abl-2": {"min_seconds": 30},

@@ -136,7 +136,9 @@ def test_report_shows_root_cause_and_reference_section(tmp_path):
         "loss_points": [{"optimizer": "adam", "t": 60.0, "reference": 8.3e-3, "higbench": 1e-3}],
         "update_seconds": [{**UPDATE_SECONDS[0], "higbench_update_s": 0.01}],
     }
-    (tmp_path / "ref_oscillator.json").write_text(json.dumps({"id": "ref_oscillator", "preset": "quick", "reference": ref, "runs": []}))
+    (tmp_path / "ref_oscillator.json").write_text(
+        json.dumps({"id": "ref_oscillator", "preset": "quick", "reference": ref, "runs": []})
+    )
     text = write_report(tmp_path).read_text()
     assert "| **not** | budget: HIG still falling at the end |" in text
     assert "## Beside the authors' code" in text and "| adam | 60 | 0.0083 | 0.001 |" in text
