@@ -37,6 +37,7 @@ INIT_SCHEMES = ("glorot", "torch")
 DEVICES = ("cpu", "cuda", "auto")
 DTYPES = ("float32", "float64")
 EVAL_UNITS = ("seconds", "updates")
+LOSS_REDUCTIONS = ("mean", "sum")  # mirrors higbench.problems.base.LOSS_REDUCTIONS
 
 
 class ConfigError(ValueError):
@@ -176,6 +177,7 @@ _DATA = {
     "test_size": integer(1),
     "data_seed": integer(0),
     "init": choice(INIT_SCHEMES),
+    "loss_reduction": choice(LOSS_REDUCTIONS),
 }
 
 # problem.solver of the time-stepping problems: the compiled loop with its adjoint, or plain torch.

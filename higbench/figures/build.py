@@ -141,18 +141,34 @@ class Builder:
             known = registry.figures()
             datas = {fid: self.figure_data(known[fid]) for fid in c.figures}
             missing = sum(len(d.missing()) for d in datas.values())
+            cause = c.cause
             try:
-                measured, verdict, why = c.check(datas)
+                out_ = c.check(datas)
+                measured, verdict, why = out_[:3]
+                if len(out_) > 3 and out_[3]:
+                    cause = out_[3]
             except Exception as exc:  # noqa: BLE001
                 measured, verdict, why = "-", "n/a", f"could not be evaluated: {type(exc).__name__}: {exc}"
             if missing and verdict != "n/a":
                 why += f" ({missing} run(s) missing)"
+            seconds, seeds = claim_budget(datas), claim_seeds(datas)
+            if c.min_seconds and verdict != "n/a" and seconds is not None and seconds < c.min_seconds:
+                why = (
+                    f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; the rule "
+                    f"would say '{verdict}'. {why}"
+                )
+                verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
+            elif verdict == "reproduced" and seeds < c.min_seeds:
+                why = f"only {seeds} seed(s) per setting (a comparison needs the median of {c.min_seeds}): at most partly. {why}"
+                verdict, cause = "partly", ("seeds", f"{seeds} seed(s) per setting at this preset")
             if self.preset.name == "smoke" and verdict != "n/a" and any(d.jobs for d in datas.values()):
                 why = (
                     f"smoke preset ({self.preset.name}: a few updates per run) checks code paths only, no verdict; the "
                     f"rule would say '{verdict}'. {why}"
                 )
                 verdict = "n/a"
+            if verdict in ("not", "partly") and not cause:
+                cause = ("open", "no targeted run has examined this verdict yet")
             budgets = "; ".join(sorted({b for d in datas.values() for b in d.budgets.values()}))
             out.append(
                 {
@@ -164,6 +180,8 @@ class Builder:
                     "budget": budgets,
                     "verdict": verdict,
                     "why": why,
+                    "cause": list(cause) if cause and verdict not in ("reproduced", "n/a") else None,
+                    "seeds": seeds,
                     "preset": self.preset.name,
                 }
             )
@@ -171,6 +189,29 @@ class Builder:
 
     def close(self) -> None:
         self.composer.close()
+
+
+def _main_jobs(datas: dict) -> list:
+    return [j for d in datas.values() for j in d.jobs if not j.sweep.endswith("/search")]
+
+
+def claim_budget(datas: dict) -> float | None:
+    """The smallest training budget in seconds of the claim's runs (None: budgets in updates)."""
+    secs = [j.overrides.get("budget.seconds") for j in _main_jobs(datas)]
+    secs = [float(s) for s in secs if s is not None]
+    return min(secs) if secs else None
+
+
+def claim_seeds(datas: dict) -> int:
+    """The fewest seeds of any setting (sweep and overrides but the seed) behind the claim;
+    a setting whose seed came from a seed search counts as settled (the paper's fixed seed)."""
+    groups: dict[tuple, set] = {}
+    for j in _main_jobs(datas):
+        if j.search:
+            continue
+        key = (j.figure, j.sweep, tuple(sorted((k, str(v)) for k, v in j.overrides.items() if k != "seed")))
+        groups.setdefault(key, set()).add(j.seed)
+    return min((len(s) for s in groups.values()), default=0) if groups else 99
 
 
 def build(

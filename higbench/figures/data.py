@@ -152,6 +152,7 @@ class FigureData:
     notes: list[str] = field(default_factory=list)
     banded: bool = False  # a curve drew a min-max band (the caption then says what it is)
     diverged_marked: bool = False  # a diverged run's last point was marked
+    sidecar: dict = field(default_factory=dict)  # extra entries a plot puts into <id>.json
 
     def runs(self, sweep: str | None = None, only_ok: bool = True, **where: Any) -> list[RunData]:
         """Runs of a sweep (all sweeps if None) whose resolved config matches ``where``
@@ -318,6 +319,7 @@ class FigureData:
                 }
                 for j in self.jobs
             ],
+            **self.sidecar,
             **(extra or {}),
         }
         (self.out_dir / f"{self.figure.id}.json").write_text(json.dumps(info, indent=1, default=str) + "\n")

@@ -12,7 +12,7 @@ from higbench.figures import checks
 from higbench.figures.checks import crossing_time, e, final, verdict
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, legend, new_figure, num, semilogy_axes
 from higbench.figures.registry import Claim, claim, register
-from higbench.figures.spec import Budget, Figure, Preset, Sweep
+from higbench.figures.spec import Budget, Figure, Preset, SeedSearch, Sweep
 
 FIG2B_OPTIMIZERS = ("adadelta", "adagrad", "adam", "gn", "hig", "rmsprop", "sgd")
 GD_FAMILY = ("adadelta", "adagrad", "adam", "rmsprop", "sgd")
@@ -22,10 +22,43 @@ FIG2C_BATCHES = {"adam": [256, 512, 1024], "gn": [32, 64, 128], "hig": [32, 64, 
 FIG5_LRS = {"adadelta": [0.01, 0.1, 1.0], "adagrad": [0.01, 0.1, 1.0], "sgd": [0.01, 0.1, 1.0], "rmsprop": [1e-5, 1e-4, 1e-3]}
 FIG6_LRS = [3e-5, 3e-4, 3e-3]
 GRID_BATCHES = [256, 512, 1024]
+# GN from a fresh initialisation takes a first step far larger than the weights for most
+# seeds (NaN or a loss 14-600x higher); the authors show GN's "best stable run" of one
+# fixed seed, so GN's runs here use the best stable seed of a short search.
+GN_SEARCH_BUDGET = Budget(seconds={"paper": 60, "quick": 15})
+
+
+def gn_search(p: Preset, **overrides) -> SeedSearch:
+    return SeedSearch(p.pick(paper=list(range(8)), smoke=[0, 1]), GN_SEARCH_BUDGET, dict(overrides))
 
 
 def fig2b_runs(p: Preset) -> list[Sweep]:
-    return [Sweep("best", {"problem": "oscillator"}, MAIN, grid={"optimizer": list(FIG2B_OPTIMIZERS)})]
+    others = [o for o in FIG2B_OPTIMIZERS if o != "gn"]
+    return [
+        Sweep("best", {"problem": "oscillator"}, MAIN, grid={"optimizer": others}),
+        Sweep("best", {"problem": "oscillator", "optimizer": "gn"}, MAIN, seed_search=gn_search(p)),
+        # Fair baseline: Adam re-tuned at the same budget (its cost per update hardly grows with b).
+        Sweep(
+            "adam_tuned",
+            {"problem": "oscillator", "optimizer": "adam"},
+            MAIN,
+            grid={
+                "optimizer.lr": p.pick(paper=[1e-4, 1e-3, 3e-3], quick=[1e-3, 3e-3], smoke=[1e-3]),
+                "batch_size": p.pick(paper=[512, 2048], quick=[2048]),
+            },
+        ),
+    ]
+
+
+def tuned_adam(d: FigureData) -> tuple[float, str]:
+    """(final loss, label) of the best re-tuned Adam run of fig2b (median over seeds per setting)."""
+    best = (float("inf"), "not run")
+    for lr in sorted({j.overrides["optimizer.lr"] for j in d.jobs if j.sweep == "adam_tuned"}):
+        for b in sorted({j.overrides["batch_size"] for j in d.jobs if j.sweep == "adam_tuned"}):
+            runs = d.runs("adam_tuned", optimizer__lr=lr, batch_size=b)
+            if runs and final(runs) < best[0]:
+                best = (final(runs), f"η={num(lr)} b={b}")
+    return best
 
 
 def fig2a_runs(p: Preset) -> list[Sweep]:
@@ -39,6 +72,7 @@ def fig2c_runs(p: Preset) -> list[Sweep]:
             {"problem": "oscillator", "optimizer": opt},
             MAIN,
             grid={"batch_size": p.pick(paper=bs, quick=bs[::2] if opt == "gn" else bs, smoke=bs[:2])},
+            seed_search=gn_search(p) if opt == "gn" else None,
         )
         for opt, bs in FIG2C_BATCHES.items()
     ]
@@ -243,23 +277,45 @@ def check_gn(datas):
         return checks.na("fig2b GN/Adam")
     status = runs[0].status
     level = 1e-7 <= f["gn"] <= 1e-5 and status == "completed"
+    search = gn_search_summary(datas["fig2b"], "best/search")
     return (
-        f"GN {e(f['gn'])} ({status}); Adam {e(f['adam'])}",
+        f"GN {e(f['gn'])} ({status}, seed {runs[0].seed}); Adam {e(f['adam'])}; seed search: {search}",
         verdict(level, f["gn"] < f["adam"]),
-        "rule: GN's final loss in [1e-7, 1e-5] without diverging (partly: below Adam's)",
+        "rule: GN's best stable run (best seed of the search) ends in [1e-7, 1e-5] without diverging (partly: below Adam's)",
+    )
+
+
+def gn_search_summary(d: FigureData, sweep: str) -> str:
+    """Share of the searched seeds whose GN run diverged (NaN) or ended above its initial loss."""
+    runs = d.runs(sweep)
+    if not runs:
+        return "not run"
+    diverged = sum(r.status == "diverged" for r in runs)
+    rose = sum(r.status == "completed" and not (r.final_loss < r.initial_loss) for r in runs)
+    budget = checks.budget_of(runs[0])
+    return (
+        f"{len(runs)} seeds x {budget}: {diverged}/{len(runs)} diverged ({diverged / len(runs):.0%}), {rose} ended above "
+        f"their initial loss, {len(runs) - diverged - rose} stable"
     )
 
 
 def check_hig(datas):
-    f = _finals(datas["fig2b"])
+    d = datas["fig2b"]
+    f = _finals(d)
     if "hig" not in f:
         return checks.na("fig2b HIG")
+    ft, tlabel = tuned_adam(d)
+    if ft < float("inf"):
+        f["adam (re-tuned)"] = ft
     best = min(f, key=f.get)
     level = 1e-8 <= f["hig"] <= 1e-6
+    adv = f"HIG's advantage: {f['adam'] / f['hig']:.1f}x over Adam (paper setting)" if "adam" in f else ""
+    if ft < float("inf"):
+        adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {e(ft)})"
     return (
-        f"HIG {e(f['hig'])}; lowest of all: {OPTIMIZER_NAMES[best]} ({e(f[best])})",
+        f"HIG {e(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({e(f[best])}); {adv}",
         verdict(level and best == "hig", level or best == "hig"),
-        "rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven (partly: one of the two)",
+        "rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven and of re-tuned Adam (partly: one of the two)",
     )
 
 
@@ -268,15 +324,24 @@ def check_crossing(datas):
     hig, adam = d.runs("best", optimizer__name="hig"), d.runs("best", optimizer__name="adam")
     if not hig or not adam:
         return checks.na("fig2b HIG/Adam")
+    tuned = [r for r in d.runs("adam_tuned")]
+    t_tuned = [crossing_time(hig[0], r) for r in tuned]
+    tuned_text = ""
+    if tuned:
+        never = sum(x is None for x in t_tuned)
+        late = max((x for x in t_tuned if x is not None), default=None)
+        tuned_text = f"; against re-tuned Adam ({len(tuned)} settings): HIG never passes {never}" + (
+            f", passes the others by t = {late:.0f} s" if late is not None else ""
+        )
     t = crossing_time(hig[0], adam[0])
     if t is None:
         return (
-            "HIG does not pass Adam within the budget",
+            "HIG does not pass Adam within the budget" + tuned_text,
             checks.NOT,
             "rule: HIG stays below Adam from a time in [60, 540] s on (partly: from any time on)",
         )
     return (
-        f"HIG below Adam from t = {t:.0f} s on",
+        f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text,
         verdict(60 <= t <= 540, True),
         "rule: HIG stays below Adam from a time in [60, 540] s on (partly: from any time on)",
     )
@@ -329,5 +394,74 @@ claim(
         "Oscillators: Adam's runs converge alike for all b; HIG and GN improve with larger b",
         "Adam ~b-independent; HIG/GN better at larger b",
         check_batch,
+    )
+)
+
+
+# -- beside the authors' code ---------------------------------------------------------------
+
+
+def ref_runs(p: Preset) -> list[Sweep]:
+    # = fig2b's Adam, HIG and GN runs (table-2 settings, the reference's settings)
+    return [
+        *(Sweep(opt, {"problem": "oscillator", "optimizer": opt}, MAIN) for opt in ("adam", "hig")),
+        Sweep("gn", {"problem": "oscillator", "optimizer": "gn"}, MAIN, seed_search=gn_search(p)),
+    ]
+
+
+def reference_rows(d: FigureData) -> list[dict]:
+    """Reference points with higbench's loss at the same training time (median over seeds)."""
+    from higbench.figures.reference import OSCILLATOR_CURVES
+
+    rows = []
+    for opt, ref in OSCILLATOR_CURVES.items():
+        runs = d.runs(opt)
+        for t, loss in ref["points"]:
+            ours = None
+            if runs and all(t <= float(r.curves["wall_time"].iloc[-1]) for r in runs):
+                ours = checks.median([checks.loss_at(r, t) for r in runs])
+            rows.append({"optimizer": opt, "t": t, "reference": loss, "higbench": ours})
+    return rows
+
+
+def plot_reference(d: FigureData) -> None:
+    from higbench.figures.reference import OSCILLATOR_CURVES, SOURCE, UPDATE_SECONDS
+
+    fig, axes = new_figure(1, 1, width=6.4, height=4.2)
+    ax = axes[0, 0]
+    for opt, ref in OSCILLATOR_CURVES.items():
+        runs = d.runs(opt)
+        if runs:
+            d.curve(ax, runs, f"higbench {runs[0].label()}", panel="loss", color=COLORS[opt])
+        t, y = zip(*ref["points"])
+        ax.plot(t, y, "o--", color=COLORS[opt], mfc="none", label=f"authors' TF code {OPTIMIZER_NAMES[opt]} ({ref['note']})")
+        d.record("loss", f"reference {opt}", None, "wall_time", t, "test_loss", y)
+    semilogy_axes(ax)
+    ax.set_title("oscillators: higbench beside the authors' TensorFlow code (same settings, 2 CPU cores)", fontsize=8)
+    legend(ax)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    d.save(fig)
+    ours = {}
+    for opt in ("adam", "hig", "gn"):
+        runs = d.runs(opt)
+        if runs and "update_s" in runs[0].updates:
+            ours[opt] = checks.median([float(r.updates["update_s"].iloc[1:].median()) for r in runs])
+    d.sidecar["reference"] = {
+        "source": SOURCE,
+        "loss_points": reference_rows(d),
+        "update_seconds": [
+            {**row, "higbench_update_s": ours.get(row["optimizer"]) if row["problem"] == "oscillator" else None}
+            for row in UPDATE_SECONDS
+        ],
+    }
+
+
+register(
+    Figure(
+        "ref_oscillator",
+        "Oscillators: higbench's Adam and HIG curves beside the authors' TensorFlow code on the same CPU kind",
+        ref_runs,
+        plot_reference,
+        family="oscillator",
     )
 )

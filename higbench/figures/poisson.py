@@ -63,7 +63,18 @@ def fig3c_runs(p: Preset) -> list[Sweep]:
             MAIN,
             init_from="adam_pre",
         ),
+        # Fair baseline: the continued Adam with a re-tuned learning rate, same budget.
+        Sweep(
+            "adam_cont_tuned",
+            {"problem": "poisson", "optimizer": "adam"},
+            MAIN,
+            grid={"optimizer.lr": p.pick(paper=TUNED_CONT_LRS, smoke=TUNED_CONT_LRS[:1])},
+            init_from="adam_pre",
+        ),
     ]
+
+
+TUNED_CONT_LRS = [3e-4, 1e-3]
 
 
 def fig7_runs(p: Preset) -> list[Sweep]:
@@ -75,7 +86,7 @@ def fig7_runs(p: Preset) -> list[Sweep]:
 
 
 def fig3a_runs(p: Preset) -> list[Sweep]:
-    return fig3c_runs(p)[0::2]  # adam_pre, hig_cont: the HIG network after Adam pre-training
+    return fig3c_runs(p)[0:3:2]  # adam_pre, hig_cont: the HIG network after Adam pre-training
 
 
 # -- plots ----------------------------------------------------------------------------------
@@ -254,13 +265,18 @@ def check_pretrained(datas):
     quarter = 0.25 * float(h.curves["wall_time"].iloc[-1])
     drop = h.initial_loss / loss_at(h, quarter)
     fh, fa = final(hig), final(adam)
+    tuned = {r.cfg("optimizer.lr"): final([r]) for r in d.runs("adam_cont_tuned")}
+    fa_best = min([fa, *tuned.values()])
     measured = (
-        f"start {e(h.initial_loss)}; HIG after 1/4 of its budget {drop:.1f}x lower, final {e(fh)} vs Adam continued {e(fa)}"
+        f"start {e(h.initial_loss)}; HIG after 1/4 of its budget {drop:.1f}x lower, final {e(fh)} vs Adam continued "
+        f"{e(fa)} (η=1e-4, paper)"
+        + "".join(f", η={lr:g} {e(v)}" for lr, v in sorted(tuned.items()))
+        + f"; HIG's advantage {fa / fh:.2g}x (paper η), {fa_best / fh:.2g}x (best Adam)"
     )
     return (
         measured,
-        verdict(fh <= 0.5 * fa, fh < fa),
-        "rule: HIG's final loss <= half of Adam's continued from the same weights (partly: below it)",
+        verdict(fh <= 0.5 * fa_best, fh < fa_best),
+        "rule: HIG's final loss <= half of the best Adam continued from the same weights, paper η or re-tuned (partly: below it)",
     )
 
 

@@ -35,7 +35,26 @@ class Claim:
     figures: tuple[str, ...]
     statement: str
     paper: str
-    check: Callable[[dict], tuple[str, str, str]]
+    check: Callable[[dict], tuple]
+    # Below this training budget per run (seconds) the claim cannot show: "n/a (budget)".
+    min_seconds: float | None = None
+    # A comparison needs the median of this many seeds per setting to be "reproduced"
+    # (fewer: at most "partly"); runs whose seed came from a seed search count as settled.
+    min_seeds: int = 1
+    # Root cause of a "not"/"partly" verdict, found with targeted runs: (category, evidence).
+    # Categories: CAUSES. A check may return a 4th element (category, evidence) instead.
+    cause: tuple[str, str] | None = None
+
+
+CAUSES = {
+    "budget": "too short a budget (the trend points the paper's way)",
+    "deviation": "a deviation from the paper forced by cost",
+    "unspecified": "a setting the paper does not give",
+    "disagreement": "a genuine disagreement with the paper",
+    "bug": "a bug (fixed or open)",
+    "seeds": "too few seeds for a median",
+    "open": "not yet examined with targeted runs",
+}
 
 
 def register(figure: Figure) -> Figure:
@@ -72,6 +91,9 @@ def figures() -> dict[str, Figure]:
 
 def claims() -> dict[str, Claim]:
     _load()
+    from higbench.figures.fidelity import apply
+
+    apply(_CLAIMS)  # minimum budgets, seeds and root causes (one table, with its evidence)
     return dict(_CLAIMS)
 
 

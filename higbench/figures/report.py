@@ -21,7 +21,11 @@ directory: every measured value below is computed from those runs, and every ver
 an explicit rule (stated in the last column). Budgets are training-clock seconds per run
 (evaluations excluded) or a number of updates; the paper's runs took up to an hour each
 on a GPU, so `quick` and `smoke` results are not expected to reach the paper's levels.
-A claim that a short budget cannot show is marked `not` or `partly`, never reproduced.
+A claim whose runs are shorter than the budget it needs to show reads `n/a (budget)`
+(its minimum is in the rule column); a comparison resting on fewer seeds per setting
+than it needs (the median of 3) is at most `partly`. Every `not` and `partly` names a
+root cause: budget (too short, with the trend), deviation (forced by cost), unspecified
+(a setting the paper does not give), disagreement (with the paper), bug, or seeds.
 """
 
 
@@ -73,6 +77,32 @@ def collect(out_dir: Path) -> list[dict]:
     return out
 
 
+def _num(v) -> str:
+    return "-" if v is None else f"{v:.2g}"
+
+
+def reference_section(out_dir: Path) -> list[str]:
+    """Beside the authors' TensorFlow code: their loss points and update times next to ours."""
+    info = _json_sidecars(out_dir).get("ref_oscillator", {}).get("reference")
+    if not info:
+        return []
+    lines = ["", "## Beside the authors' code (oscillators, figure ref_oscillator)", ""]
+    lines.append(f"Reference numbers: {info['source']} (`higbench/figures/reference.py`).")
+    lines.append("higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n")
+    lines.append("| optimizer | training time [s] | authors' code | higbench |")
+    lines.append("|---|---|---|---|")
+    for r in info["loss_points"]:
+        lines.append(f"| {r['optimizer']} | {r['t']:g} | {_num(r['reference'])} | {_num(r['higbench'])} |")
+    lines.append("\n| problem | optimizer | b | authors' code, s/update | higbench, s/update | authors' memory [GB] |")
+    lines.append("|---|---|---|---|---|---|")
+    for r in info["update_seconds"]:
+        lines.append(
+            f"| {r['problem']} | {r['optimizer']} | {r['batch_size']} | {r['update_s']:g} | {_num(r.get('higbench_update_s'))} "
+            f"| {_num(r.get('memory_gb'))} |"
+        )
+    return lines
+
+
 def write_report(out_dir: Path) -> Path:
     rows = collect(out_dir)
     counts: dict[str, int] = {}
@@ -86,14 +116,19 @@ def write_report(out_dir: Path) -> Path:
         + "."
     )
     lines.append(f"Generated {time.strftime('%Y-%m-%d %H:%M:%S')}.\n")
-    lines.append("| claim | figure | paper | measured here | budget | verdict | rule / explanation |")
-    lines.append("|---|---|---|---|---|---|---|")
+    lines.append("| claim | figure | paper | measured here | budget | verdict | root cause | rule / explanation |")
+    lines.append("|---|---|---|---|---|---|---|---|")
     for r in rows:
         fig = ", ".join(r["figures"])
+        cause = r.get("cause")
+        cause_text = f"{cause[0]}: {cause[1]}" if cause else "-"
+        seeds = r.get("seeds")
+        seeds_text = f", {seeds} seed(s)" if isinstance(seeds, int) and 0 < seeds < 99 else ""
         lines.append(
             f"| {_cell(r['id'])}: {_cell(r['statement'])} | {fig} | {_cell(r['paper'])} | {_cell(r['measured'])} | "
-            f"{_cell(r['budget'])} ({r['preset']}) | **{r['verdict']}** | {_cell(r['why'])} |"
+            f"{_cell(r['budget'])} ({r['preset']}{seeds_text}) | **{r['verdict']}** | {_cell(cause_text)} | {_cell(r['why'])} |"
         )
+    lines += reference_section(out_dir)
     lines += ["", "## Figures and tables in this directory", ""]
     lines.append("| id | preset | budget per run | runs done / needed | notes |")
     lines.append("|---|---|---|---|---|")

@@ -74,6 +74,8 @@ class Job:
     overrides: dict[str, Any]  # everything but init_from, in order
     seed: int
     parent: Job | None = None  # init_from: this job starts from the parent's final weights
+    search: list[Job] = field(default_factory=list)  # seed search: the seed is picked from these runs
+    search_note: str = ""  # how the seed was picked
     identity: str | None = None
     config: dict | None = None  # resolved task config (init_from: the parent's path)
     path: Path | None = None  # the run file that satisfies it
@@ -106,6 +108,8 @@ def expand(figure: Figure, preset: Preset) -> list[Job]:
     jobs: list[Job] = []
     for sweep in sweeps:
         mine = _sweep_jobs(figure.id, sweep, preset)
+        if sweep.seed_search is not None:
+            mine = _with_search(figure.id, sweep, mine, preset, jobs)
         if sweep.init_from is not None:
             parents = by_name.get(sweep.init_from)
             if not parents:
@@ -118,6 +122,54 @@ def expand(figure: Figure, preset: Preset) -> list[Job]:
         by_name[sweep.name] = mine
         jobs.extend(mine)
     return jobs
+
+
+def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, jobs: list[Job]) -> list[Job]:
+    """One main job per grid point (seed to be picked) after its seed-search jobs (added to ``jobs``)."""
+    search = sweep.seed_search
+    main: dict[tuple, Job] = {}
+    searches: dict[tuple, list[Job]] = {}  # grid points with the same search share its runs
+    for job in mine:
+        key = tuple((k, fmt(v)) for k, v in job.overrides.items() if k != "seed")
+        if key in main:
+            continue
+        main[key] = job
+        base = {k: v for k, v in job.overrides.items() if not k.startswith("budget.") and k not in ("eval_unit", "eval_every")}
+        base.update(search.overrides)
+        skey = tuple((k, fmt(v)) for k, v in base.items() if k != "seed")
+        if skey not in searches:
+            searches[skey] = []
+            for seed in search.seeds:
+                ov = {**base, "seed": seed, **search.budget.overrides(preset)}
+                searches[skey].append(Job(figure_id, f"{sweep.name}/search", ov, seed))
+            jobs.extend(searches[skey])
+        job.search = searches[skey]
+    return list(main.values())
+
+
+def pick_seed(search: list[Job]) -> tuple[int, str]:
+    """(seed, note): the best stable search run (completed, final test loss finite and below
+    its initial one; lowest final loss), else the first seed."""
+    from higbench.runfile.reader import load_run
+
+    stable, diverged = {}, 0
+    for job in search:
+        if job.status == "diverged":
+            diverged += 1
+        if job.status != "completed" or job.path is None:
+            continue
+        try:
+            loss = load_run(job.path)[1]["test_loss"].to_numpy(dtype=float)
+        except Exception:  # noqa: BLE001 - an unreadable file is not a stable run
+            continue
+        if len(loss) >= 2 and loss[-1] == loss[-1] and loss[-1] < loss[0]:
+            stable[job.seed] = float(loss[-1])
+    n = len(search)
+    tally = f"{n} seeds searched: {diverged} diverged, {n - diverged - len(stable)} unstable (loss rose), {len(stable)} stable"
+    if not stable:
+        return search[0].seed, f"{tally}; no stable seed, seed {search[0].seed} used"
+    seed = min(stable, key=stable.get)
+    return seed, f"{tally}; best stable seed {seed}"
 
 
 def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
@@ -295,10 +347,16 @@ def _read_head(path: Path) -> IndexedRun | None:
 
 def resolve(jobs: Iterable[Job], composer: Composer, index: RunIndex) -> None:
     """Fill in each job's config and identity, and its run file if one is done."""
-    for job in jobs:  # parents come first (expand keeps declaration order)
+    for job in jobs:  # parents and search runs come first (expand keeps declaration order)
         if job.parent is not None and not job.parent.done:
             job.identity, job.path, job.status = None, None, "waiting"
             continue
+        if job.search:
+            if not all(s.done for s in job.search):
+                job.identity, job.path, job.status = None, None, "waiting"
+                continue
+            job.seed, job.search_note = pick_seed(job.search)
+            job.overrides["seed"] = job.seed
         config = dict(composer.compose(job.override_list()))
         job.config = config
         job.identity = identity_of(config, job.parent.identity if job.parent else None)

@@ -88,6 +88,19 @@ class Budget:
 
 
 @dataclass
+class SeedSearch:
+    """The authors' "best stable run of a fixed seed": short runs over ``seeds`` first, then
+    the sweep's run with the best stable one (``runs.pick_seed``: completed, final test loss
+    finite and below the initial one, lowest final loss). ``overrides`` replace the sweep's
+    values in the search runs (e.g. fig13 searches at the default tau and then sweeps tau
+    with that seed). The search runs form the sweep ``<name>/search`` of the figure."""
+
+    seeds: list[int]
+    budget: Budget
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
 class Sweep:
     """Runs of one setting family: fixed overrides x grid (cartesian) x seeds.
 
@@ -104,6 +117,7 @@ class Sweep:
     grid: dict[str, list[Any]] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=lambda: [0])
     init_from: str | None = None
+    seed_search: SeedSearch | None = None  # seeds then come from a search (one run per grid point)
 
 
 @dataclass

@@ -233,6 +233,7 @@ class JacobianPower(torch.optim.Optimizer):
         physics: Callable[..., torch.Tensor],
         loss: Callable[[torch.Tensor], torch.Tensor],
         inputs: torch.Tensor | None = None,
+        reduction: str = "mean",
     ) -> torch.Tensor:
         """One update for y = physics(inputs, model(net_inputs)) and per-sample loss(y).
 
@@ -241,8 +242,9 @@ class JacobianPower(torch.optim.Optimizer):
             per-layer-factor route (no J on the Gram route), anything else torch.func.
         physics: ``physics(inputs, u)`` (or ``physics(u)`` when ``inputs`` is None),
             differentiable, batched, samples independent; returns y (b, ...).
-        loss: ``loss(y)`` -> per-sample losses (b,) (or the scalar batch mean); g is the
-            gradient of their mean.
+        loss: ``loss(y)`` -> per-sample losses (b,) (or a scalar); g is the gradient of
+            their mean, or of their sum with ``reduction="sum"`` (a b-times larger g: the
+            convention of the reference's Poisson script).
         With ``jacobian="naive"`` J comes from torch.func through network and solver per
         sample (the reference). Returns the batch-mean loss before the update (detached);
         ``last_timings``, ``last_finite`` and ``last_reason`` say how the update went.
@@ -257,9 +259,12 @@ class JacobianPower(torch.optim.Optimizer):
             y, A = solver_jacobian(physics, inputs, u)
         with torch.enable_grad():
             y_leaf = y.requires_grad_(True)
-            value = loss(y_leaf)
-            value = value.mean() if value.ndim > 0 else value
-            (grad_y,) = torch.autograd.grad(value, y_leaf)
+            per_sample = loss(y_leaf)
+            if reduction not in ("mean", "sum"):
+                raise ValueError(f"reduction={reduction!r}: expected 'mean' or 'sum'")
+            objective = per_sample.sum() if reduction == "sum" and per_sample.ndim > 0 else per_sample.mean()
+            value = per_sample.mean()
+            (grad_y,) = torch.autograd.grad(objective, y_leaf)
         if not torch.isfinite(value):
             self._refuse("non-finite loss")
             return value.detach()

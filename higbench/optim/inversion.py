@@ -14,15 +14,87 @@ Two equivalent routes:
 * ``gram_coefficients``: eigen-decomposition of the Gram matrix K = J J^T = U diag(s^2) U^T.
   Since V diag(s^kappa) U^T = J^T U diag(s^(kappa-1)) U^T, the direction is J^T c with
   c = max(s)^beta U diag(s^(kappa-1)) U^T g: one vector-Jacobian product, no SVD of J.
+
+Failures. LAPACK's default drivers (gesdd for the SVD, syevd for eigh) occasionally fail
+to converge on ill-conditioned matrices (torch raises ``LinAlgError``). Before giving up,
+``svd`` and ``eigh`` below retry with other algorithms for the same factorisation: the
+QR-iteration SVD ``gesvd`` (SciPy) or the SVD through eigh, and SciPy's ``syevr``/``syev``
+or the SVD of K for eigh. A run is declared diverged only when every route fails.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import torch
 
 from higbench.optim.routes import gram_resolves
 
 TRUNCATION_MODES = ("relative", "absolute")
+
+
+def _scipy_svd(A: torch.Tensor):
+    import scipy.linalg
+
+    u, s, vh = scipy.linalg.svd(A.detach().cpu().numpy(), full_matrices=False, lapack_driver="gesvd", check_finite=False)
+    return tuple(torch.from_numpy(x).to(A.device, A.dtype) for x in (u, s, vh))
+
+
+def _svd_via_eigh(A: torch.Tensor):
+    """Thin SVD from eigh of the smaller Gram matrix (singular values below ~sqrt(eps) lost)."""
+    wide = A.shape[0] <= A.shape[1]
+    lam, W = eigh(A @ A.T if wide else A.T @ A)
+    lam, W = lam.flip(0).clamp_min(0), W.flip(1)
+    s = lam.sqrt()
+    inv = torch.where(s > 0, 1 / torch.where(s > 0, s, torch.ones_like(s)), torch.zeros_like(s))
+    if wide:
+        return W, s, (A.T @ W * inv).T
+    return A @ W * inv, s, W.T
+
+
+def svd(A: torch.Tensor):
+    """``torch.linalg.svd(A, full_matrices=False)`` with fallbacks when it does not converge."""
+    routes = [("gesdd", lambda: torch.linalg.svd(A, full_matrices=False)), ("gesvd", lambda: _scipy_svd(A)),
+              ("eigh of the Gram matrix", lambda: _svd_via_eigh(A))]  # fmt: skip
+    return _first_success("SVD", routes)
+
+
+def _scipy_eigh(K: torch.Tensor, driver: str):
+    import scipy.linalg
+
+    lam, U = scipy.linalg.eigh(K.detach().cpu().numpy(), lower=True, driver=driver, check_finite=False)
+    return torch.from_numpy(lam).to(K.device, K.dtype), torch.from_numpy(U).to(K.device, K.dtype)
+
+
+def _eigh_via_svd(K: torch.Tensor):
+    """K symmetric positive semi-definite: its SVD is its eigen-decomposition (ascending here)."""
+    sym = torch.tril(K) + torch.tril(K, -1).T
+    U, s, _ = torch.linalg.svd(sym)
+    return s.flip(0), U.flip(1)
+
+
+def eigh(K: torch.Tensor):
+    """``torch.linalg.eigh(K)`` (lower triangle) with fallbacks when it does not converge."""
+    routes = [("syevd", lambda: torch.linalg.eigh(K)), ("syevr", lambda: _scipy_eigh(K, "evr")),
+              ("syev", lambda: _scipy_eigh(K, "ev")), ("SVD of K", lambda: _eigh_via_svd(K))]  # fmt: skip
+    return _first_success("eigh", routes)
+
+
+def _first_success(what: str, routes):
+    errors = []
+    for name, route in routes:
+        try:
+            out = route()
+        except (torch.linalg.LinAlgError, ImportError, ValueError) as exc:  # numpy's LinAlgError is a ValueError
+            errors.append(f"{name}: {exc}")
+            continue
+        if not all(torch.isfinite(x).all() for x in out):
+            errors.append(f"{name}: non-finite result")
+            continue
+        if errors:
+            warnings.warn(f"{what} failed ({'; '.join(errors)}); used {name} instead", RuntimeWarning, stacklevel=3)
+        return out
+    raise torch.linalg.LinAlgError(f"{what} failed with every driver: {'; '.join(errors)}")
 
 
 def _keep_mask(s: torch.Tensor, tau: float, truncation: str) -> torch.Tensor:
@@ -67,10 +139,10 @@ def jacobian_power(
     if J.shape[0] < J.shape[1]:
         # Wide J: the SVD of J^T (a column-major view of row-major J) is the same factorisation
         # and 4-6x faster in LAPACK here than the SVD of J itself (no relayout of the long side).
-        V, s, Uh = torch.linalg.svd(J.T, full_matrices=False)
+        V, s, Uh = svd(J.T)
         U, Vh = Uh.T, V.T
     else:
-        U, s, Vh = torch.linalg.svd(J, full_matrices=False)
+        U, s, Vh = svd(J)
     keep = _keep_mask(s, tau, truncation)
     coeff = _powered(s, keep, kappa) * (U.T @ g.to(J.dtype))
     return _prefactor(s, beta) * (Vh.T @ coeff)
@@ -116,13 +188,20 @@ def gram_coefficients(
     if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
         raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
     g = g.to(K.dtype)
-    if resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal":
+    tridiagonal = resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal"
+    if tridiagonal:
         from higbench.optim.tridiagonal import TridiagonalEigen
 
-        eig = TridiagonalEigen(K, overwrite=overwrite)
-        lam, project, expand = eig.values, eig.project, eig.expand
-    else:
-        lam, U = torch.linalg.eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
+        try:
+            eig = TridiagonalEigen(K, overwrite=overwrite)
+            lam, project, expand = eig.values, eig.project, eig.expand
+        except torch.linalg.LinAlgError:
+            if overwrite:  # K is destroyed: nothing left to retry on
+                raise
+            warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=2)
+            tridiagonal = False
+    if not tridiagonal:
+        lam, U = eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
 
         def project(v):
             return U.T @ v

@@ -16,6 +16,9 @@ from torch import nn
 
 from higbench.problems.networks import initialise
 
+# problem.loss_reduction: how the per-sample losses of a batch become the training objective.
+LOSS_REDUCTIONS = ("mean", "sum")
+
 
 @dataclass
 class Batch:
@@ -61,6 +64,15 @@ class Problem(abc.ABC):
     @abc.abstractmethod
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         """Per-sample loss (b,)."""
+
+    def objective(self, per_sample: torch.Tensor) -> torch.Tensor:
+        """The scalar every optimizer differentiates: the batch mean (default) or sum of the
+        per-sample losses (``problem.loss_reduction``; the reference's Poisson script sums).
+        Curves and logged losses stay per-sample means either way."""
+        reduction = self.cfg.get("loss_reduction", "mean")
+        if reduction not in LOSS_REDUCTIONS:
+            raise ValueError(f"loss_reduction={reduction!r}: expected one of {LOSS_REDUCTIONS}")
+        return per_sample.sum() if reduction == "sum" else per_sample.mean()
 
     def metrics(self, y: torch.Tensor, batch: Batch) -> dict[str, torch.Tensor]:
         """Extra per-sample metrics (name -> (b,)) logged as curves next to the loss."""

@@ -37,7 +37,7 @@ def _sync(device: torch.device) -> None:
 
 
 class FirstOrderUpdate:
-    """Any torch.optim optimizer on the batch-mean loss."""
+    """Any torch.optim optimizer on the problem's objective (batch mean or sum, ``problem.loss_reduction``)."""
 
     def __init__(self, problem: Problem, model: nn.Module, optimizer: torch.optim.Optimizer):
         self.problem, self.model, self.optimizer = problem, model, optimizer
@@ -46,8 +46,9 @@ class FirstOrderUpdate:
         dev = self.problem.device
         t0 = time.perf_counter()
         self.optimizer.zero_grad(set_to_none=True)
-        loss = self.problem.loss(self.problem.outputs(self.model, batch), batch.targets).mean()
-        loss.backward()
+        per_sample = self.problem.loss(self.problem.outputs(self.model, batch), batch.targets)
+        loss = per_sample.mean()  # logged; the gradient is that of the problem's objective (mean or sum)
+        self.problem.objective(per_sample).backward()
         _sync(dev)
         t1 = time.perf_counter()
         value = loss.item()
@@ -95,12 +96,15 @@ class JacobianPowerUpdate:
                 physics=problem.physics,
                 loss=lambda y: problem.loss(y, batch.targets),
                 inputs=batch.inputs,
+                reduction=problem.cfg.get("loss_reduction", "mean"),  # poisson: sum, as the reference
             )
         else:
 
             def closure():
                 y = problem.outputs(self.model, batch)
-                return y, problem.loss(y, batch.targets).mean()
+                # g is the gradient of the objective (problem.loss_reduction); for a summing
+                # problem the logged batch loss is then that sum, not the mean.
+                return y, problem.objective(problem.loss(y, batch.targets))
 
             value = opt.step(closure)
         return UpdateResult(value.item(), dict(opt.last_timings), opt.last_finite, opt.last_reason)
