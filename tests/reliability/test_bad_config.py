@@ -331,8 +331,14 @@ def _conf(group):
 def test_shipped_configs_pass(inputs):
     """The schema must not refuse what conf/ ships: each problem, optimizer, experiment."""
     lists = [[f"problem={p}"] for p in _conf("problem")] + [[f"optimizer={o}"] for o in _conf("optimizer")]
-    lists += [[f"+experiment={e}"] for e in _conf("experiment")] + [[f"init_from={inputs / 'toy7'}"]]
+    lists += [[f"+experiment={e}"] for e in _conf("experiment") if "optuna" not in e] + [[f"init_from={inputs / 'toy7'}"]]
     _validate_all(lists)
+
+
+@pytest.mark.optuna
+def test_shipped_optuna_experiments_pass():
+    """Experiments that select Hydra's Optuna sweeper compose only with the optuna extra."""
+    _validate_all([[f"+experiment={e}"] for e in _conf("experiment") if "optuna" in e])
 
 
 @pytest.mark.slow
