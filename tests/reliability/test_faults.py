@@ -30,33 +30,20 @@ import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
-from rel_helpers import FAST, REPO, files_under, run_cli, start_cli, table_rows, wait_for_rows
+from rel_helpers import FAST, REPO, compose_here, files_under, run_cli, start_cli, table_rows, train_here, wait_for_rows
 
 from higbench import cli
 from higbench.results.index import load_runs
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runfile.writer import DiskFull, RunFileWriter
 from higbench.runner import checkpoint
-from higbench.runner.train import StopSignals, train
+from higbench.runner.train import StopSignals
 
 LONG_RUN = ["problem=toy", "optimizer=adam", "budget.seconds=30", "eval_unit=updates", "eval_every=10", *FAST]
 
 
 def digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def compose_here(overrides):
-    with initialize_config_dir(config_dir=cli.config_dir(), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
-
-
-def train_here(cfg, path, **kwargs):
-    threads = torch.get_num_threads()
-    try:
-        return train(cfg, path, **kwargs)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def interrupted_run(path: Path, monkeypatch, overrides=(), after: int = 25):

@@ -23,17 +23,15 @@ import numpy as np
 import pytest
 import torch
 import yaml
-from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
-from rel_helpers import FAST, start_cli, table_rows, wait_for_rows
+from rel_helpers import FAST, compose_here, start_cli, table_rows, train_here, wait_for_rows
 
 from higbench import cli
 from higbench.config import ConfigError, to_plain
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner.checkpoint import checkpoint_path, resume_config
-from higbench.runner.train import train
 
 VICTIM = ["problem=toy", "budget.seconds=30", "eval_unit=updates", "eval_every=5", "checkpoint_every=0.3", *FAST]
 RUNS = {
@@ -64,19 +62,6 @@ def assert_continuous(run_file, last_step):
     assert updates["wall_time"].is_monotonic_increasing
     assert not checkpoint_path(run_file).exists(), "a finished run keeps no checkpoint"
     return meta, curves, updates
-
-
-def compose_here(overrides):
-    with initialize_config_dir(config_dir=cli.config_dir(), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
-
-
-def train_here(cfg, path, **kwargs):
-    threads = torch.get_num_threads()
-    try:
-        return train(cfg, path, **kwargs)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def sigterm_self_after_rows(n, monkeypatch):
