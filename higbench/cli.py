@@ -52,8 +52,9 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.config import ConfigError, check_hydra_references, to_plain, validate
+from higbench.runfile.reader import RUN_FILE
 
-RUN_FILE_NAME = "run.h5"
+RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 EXIT_BAD_INPUT = 2
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 
@@ -318,15 +319,13 @@ def precheck(argv: list[str]) -> list[str]:
 
 def _stored_config(run_file: Path, resume_value) -> str:
     """Config YAML of a run: from its run file, else (a file killed at creation) Hydra's copy."""
-    import h5py
+    from higbench.runfile.reader import UnreadableRunFile, read_head
 
     try:
-        with h5py.File(run_file, "r", locking=False) as f:
-            stored = f.attrs.get("config", "")
-            stored = stored.decode() if isinstance(stored, bytes) else str(stored)
+        stored = read_head(run_file).config_yaml
         if stored:
             return stored
-    except Exception:  # noqa: BLE001
+    except UnreadableRunFile:
         pass
     saved = run_file.parent / ".hydra" / "config.yaml"
     if saved.is_file():

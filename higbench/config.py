@@ -507,29 +507,25 @@ def check_init_from_file(path: str, problem_name: str) -> None:
     The shapes of the weights against this config's network are checked later, once the
     network is built (``higbench.runner.train.preflight``), still before anything is written.
     """
-    p = Path(path)
-    if p.is_dir():
-        p = p / "run.h5"
+    from higbench.runfile.reader import UnreadableRunFile, read_head, run_file_path
+
+    p = run_file_path(path)
     if not p.is_file():
         raise ConfigError("init_from", path, "no such run file")
-    import h5py
-
     try:
-        with h5py.File(p, "r", locking=False) as f:
-            has_weights = "weights" in f and len(f["weights"]) > 0
-            other = f.attrs.get("problem", "")
-            other = other.decode() if isinstance(other, bytes) else str(other)
-    except Exception as exc:  # noqa: BLE001 - not HDF5, truncated, ...
-        raise ConfigError("init_from", path, f"not a readable run file ({type(exc).__name__})") from None
-    if not has_weights:
+        head = read_head(p)
+    except UnreadableRunFile as exc:
+        raise ConfigError("init_from", path, str(exc).split(": ", 1)[-1]) from None
+    if not head.has_weights:
         raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
-    if other and other != problem_name:
-        raise ConfigError("init_from", path, f"run is of problem {other}, not {problem_name}")
+    if head.problem and head.problem != problem_name:
+        raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
 
 
 def init_from_path(path: str) -> Path:
-    p = Path(path)
-    return p / "run.h5" if p.is_dir() else p
+    from higbench.runfile.reader import run_file_path
+
+    return run_file_path(path)
 
 
 _HYDRA_REFERENCE = re.compile(r"\$\{hydra:([^}]+)\}")

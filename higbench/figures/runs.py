@@ -36,6 +36,7 @@ import h5py
 import yaml
 
 from higbench.figures.spec import Figure, Preset, Sweep
+from higbench.runfile.reader import RUN_FILE, run_file_path
 
 COSMETIC_KEYS = ("progress", "threads", "checkpoint_every", "resume", "memory_limit_mb")
 DONE_STATUSES = ("completed", "diverged")
@@ -323,8 +324,7 @@ class RunIndex:
 
 
 def _run_file(path: str) -> Path:
-    p = Path(path)
-    return p / "run.h5" if p.suffix != ".h5" else p
+    return run_file_path(path)
 
 
 def _read_head(path: Path) -> IndexedRun | None:
@@ -507,7 +507,7 @@ def launch(
             out.write(" ".join(cmd) + "\n\n")
             out.flush()
             proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
-        new = sorted(sweep_dir.rglob("run.h5"))
+        new = sorted(sweep_dir.rglob(RUN_FILE))
         status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
         log(f"[figures] {figure_id}: {len(new)}/{len(members)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
         return new

@@ -1,9 +1,24 @@
 """The HDF5 run file: one per run, the single source of truth for figures and tables."""
 
-from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
+from higbench.runfile.reader import (
+    RUN_FILE,
+    RunHead,
+    UnreadableRunFile,
+    load_logs,
+    load_run,
+    load_updates,
+    load_weights,
+    read_head,
+    run_file_path,
+)
 from higbench.runfile.writer import FORMAT_VERSION, STATUSES, RunFileExists, RunFileWriter
 
 __all__ = [
+    "RUN_FILE",
+    "RunHead",
+    "UnreadableRunFile",
+    "read_head",
+    "run_file_path",
     "RunFileWriter",
     "RunFileExists",
     "FORMAT_VERSION",

@@ -7,12 +7,68 @@ killed) can be read up to its last flush; its ``status`` is then ``running``.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pandas as pd
 import yaml
+
+RUN_FILE = "run.h5"  # the file name of a run inside its output directory
+
+
+def run_file_path(path: str | Path) -> Path:
+    """A run's file from a run directory or a file path (``outputs/x`` -> ``outputs/x/run.h5``)."""
+    p = Path(path)
+    return p / RUN_FILE if p.is_dir() or p.suffix != ".h5" else p
+
+
+class UnreadableRunFile(OSError):
+    """Not a run file: missing, not HDF5, truncated, a FIFO, or without a recorded config."""
+
+
+@dataclass(frozen=True)
+class RunHead:
+    """What a run file says about itself, without its curves: enough to index, resume or
+    initialise from it. ``attrs`` holds every root attribute (decoded, numeric ones as numbers)."""
+
+    path: Path
+    status: str
+    config_yaml: str
+    run_id: str | None
+    problem: str
+    steps: int | None
+    has_weights: bool
+    attrs: dict = field(default_factory=dict, repr=False)
+
+
+def read_head(path: str | Path, locking: bool = False) -> RunHead:
+    """The root attributes of a run file; raises ``UnreadableRunFile`` (with the reason)."""
+    p = run_file_path(path)
+    if not p.is_file():  # a FIFO or device named *.h5 would block the open forever
+        raise UnreadableRunFile(f"{p}: no such run file")
+    try:
+        with h5py.File(p, "r", locking=locking) as f:
+            attrs = {k: _attr(v) for k, v in f.attrs.items()}
+            has_weights = "weights" in f and len(f["weights"]) > 0
+    except Exception as exc:  # noqa: BLE001 - not HDF5, truncated, ...
+        raise UnreadableRunFile(f"{p}: not a readable run file ({type(exc).__name__})") from None
+    steps = attrs.get("steps")
+    try:
+        steps = None if steps is None else int(float(steps))
+    except (TypeError, ValueError):
+        steps = None
+    return RunHead(
+        path=p,
+        status=str(attrs.get("status", "running")),
+        config_yaml=str(attrs.get("config", "")),
+        run_id=attrs.get("run_id"),
+        problem=str(attrs.get("problem", "")),
+        steps=steps,
+        has_weights=has_weights,
+        attrs=attrs,
+    )
 
 
 def _attr(value):

@@ -38,9 +38,10 @@ from pathlib import Path
 from typing import Any
 
 from higbench.config import ConfigError, show
+from higbench.runfile.reader import RUN_FILE, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
-RUN_FILE_NAME = "run.h5"
+RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 SUFFIX = ".ckpt"
 FORMAT = 1
 RESUMABLE_KEYS = ("budget", "eval_every", "checkpoint_every", "progress", "threads", "device", "memory_limit_mb", "resume")
@@ -165,7 +166,7 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
             raise ConfigError("resume", True, "needs hydra.run.dir=<run dir>, or give the run: resume=<run dir or run file>")
         return Path(run_dir) / RUN_FILE_NAME
     p = Path(str(resume)).expanduser()
-    return p / RUN_FILE_NAME if p.is_dir() or p.suffix != ".h5" else p
+    return run_file_path(p)
 
 
 def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
