@@ -62,7 +62,7 @@ lint: install-dev
 	$(BIN)/ruff format --check higbench tests scripts
 
 bench: install
-	$(BIN)/python scripts/bench_step.py
+	$(BIN)/python -m higbench.bench.step
 
 # Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG/GN/Adam, dipole HIG/Adam,
 # paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes).

@@ -6,8 +6,10 @@
     python -m higbench.figures all --no-run                  # draw from the runs that exist
     python -m higbench.figures --list
 
-Runs already under --runs-root with the same resolved config are reused; only missing
-ones are run (Hydra multiruns of the `higbench` CLI, joblib launcher for parallel jobs).
+Runs already under --runs-root with the same resolved config are reused (the results
+index); only missing ones are run, as `higbench -m` multiruns on a Hydra launcher:
+joblib with --jobs workers here, or e.g. `--launcher slurm --launcher-override
+hydra.launcher.partition=gpu` on a cluster.
 Outputs in --out: <id>.png/.pdf + <id>.csv (plotted data) + <id>.json (preset, budgets,
 runs), tables as <id>.md/.csv, and REPORT.md (the paper's claims against these runs).
 """
@@ -32,16 +34,23 @@ def main(argv: list[str] | None = None) -> int:
         "--jobs",
         type=int,
         default=None,
-        help="runs trained at the same time (default: min(cores, 2)); each run uses one torch thread",
+        help="joblib launcher: runs trained at the same time (default: min(cores, 2)); each run uses one torch thread",
     )
     p.add_argument(
         "--launcher",
-        default="auto",
-        choices=("auto", "basic", "joblib"),
+        default="joblib",
+        metavar="NAME",
         help=(
-            "Hydra launcher for missing runs (auto = basic: multiruns split n ways and run side by side; joblib: one "
-            "multirun per grid on joblib workers)"
+            "Hydra launcher of the missing runs' multiruns (higbench -m): joblib (default; local, --jobs workers), "
+            "basic (one after another), or a hydra/launcher config: slurm, submitit_slurm, submitit_local"
         ),
+    )
+    p.add_argument(
+        "--launcher-override",
+        action="append",
+        default=[],
+        metavar="hydra.KEY=VALUE",
+        help="extra Hydra override for every multirun, e.g. hydra.launcher.partition=gpu (repeatable)",
     )
     p.add_argument("--no-run", action="store_true", help="run nothing; draw from the runs that exist")
     p.add_argument(
@@ -66,6 +75,13 @@ def main(argv: list[str] | None = None) -> int:
         registry.select(args.ids)
     except KeyError as exc:
         print(f"higbench-figures: error: {exc.args[0]}", file=sys.stderr)
+        return 2
+    from higbench.figures.runs import Launcher
+
+    try:
+        launcher = Launcher(args.launcher, tuple(args.launcher_override))
+    except ValueError as exc:
+        print(f"higbench-figures: error: --launcher-override {exc}", file=sys.stderr)
         return 2
 
     if args.plan:
@@ -92,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         args.runs_root,
         args.out,
         jobs=args.jobs,
-        launcher=args.launcher,
+        launcher=launcher,
         run=not args.no_run,
         report=not args.no_report,
         bench=not args.no_bench,

@@ -1,22 +1,26 @@
 """Which runs a figure needs, which of them exist, and running the missing ones.
 
 Identity. A run is identified by its resolved config (what ``higbench`` composes with
-Hydra for the same overrides) minus the keys that do not change its result: output
-paths live in the Hydra node (not in the task config at all), and ``COSMETIC_KEYS``
-(progress bar, torch threads, checkpoint interval, resume, memory cap) are dropped.
-``init_from`` (a path) is replaced by the identity of the run it points at, so a
-continued run keeps its identity wherever its parent's file lies.
+Hydra for the same overrides) minus the keys that do not change its result: the results
+index's ``config_id`` (``higbench.results.index``: ``COSMETIC_KEYS`` dropped, ``init_from``
+replaced by the identity of the run it points at).
 
-Reuse. Every ``*.h5`` under the runs root (``outputs/`` by default, including runs made
-by hand with ``higbench``) is indexed by identity; a run whose status is ``completed`` or
-``diverged`` (a diverged run is a result) is reused. Missing, failed, interrupted and
-still-running (or killed) runs are (re)run.
+Reuse. The results index of the runs root (``outputs/`` by default, including runs made by
+hand with ``higbench``, and the figures' own runs) decides which runs exist: one per
+config by its rule (``one_per_config``: the newest done run, else the newest of any
+status), done meaning ``DONE_STATUSES`` (completed or diverged: a diverged run is a
+result). Missing, failed, interrupted and still-running (or killed) runs are (re)run.
 
 Running. The missing jobs of a figure are grouped into exact cartesian products
-("boxes"); each box (cut into ``--jobs`` pieces to run side by side) is one
-``python -m higbench.cli -m ...`` multirun, i.e. the same Hydra machinery and checks as
-the CLI (``--launcher joblib``: one multirun per box on Hydra's joblib launcher instead).
+("boxes"); each box is one ``higbench -m`` multirun (``python -m higbench.cli -m``: the
+same Hydra machinery and checks as the CLI) on a Hydra launcher: joblib with ``--jobs``
+workers locally (the basic launcher for a box of one run or of a few seconds of training),
+or any other Hydra launcher (``--launcher slurm``, ``submitit_local``, ...) with extra
+``hydra.*`` overrides. Multiruns run one after the other; the parallelism is the launcher's.
 Run files go to ``<runs root>/figures-runs/<figure>/<time>/<job number>/run.h5``.
+
+Interface used by ``build.py``/``data.py``: ``Job``, ``expand``, ``Composer``,
+``RunIndex`` (``scan``/``add``/``find``), ``resolve``, ``launch``, ``job_seconds``.
 """
 
 from __future__ import annotations
@@ -27,22 +31,26 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import h5py
 import yaml
 
 from higbench.figures.spec import Figure, Preset, Sweep
-from higbench.runfile.reader import RUN_FILE, run_file_path
+from higbench.results.index import COSMETIC_KEYS, DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
+from higbench.results.index import config_id as identity_of
+from higbench.runfile.reader import RUN_FILE
 
-COSMETIC_KEYS = ("progress", "threads", "checkpoint_every", "resume", "memory_limit_mb")
-DONE_STATUSES = ("completed", "diverged")
+__all__ = [
+    "COSMETIC_KEYS", "DONE_STATUSES", "Composer", "Job", "Launcher", "RunIndex", "boxes", "expand", "fmt",
+    "identity_of", "job_seconds", "launch", "pick_seed", "resolve",
+]  # fmt: skip
+
 LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
-SPLIT_SECONDS = 30  # a box with less training than this runs in one process
-REPO_ROOT = Path(__file__).resolve().parents[2]
+PARALLEL_SECONDS = 30  # a box with less training than this runs on Hydra's basic launcher (no worker start-up)
+PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # the checkout (or site-packages) holding higbench
 
 try:
     _Loader = yaml.CSafeLoader
@@ -193,16 +201,7 @@ def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
     return out
 
 
-# -- identity -------------------------------------------------------------------------------
-
-
-def identity_of(config: dict, parent_identity: str | None = None) -> str:
-    """The identity hash of a resolved task config (cosmetic keys dropped)."""
-    c = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
-    if c.get("init_from"):
-        c["init_from"] = {"run": parent_identity or f"path:{c['init_from']}"}
-    text = json.dumps(c, sort_keys=True, default=str)
-    return hashlib.sha1(text.encode()).hexdigest()[:16]
+# -- composing configs ----------------------------------------------------------------------
 
 
 def _conf_fingerprint(conf_dir: Path) -> str:
@@ -265,84 +264,49 @@ class Composer:
             self.dirty = False
 
 
-# -- the index of existing runs -------------------------------------------------------------
+# -- the runs that exist: the results index -------------------------------------------------
 
 
-@dataclass
+@dataclass(frozen=True)
 class IndexedRun:
     path: Path
     status: str
-    config: dict
-    mtime: float
-    identity: str | None = None
 
 
-@dataclass
 class RunIndex:
-    """Every run file under a root, by identity (the newest done run wins)."""
+    """The results index of a runs root, one run per config (``one_per_config``), by identity.
 
-    root: Path
-    runs: dict[Path, IndexedRun] = field(default_factory=dict)
+    A view of ``higbench.results.index.load_runs(root, figure_runs=True)``: no status or
+    duplicate rule of its own. ``add`` (after a launch) re-reads the root on the next ``find``,
+    so runs continued from new ones get their parent's identity.
+    """
+
+    def __init__(self, root: Path | None):
+        self.root = None if root is None else Path(root)
+        self._by_id: dict[str, IndexedRun] | None = None
 
     @classmethod
-    def scan(cls, root: Path) -> RunIndex:
-        index = cls(Path(root))
-        if not index.root.is_dir():
-            return index
-        for path in sorted(index.root.rglob("*.h5")):
-            run = _read_head(path)
-            if run is not None:
-                index.runs[path.resolve()] = run
-        for run in index.runs.values():
-            index._identity(run, set())
+    def scan(cls, root: Path | None) -> RunIndex:
+        index = cls(root)
+        index._read()
         return index
 
-    def _identity(self, run: IndexedRun, seen: set) -> str:
-        if run.identity is None:
-            parent_id = None
-            src = run.config.get("init_from")
-            if src:
-                parent = self.runs.get(_run_file(src).resolve())
-                if parent is not None and parent.path not in seen:
-                    parent_id = self._identity(parent, seen | {run.path})
-            run.identity = identity_of(run.config, parent_id)
-        return run.identity
+    def _read(self) -> None:
+        self._by_id = {}
+        if self.root is None or not self.root.is_dir():
+            return
+        runs = one_per_config(load_runs(self.root, figure_runs=True))
+        for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
+            self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
 
     def add(self, path: Path) -> None:
-        run = _read_head(path)
-        if run is not None:
-            self.runs[path.resolve()] = run
-            self._identity(run, set())
+        self._by_id = None  # read again when next asked
 
     def find(self, identity: str) -> IndexedRun | None:
-        """The newest done run with this identity, else the newest run of any status."""
-        matches = [r for r in self.runs.values() if r.identity == identity]
-        if not matches:
-            return None
-        done = [r for r in matches if r.status in DONE_STATUSES]
-        return max(done or matches, key=lambda r: r.mtime)
-
-
-def _run_file(path: str) -> Path:
-    return run_file_path(path)
-
-
-def _read_head(path: Path) -> IndexedRun | None:
-    if not path.is_file():  # a FIFO or device named *.h5 would block the open forever
-        return None
-    try:
-        with h5py.File(path, "r", locking=False) as f:
-            attrs = f.attrs
-            if "config" not in attrs:
-                return None
-            status = attrs.get("status", "running")
-            config = attrs["config"]
-        status = status.decode() if isinstance(status, bytes) else str(status)
-        config = config.decode() if isinstance(config, bytes) else str(config)
-        cfg = yaml.load(config, Loader=_Loader) or {}
-        return IndexedRun(path.resolve(), status, cfg, path.stat().st_mtime)
-    except Exception:  # noqa: BLE001 - half-written or foreign files are not runs
-        return None
+        """The run the index chooses for this identity (done if any is), or None."""
+        if self._by_id is None:
+            self._read()
+        return self._by_id.get(identity)
 
 
 def resolve(jobs: Iterable[Job], composer: Composer, index: RunIndex) -> None:
@@ -422,33 +386,42 @@ def _same(xs: list, ys: list) -> bool:
     return len(xs) == len(ys) and all(any(_eq(x, y) for y in ys) for x in xs)
 
 
-def box_command(box: dict[str, list], sweep_dir: Path, n_jobs: int, launcher: str) -> list[str]:
+@dataclass(frozen=True)
+class Launcher:
+    """The Hydra launcher of the figures' multiruns.
+
+    name: ``joblib`` (default; ``auto`` is the same: local workers, ``n_jobs`` = ``--jobs``),
+    ``basic`` (one run after another in one process), or any launcher config of
+    ``hydra/launcher`` (``slurm``: conf/hydra/launcher/slurm.yaml, ``submitit_slurm``,
+    ``submitit_local``). overrides: extra ``hydra.*`` overrides for every multirun
+    (``hydra.launcher.partition=gpu``); they do not change a run's identity.
+    """
+
+    name: str = "joblib"
+    overrides: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        bad = [o for o in self.overrides if not o.split("=", 1)[0].lstrip("+~").startswith("hydra.")]
+        if bad:
+            raise ValueError(f"{bad[0]}: only hydra.* overrides may be added to the figures' runs (others change the runs)")
+
+    def args(self, n_runs: int, n_jobs: int, seconds: float) -> list[str]:
+        """Hydra overrides choosing the launcher for a multirun of ``n_runs`` runs."""
+        name = "joblib" if self.name == "auto" else self.name
+        if name in ("joblib", "basic"):
+            workers = min(n_jobs, n_runs)
+            if name == "basic" or workers <= 1 or seconds < PARALLEL_SECONDS:  # not worth starting workers
+                return [o for o in self.overrides if not o.startswith("hydra.launcher.")]
+            return ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={workers}", *self.overrides]
+        return [f"hydra/launcher={name}", *self.overrides]
+
+
+def multirun_command(box: dict[str, list], sweep_dir: Path, launcher_args: Sequence[str]) -> list[str]:
+    """``higbench -m`` over the box's product, into ``sweep_dir`` (one numbered dir per run)."""
     args = [sys.executable, "-m", "higbench.cli", "-m"]
-    for key, values in box.items():
-        args.append(f"{key}={','.join(fmt(v) for v in values)}")
-    args += LAUNCHER_ARGS(sweep_dir)
-    if launcher == "joblib":
-        args += ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"]
-    return args
-
-
-def LAUNCHER_ARGS(sweep_dir: Path) -> list[str]:  # noqa: N802
-    return [*LAUNCH_OVERRIDES, f"hydra.sweep.dir={fmt(str(sweep_dir))}", "hydra.sweep.subdir=${hydra.job.num}"]
-
-
-def split(members: list[Job], box: dict[str, list], n: int) -> list[tuple[list[Job], dict[str, list]]]:
-    """A box cut into up to n boxes along its longest axis (each still an exact product)."""
-    key = max(box, key=lambda k: len(box[k]))
-    values = box[key]
-    parts = min(n, len(values))
-    if parts <= 1:
-        return [(members, box)]
-    out = []
-    for i in range(parts):
-        chunk = values[i::parts]
-        sub = [j for j in members if any(_eq(_job_items(j)[key], v) for v in chunk)]
-        out.append((sub, {**box, key: chunk}))
-    return out
+    args += [f"{key}={','.join(fmt(v) for v in values)}" for key, values in box.items()]
+    args += [*LAUNCH_OVERRIDES, f"hydra.sweep.dir={fmt(str(sweep_dir))}", "hydra.sweep.subdir=${hydra.job.num}"]
+    return args + list(launcher_args)
 
 
 def job_seconds(job: Job) -> float:
@@ -464,63 +437,39 @@ def launch(
     runs_root: Path,
     *,
     n_jobs: int,
-    launcher: str,
+    launcher: str | Launcher = "joblib",
     log=print,
 ) -> list[Path]:
-    """Run the jobs: one Hydra multirun per box; returns the run files written.
-
-    launcher "basic" (default, "auto"): each box is split along its longest axis into up to
-    ``n_jobs`` smaller products, and these multiruns (Hydra's basic launcher: jobs one
-    after the other in the CLI process) run ``n_jobs`` at a time. Every job then runs in a
-    process whose CLI pre-check has already imported and warmed up torch, as a single run
-    does. launcher "joblib": one multirun per box with ``hydra/launcher=joblib`` and
-    ``n_jobs`` workers (the first job of each fresh worker pays torch's lazy imports,
-    seconds, inside its training clock). At most ``n_jobs`` training processes at once.
-    """
-    plans = []
+    """Run the jobs: one ``higbench -m`` multirun per box, one box after the other, each on
+    the Hydra launcher (``Launcher``, or the name of one without extra overrides); returns
+    the run files written. With joblib at most ``n_jobs`` training processes at once."""
+    if not isinstance(launcher, Launcher):
+        launcher = Launcher(launcher)
     by_figure: dict[str, list[Job]] = {}
     for job in jobs:
         by_figure.setdefault(job.figure, []).append(job)
+    written: list[Path] = []
+    number = 0
     for figure_id, fjobs in by_figure.items():
         for members, box in boxes(fjobs):
-            if launcher == "joblib" and len(members) > 1 and n_jobs > 1:
-                plans.append((figure_id, members, box, "joblib", min(n_jobs, len(members)), len(plans)))
-                continue
-            # Short boxes (a few updates per run) are not worth a second process start.
-            ways = n_jobs if sum(map(job_seconds, members)) >= SPLIT_SECONDS else 1
-            for sub_members, sub_box in split(members, box, ways):
-                plans.append((figure_id, sub_members, sub_box, "basic", 1, len(plans)))
-
-    def run_box(plan) -> list[Path]:
-        figure_id, members, box, which, k, number = plan
-        stamp = time.strftime("%Y-%m-%d_%H-%M-%S") + f"-{os.getpid()}-{number}"
-        sweep_dir = (runs_root / "figures-runs" / figure_id / stamp).resolve()
-        sweep_dir.mkdir(parents=True, exist_ok=False)
-        cmd = box_command(box, sweep_dir, k, which)
-        secs = sum(map(job_seconds, members))
-        how = f"{which} x{k}" if which == "joblib" else which
-        log(f"[figures] {figure_id}: running {len(members)} run(s) ({how}, ~{secs:.0f} s of training) -> {sweep_dir}")
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join([str(REPO_ROOT), *filter(None, [env.get("PYTHONPATH")])])
-        t0 = time.perf_counter()
-        with open(sweep_dir / "launch.log", "w") as out:
-            out.write(" ".join(cmd) + "\n\n")
-            out.flush()
-            proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
-        new = sorted(sweep_dir.rglob(RUN_FILE))
-        status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
-        log(f"[figures] {figure_id}: {len(new)}/{len(members)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
-        return new
-
-    written: list[Path] = []
-    single = [p for p in plans if p[4] == 1]
-    wide = [p for p in plans if p[4] > 1]
-    if single:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=max(1, n_jobs)) as pool:
-            for new in pool.map(run_box, single):
-                written.extend(new)
-    for plan in wide:
-        written.extend(run_box(plan))
+            stamp = time.strftime("%Y-%m-%d_%H-%M-%S") + f"-{os.getpid()}-{number}"
+            number += 1
+            sweep_dir = (runs_root / FIGURE_RUNS_DIR / figure_id / stamp).resolve()
+            sweep_dir.mkdir(parents=True, exist_ok=False)
+            secs = sum(map(job_seconds, members))
+            extra = launcher.args(len(members), n_jobs, secs)
+            cmd = multirun_command(box, sweep_dir, extra)
+            how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
+            log(f"[figures] {figure_id}: running {len(members)} run(s) ({how}, ~{secs:.0f} s of training) -> {sweep_dir}")
+            env = dict(os.environ)
+            env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
+            t0 = time.perf_counter()
+            with open(sweep_dir / "launch.log", "w") as out:
+                out.write(" ".join(cmd) + "\n\n")
+                out.flush()
+                proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+            new = sorted(sweep_dir.rglob(RUN_FILE))
+            status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
+            log(f"[figures] {figure_id}: {len(new)}/{len(members)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
+            written.extend(new)
     return written

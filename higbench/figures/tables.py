@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from higbench.bench.paper import costs_of_table
 from higbench.figures import checks
 from higbench.figures.checks import verdict
 from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
@@ -36,18 +37,8 @@ PAPER_TABLE2 = {
     "hig": (128, "1", "1e-6"), "rmsprop": (512, "1e-4", "-"), "sgd": (512, "0.1", "-"),
 }  # fmt: skip
 
-# (problem, optimizer, batch size) -> paper's (memory MB, update s, Jacobian s); GPU, TensorFlow.
-PAPER_TIMINGS = {
-    "table3": {
-        ("adam", 256): (11.1, 0.081, 0.070), ("adam", 512): (22.2, 0.081, 0.070), ("adam", 1024): (44.5, 0.081, 0.070),
-        ("hig", 32): (169, 0.087, 0.070), ("hig", 64): (676, 0.097, 0.070), ("hig", 128): (2640, 0.146, 0.070),
-    },
-    "table4": {("adam", 64): (1.3, 0.011, 0.010), ("hig", 64): (3560, 13.8, 0.0035)},
-    "table5": {
-        ("adam", 256): (460, 0.40, 0.39), ("adam", 512): (947, 0.50, 0.49), ("adam", 1024): (2007, 1.33, 1.32),
-        ("hig", 8): (1064, 0.42, 0.40), ("hig", 16): (5039, 0.60, 0.53),
-    },
-}  # fmt: skip
+# (optimizer, batch size) -> paper's (memory MB, update s, Jacobian s); GPU, TensorFlow (higbench.bench.paper).
+PAPER_TIMINGS = {tid: costs_of_table(tid) for tid in ("table3", "table4", "table5")}
 PROBLEMS = {"table3": "oscillator", "table4": "poisson", "table5": "dipole"}
 TITLES = {
     "table3": "Nonlinear oscillators: memory, update duration and Jacobian duration for Adam and HIG",
@@ -109,7 +100,6 @@ register(
 
 
 BENCH_CSV = "paper_tables.csv"
-BENCH_SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench_step.py"
 TABLE_NUMBER = {"table3": 3, "table4": 4, "table5": 5}
 
 
@@ -118,7 +108,7 @@ def bench_file(p: Preset, table_id: str | None = None) -> Path:
 
 
 def ensure_bench(p: Preset, log=print) -> bool:
-    """Run ``scripts/bench_step.py --paper-tables`` if its table is missing (not for smoke)."""
+    """Run the benchmark (``higbench.bench.step --paper-tables``) if its table is missing (not for smoke)."""
     import os
     import subprocess
     import sys
@@ -127,14 +117,14 @@ def ensure_bench(p: Preset, log=print) -> bool:
     target = bench_file(p)
     if target.is_file():
         return True
-    if p.name == "smoke" or not BENCH_SCRIPT.is_file():
+    if p.name == "smoke":
         return False
-    log(f"[figures] tables 3-5: running {BENCH_SCRIPT.name} --paper-tables (minutes) -> {target.parent}")
+    log(f"[figures] tables 3-5: running higbench.bench.step --paper-tables (minutes) -> {target.parent}")
     t0 = time.perf_counter()
     target.parent.mkdir(parents=True, exist_ok=True)
     with open(target.parent / "bench.log", "w") as out:
         proc = subprocess.run(
-            [sys.executable, str(BENCH_SCRIPT), "--paper-tables", "--out", str(target.parent)],
+            [sys.executable, "-m", "higbench.bench.step", "--paper-tables", "--out", str(target.parent)],
             stdout=out,
             stderr=subprocess.STDOUT,
             env=dict(os.environ),

@@ -17,17 +17,25 @@ open; see ``error``) or ``corrupt`` (truncated, not an HDF5 run file), and ``err
 
 from __future__ import annotations
 
-import errno
+import hashlib
 import json
 import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 import yaml
+
+from higbench.runfile.reader import (
+    RunFileLocked,
+    RunFileOpenForWrite,
+    RunTables,
+    UnreadableRunFile,
+    read_tables,
+    run_file_path,
+)
 
 try:  # libyaml's parser: the config YAML of every run is parsed, pure Python is slow
     _YamlLoader = yaml.CSafeLoader
@@ -35,7 +43,15 @@ except AttributeError:  # pragma: no cover
     _YamlLoader = yaml.SafeLoader
 
 DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
-RUN_STATUSES_DONE = ("completed",)
+# The one status rule. A done run ended by its own rule and is a result: never run again
+# (a diverged run is a result too). Only completed runs compete in ``best_runs`` (a diverged
+# run's last finite loss is not what it reached). Anything else (running, interrupted,
+# failed, corrupt) is not a result: the figures run it again.
+DONE_STATUSES = ("completed", "diverged")
+RUN_STATUSES_DONE = ("completed",)  # the statuses ``best_runs`` selects from
+# Config keys that do not change a run's result: two runs that differ only in these have the
+# same ``config_id`` (progress bar, torch threads, checkpoint interval, resume, memory cap).
+COSMETIC_KEYS = ("progress", "threads", "checkpoint_every", "resume", "memory_limit_mb")
 
 # Columns the index computes; a config key of the same name is stored as "config.<key>".
 _OWN_COLUMNS = {
@@ -43,7 +59,21 @@ _OWN_COLUMNS = {
     "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
+    "config_id",
 }  # fmt: skip
+
+
+def config_id(config: dict, parent_id: str | None = None) -> str:
+    """The identity of a run: a hash of its resolved config without ``COSMETIC_KEYS``.
+
+    ``init_from`` (a path) is replaced by ``parent_id``, the identity of the run it starts
+    from, so a continued run keeps its identity wherever its parent's file lies.
+    """
+    c = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
+    if c.get("init_from"):
+        c["init_from"] = {"run": parent_id or f"path:{c['init_from']}"}
+    text = json.dumps(c, sort_keys=True, default=str)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
 def threshold_column(threshold: float) -> str:
@@ -71,14 +101,6 @@ def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = "*.h5
 # -- reading one file ------------------------------------------------------------------------
 
 
-def _attr(value):
-    if isinstance(value, bytes):
-        return value.decode()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
 def _flatten(d: dict, prefix: str = "", out: dict | None = None) -> dict:
     out = {} if out is None else out
     for k, v in d.items():
@@ -95,39 +117,14 @@ def _flatten(d: dict, prefix: str = "", out: dict | None = None) -> dict:
     return out
 
 
-def _columns(f: h5py.File, group: str, names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
-    """1-D datasets of a group, cut to a common length (a killed writer may leave them ragged).
-
-    h5py's low-level calls: about half the cost of ``group[name][()]`` per small dataset,
-    which is most of the time of indexing thousands of files.
-    """
-    try:
-        gid = h5py.h5g.open(f.id, group.encode())
-    except KeyError:
-        return {}
-    if names is None:
-        names = [gid.get_objname_by_idx(i).decode() for i in range(gid.get_num_objs())]
-    cols = {}
-    for name in names:
-        try:
-            ds = h5py.h5d.open(gid, name.encode())
-        except KeyError:
-            continue
-        if len(ds.shape) != 1 or ds.dtype.kind not in "fiub":
-            continue
-        values = np.empty(ds.shape, dtype=ds.dtype)
-        if values.size:
-            ds.read(h5py.h5s.ALL, h5py.h5s.ALL, values)
-        cols[name] = values
-    if cols:
-        n = min(len(v) for v in cols.values())
-        if any(len(v) != n for v in cols.values()):  # said in the row's `error` (see _summarise)
-            _RAGGED[group] = {k: len(v) for k, v in cols.items() if len(v) != n} | {"kept": n}
-        cols = {k: v[:n] for k, v in cols.items()}
-    return cols
-
-
-_RAGGED: dict[str, dict] = {}  # tables of the file being summarised whose columns differ in length
+def _cut(cols: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, int]]:
+    """Columns cut to a common length (a killed writer may leave them ragged) and, if they
+    were ragged, {column: length} of the longer ones plus ``kept``."""
+    if not cols:
+        return cols, {}
+    n = min(len(v) for v in cols.values())
+    ragged = {k: len(v) for k, v in cols.items() if len(v) != n}
+    return {k: v[:n] for k, v in cols.items()}, (ragged | {"kept": n} if ragged else {})
 
 
 def _mean(values: np.ndarray | None) -> float:
@@ -136,12 +133,19 @@ def _mean(values: np.ndarray | None) -> float:
     return float(np.mean(values))
 
 
-def _summarise(f: h5py.File, thresholds: Sequence[float], want_curves: bool) -> tuple[dict, dict[str, np.ndarray] | None]:
-    attrs = {k: _attr(v) for k, v in f.attrs.items()}
+_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss")  # what the row needs (curves=False)
+_UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s")
+
+
+def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -> tuple[dict, dict[str, np.ndarray] | None]:
+    attrs = dict(run.attrs)
     if "format_version" not in attrs or "config" not in attrs:
         raise ValueError("not a higbench run file (no format_version/config attributes)")
     row: dict = {}
     config = yaml.load(attrs.pop("config") or "{}", Loader=_YamlLoader) or {}
+    row["config_id"] = config_id(config) if isinstance(config, dict) else None
+    if isinstance(config, dict) and config.get("init_from"):
+        row["_config"] = config  # config_id is set again once its parent is known (load_runs)
     for key, value in _flatten(config).items():
         row[f"config.{key}" if key in _OWN_COLUMNS else key] = value
     try:
@@ -168,10 +172,8 @@ def _summarise(f: h5py.File, thresholds: Sequence[float], want_curves: bool) -> 
         if key in attrs:
             row[key] = attrs[key]
 
-    _RAGGED.clear()
-    curves = _columns(f, "curves", None if want_curves else ("step", "wall_time", "train_loss", "test_loss"))
-    if "curves" in _RAGGED:  # a writer stopped between columns: the last full row is the final one
-        ragged = dict(_RAGGED["curves"])
+    curves, ragged = _cut(run.tables.get("curves", {}))
+    if ragged:  # a writer stopped between columns: the last full row is the final one
         kept = ragged.pop("kept")
         longer = ", ".join(f"{k} ({v})" for k, v in sorted(ragged.items()))
         row["curves_note"] = f"curve columns differ in length: {longer}; final values taken at row {kept} of each"
@@ -205,18 +207,15 @@ def _summarise(f: h5py.File, thresholds: Sequence[float], want_curves: bool) -> 
         for t in thresholds:
             row[threshold_column(t)] = math.nan
 
-    updates = _columns(f, "updates", ("update_s", "jacobian_s", "inversion_s"))
+    updates, _ = _cut(run.tables.get("updates", {}))
     update_s = updates.get("update_s")
     row["mean_update_s"] = _mean(update_s)
     row["median_update_s"] = float(np.median(update_s)) if update_s is not None and len(update_s) else math.nan
     row["mean_jacobian_s"] = _mean(updates.get("jacobian_s"))
     row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
-    if "memory" in f:
-        for key, value in f["memory"].attrs.items():
-            row[key] = _attr(value)
-    if "env" in f:
-        for key, value in f["env"].attrs.items():
-            row[f"env.{key}"] = _attr(value)
+    row.update(run.memory)
+    for key, value in run.env.items():
+        row[f"env.{key}"] = value
     return row, (curves if want_curves else None)
 
 
@@ -226,9 +225,9 @@ def read_run_summary(
     """(row, curve columns or None) of one run file; never raises for an unreadable file."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
+    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS}
     try:
-        with h5py.File(path, "r") as f:
-            summary, columns = _summarise(f, thresholds, curves)
+        summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
         note = summary.pop("curves_note", "")
         row.update(summary)
         if row.get("status") == "running":
@@ -238,15 +237,11 @@ def read_run_summary(
                 row["error"] = "status is running but no writer holds the file: still running on another host, or killed"
         row["error"] = "; ".join(x for x in (row["error"], note) if x)
         return row, columns
-    except BlockingIOError as exc:
-        if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
-            row.update(status="corrupt", error=f"{type(exc).__name__}: {exc}")
-            return row, None
+    except RunFileLocked:
         # Locked by a live writer. Files written without SWMR can still be read unlocked up to
         # the last flush (HDF5 refuses when the file carries the 'open for write' flag).
         try:
-            with h5py.File(path, "r", locking=False) as f:
-                summary, columns = _summarise(f, thresholds, curves)
+            summary, columns = _summarise(read_tables(path, wanted, locking=False), thresholds, curves)
             row.update(summary)
             row["status"] = "running"
             row["error"] = "being written (file locked by another process); read up to its last flush"
@@ -254,16 +249,14 @@ def read_run_summary(
         except Exception:  # noqa: BLE001 - anything from a half-written file
             row.update(status="running", error="being written (file locked by another process)")
             return row, None
-    except Exception as exc:  # noqa: BLE001 - truncated, garbage, not HDF5, half-written
-        message = f"{type(exc).__name__}: {exc}"
-        if "already open for write" in message:
-            # HDF5's superblock flag (libver='latest' files): the writer is alive elsewhere or died
-            # without closing the file; `h5clear -s <file>` makes a dead run's file readable.
-            row.update(
-                status="running", error="open-for-write flag set: writer still running elsewhere, or killed (h5clear -s recovers)"
-            )
-        else:
-            row.update(status="corrupt", error=message)
+    except RunFileOpenForWrite as exc:  # the writer is alive elsewhere, or died without closing the file
+        row.update(status="running", error=exc.detail)
+        return row, None
+    except UnreadableRunFile as exc:  # truncated, garbage, not HDF5, half-written
+        row.update(status="corrupt", error=exc.detail)
+        return row, None
+    except Exception as exc:  # noqa: BLE001 - an HDF5 file that is not a run file
+        row.update(status="corrupt", error=f"{type(exc).__name__}: {exc}")
         return row, None
 
 
@@ -281,6 +274,7 @@ _ALWAYS = (
     "wall_time",
     "final_test_loss",
     "best_test_loss",
+    "config_id",
 )
 _NUMERIC = ("steps", "wall_time", "final_test_loss", "best_test_loss")
 
@@ -402,10 +396,48 @@ def load_runs(
         results = _read_chunk(paths, thresholds, curves)
     for row, _ in results:
         row["source"] = "figures" if FIGURE_RUNS_DIR in Path(row["path"]).parts else "runs"
+    _chain_ids([row for row, _ in results])
     runs = _frame([row for row, _ in results])
     if not curves:
         return runs
     return runs, _curves_frame([(row["path"], cols) for row, cols in results if cols])
+
+
+def _chain_ids(rows: list[dict]) -> None:
+    """``config_id`` of runs started from another run (``init_from``): with their parent's
+    identity when the parent is among ``rows`` (followed up the chain)."""
+    by_path = {Path(r["path"]).resolve(): r for r in rows}
+
+    def ident(row: dict, seen: frozenset) -> str | None:
+        config = row.pop("_config", None)
+        if config is None:
+            return row.get("config_id")
+        parent = by_path.get(run_file_path(str(config["init_from"])).resolve())
+        parent_id = ident(parent, seen | {id(row)}) if parent is not None and id(parent) not in seen else None
+        row["config_id"] = config_id(config, parent_id)
+        return row["config_id"]
+
+    for row in rows:
+        ident(row, frozenset())
+
+
+def one_per_config(runs: pd.DataFrame) -> pd.DataFrame:
+    """One run per ``config_id`` (the rule for duplicates of the same config): the newest done
+    run (``DONE_STATUSES``; newest by ``finished``), else the newest run of any status (by
+    ``started``). Rows without a ``config_id`` (unreadable files) are left out."""
+    if runs.empty:
+        return runs
+    df = runs[runs["config_id"].notna()]
+
+    def when(col: str) -> pd.Series:
+        if col not in df:
+            return pd.Series(pd.NaT, index=df.index, dtype="datetime64[ns, UTC]")
+        return pd.to_datetime(df[col], utc=True, errors="coerce", format="%Y-%m-%dT%H:%M:%S%z")
+
+    order = df.assign(_done=df["status"].isin(DONE_STATUSES), _when=when("finished").fillna(when("started"))).sort_values(
+        ["config_id", "_done", "_when", "path"], ascending=[True, False, False, False], na_position="last"
+    )
+    return order.groupby("config_id", sort=False).head(1).drop(columns=["_done", "_when"])
 
 
 def under_figure_runs(path: Path, roots: list[Path]) -> bool:

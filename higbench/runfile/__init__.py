@@ -2,26 +2,35 @@
 
 from higbench.runfile.reader import (
     RUN_FILE,
+    RunFileLocked,
+    RunFileOpenForWrite,
     RunHead,
+    RunTables,
     UnreadableRunFile,
     load_logs,
     load_run,
     load_updates,
     load_weights,
     read_head,
+    read_tables,
     run_file_path,
 )
-from higbench.runfile.writer import FORMAT_VERSION, STATUSES, RunFileExists, RunFileWriter
+from higbench.runfile.writer import FORMAT_VERSION, H5PY_VERSION, STATUSES, RunFileExists, RunFileWriter
 
 __all__ = [
     "RUN_FILE",
     "RunHead",
     "UnreadableRunFile",
+    "RunFileLocked",
+    "RunFileOpenForWrite",
+    "RunTables",
     "read_head",
+    "read_tables",
     "run_file_path",
     "RunFileWriter",
     "RunFileExists",
     "FORMAT_VERSION",
+    "H5PY_VERSION",
     "STATUSES",
     "load_run",
     "load_updates",

@@ -69,6 +69,7 @@ import h5py
 import numpy as np
 
 FORMAT_VERSION = 1
+H5PY_VERSION = h5py.__version__  # recorded in each run's environment
 STATUSES = ("running", "completed", "diverged", "interrupted", "failed")
 # Room kept free for closing a run (pending rows, status, weights' metadata, HDF5's caches).
 RESERVE_BYTES = 1 << 20

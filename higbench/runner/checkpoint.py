@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from higbench.config import ConfigError, show
-from higbench.runfile.reader import RUN_FILE, run_file_path
+from higbench.runfile.reader import RUN_FILE, RunFileLocked, UnreadableRunFile, read_head, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
@@ -130,18 +130,14 @@ def remove_stale_temporaries(run_path: str | Path) -> None:
 
 def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> None:
     """Refuse a checkpoint that is not of ``run_file`` (its run_id differs)."""
-    import h5py
-
-    from higbench.runfile.writer import run_id_of
-
-    with h5py.File(run_file, "r", locking=False) as f:
-        file_id = run_id_of(f)
-        short = [
-            f"{group}/{name} has {f[group][name].shape[0] if group in f and name in f[group] else 0}, the checkpoint {n}"
-            for group, names in (state.get("rows") or {}).items()
-            for name, n in names.items()
-            if (f[group][name].shape[0] if group in f and name in f[group] else 0) < n
-        ]
+    head = read_head(run_file)
+    file_id = str(head.run_id or "")
+    short = [
+        f"{group}/{name} has {head.rows.get(group, {}).get(name, 0)}, the checkpoint {n}"
+        for group, names in (state.get("rows") or {}).items()
+        for name, n in names.items()
+        if head.rows.get(group, {}).get(name, 0) < n
+    ]
     ckpt_id = str(state.get("run_id") or "")
     if ckpt_id != file_id:
         raise ConfigError(
@@ -171,19 +167,15 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
 
 def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
     """(status, stored config YAML) of a run to resume; ConfigError if it cannot be resumed."""
-    import h5py
-
     if not run_file.is_file():
         raise ConfigError("resume", resume_value, f"no run file {run_file}")
-    try:
-        # With file locking: a live writer holds the file, and we must not write into it.
-        with h5py.File(run_file, "r") as f:
-            status = _attr(f.attrs.get("status", ""))
-            config = _attr(f.attrs.get("config", ""))
-    except BlockingIOError:
+    try:  # with file locking: a live writer holds the file, and we must not write into it
+        head = read_head(run_file, locking=True)
+    except RunFileLocked:
         raise ConfigError("resume", resume_value, f"{run_file} is open in another process (that run is still going)") from None
-    except Exception as exc:  # noqa: BLE001
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({type(exc).__name__})") from None
+    except UnreadableRunFile as exc:
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({exc.kind})") from None
+    status, config = str(head.attrs.get("status", "")), head.config_yaml
     if status not in RESUMABLE_STATUSES:
         raise ConfigError(
             "resume", resume_value, f"run is {status}, nothing to resume (resumable: {', '.join(RESUMABLE_STATUSES)})"
@@ -208,10 +200,6 @@ def _checkpoint_every(config_yaml: str):
         return (yaml.safe_load(config_yaml) or {}).get("checkpoint_every")
     except Exception:  # noqa: BLE001
         return None
-
-
-def _attr(v):
-    return v.decode() if isinstance(v, bytes) else str(v)
 
 
 def override_keys(overrides: list[str]) -> list[tuple[str, str]]:
@@ -284,29 +272,22 @@ def recorded_nothing(run_file: Path) -> str | None:
     interrupted or failed, no writer alive) before recording a single update and left no
     checkpoint. Such a run may be started again in place; its file is moved aside first.
     """
-    import h5py
-
     run_file = Path(run_file)
     if not run_file.is_file() or checkpoint_path(run_file).exists():
         return None
-
-    def read(locking: bool) -> tuple[str, int]:
-        with h5py.File(run_file, "r", locking=locking) as f:
-            status = _attr(f.attrs.get("status", ""))
-            return status, f["updates"]["step"].shape[0] if "updates" in f and "step" in f["updates"] else 0
-
     try:
-        status, updates = read(locking=True)  # a live writer on this host holds the lock
-    except BlockingIOError:
+        head = read_head(run_file, locking=True)  # a live writer on this host holds the lock
+    except RunFileLocked:
         return None
-    except Exception:  # noqa: BLE001
+    except UnreadableRunFile:
         try:  # readable without locking (a file system without locks): judged by its content
-            read(locking=False)
-        except Exception:  # noqa: BLE001 - not HDF5, truncated header
+            read_head(run_file, locking=False)
+        except UnreadableRunFile:  # not HDF5, truncated header
             if run_file.stat().st_size <= EMPTY_FILE_BYTES:
                 return f"unreadable {run_file.stat().st_size}-byte file, killed while it was being created"
         return None
-    if status in RESUMABLE_STATUSES and updates == 0:
+    status = str(head.attrs.get("status", ""))
+    if status in RESUMABLE_STATUSES and head.n_updates == 0:
         return f"status {status}, no update recorded, no checkpoint"
     return None
 

@@ -9,12 +9,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import h5py
 import numpy as np
 import psutil
 import torch
 
 import higbench
+from higbench.runfile.writer import H5PY_VERSION
 
 
 def git_revision() -> str:
@@ -45,7 +45,7 @@ def environment(device: torch.device) -> dict:
         "higbench_version": higbench.__version__,
         "torch_version": str(torch.__version__),
         "numpy_version": np.__version__,
-        "h5py_version": h5py.__version__,
+        "h5py_version": H5PY_VERSION,
         "python_version": sys.version.split()[0],
         "platform": platform.platform(),
         "hostname": socket.gethostname(),

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from higbench.figures import registry
-from higbench.figures.runs import COSMETIC_KEYS, Job, boxes, expand, fmt, identity_of, split
+from higbench.figures.runs import COSMETIC_KEYS, Job, Launcher, boxes, expand, fmt, identity_of, multirun_command
 from higbench.figures.spec import PRESETS, Preset
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
@@ -87,9 +87,9 @@ def test_identity_ignores_cosmetic_keys_and_follows_init_from():
         assert identity_of({**base, key: "something"}) == ident, key
     assert identity_of({**base, "batch_size": 32}) != ident
     assert identity_of({**base, "optimizer": {"name": "hig", "lr": 0.5}}) != ident
-    a = identity_of({**base, "init_from": "/x/run.h5"}, parent_identity="p1")
-    b = identity_of({**base, "init_from": "/elsewhere/run.h5"}, parent_identity="p1")
-    c = identity_of({**base, "init_from": "/x/run.h5"}, parent_identity="p2")
+    a = identity_of({**base, "init_from": "/x/run.h5"}, "p1")
+    b = identity_of({**base, "init_from": "/elsewhere/run.h5"}, "p1")
+    c = identity_of({**base, "init_from": "/x/run.h5"}, "p2")
     assert a == b != c
 
 
@@ -129,17 +129,34 @@ def test_boxes_merge_a_grid_into_one_multirun():
     assert len(members) == 4
 
 
-def test_split_cuts_a_box_into_products():
-    rows = [{"optimizer": o, "seed": s} for o in ("adam", "sgd", "hig") for s in (0, 1)]
-    [(members, box)] = boxes(_jobs(rows))
-    parts = split(members, box, 2)
-    assert len(parts) == 2
-    seen = []
-    for sub, sub_box in parts:
-        assert _product(sub_box) == {tuple((k, j.overrides[k]) for k in sub_box) for j in sub}
-        seen += sub
-    assert sorted(map(id, seen)) == sorted(map(id, members))
-    assert split(members[:1], {"optimizer": ["adam"], "seed": [0]}, 2) == [(members[:1], {"optimizer": ["adam"], "seed": [0]})]
+def test_a_box_is_one_higbench_multirun_on_a_hydra_launcher(tmp_path):
+    box = {"optimizer": ["adam", "sgd"], "seed": [0, 1], "budget.seconds": [60.0]}
+    joblib = Launcher("joblib").args(n_runs=4, n_jobs=2, seconds=240)
+    assert joblib == ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
+    cmd = multirun_command(box, tmp_path / "s", joblib)
+    assert cmd[1:4] == ["-m", "higbench.cli", "-m"] and "optimizer=adam,sgd" in cmd and "seed=0,1" in cmd
+    assert f"hydra.sweep.dir={tmp_path / 's'}" in cmd and cmd[-2:] == joblib
+    assert Launcher("joblib").args(n_runs=1, n_jobs=2, seconds=240) == []  # one run: Hydra's basic launcher
+    assert Launcher("auto").args(n_runs=4, n_jobs=2, seconds=4) == []  # a few seconds: no worker start-up
+    slurm = Launcher("slurm", ("hydra.launcher.partition=gpu",))
+    assert slurm.args(n_runs=4, n_jobs=2, seconds=240) == ["hydra/launcher=slurm", "hydra.launcher.partition=gpu"]
+    with pytest.raises(ValueError, match="only hydra"):
+        Launcher("slurm", ("optimizer.lr=1",))  # would change the runs, not where they run
+
+
+def test_figures_runs_has_no_scheduler_of_its_own():
+    import ast
+    import inspect
+
+    from higbench.figures import runs
+
+    imported = {
+        alias.name.split(".")[0]
+        for node in ast.walk(ast.parse(inspect.getsource(runs)))
+        if isinstance(node, ast.Import | ast.ImportFrom)
+        for alias in (node.names if isinstance(node, ast.Import) else [ast.alias(node.module or "")])
+    }
+    assert not imported & {"concurrent", "threading", "multiprocessing", "h5py"}, imported
 
 
 def test_cli_lists_figures_and_plans_without_running(tmp_path, capsys):

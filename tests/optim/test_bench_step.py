@@ -1,6 +1,7 @@
-"""scripts/bench_step.py: JSON rows per configuration, memory probe, paper-table files (tiny configs)."""
+"""higbench.bench.step: JSON rows per configuration, memory probe, paper-table files (tiny configs)."""
 
 import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -8,11 +9,10 @@ import pandas as pd
 import pytest
 import torch
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "scripts"))
-import bench_step  # noqa: E402
+from higbench.bench import step as bench_step
+from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
 
-sys.path.remove(str(ROOT / "scripts"))
+ROOT = Path(__file__).resolve().parents[2]
 
 REQUIRED = {
     "problem",
@@ -81,3 +81,19 @@ def test_paper_tables_files_and_targets(tmp_path):
     assert goals["oscillator HIG b=128 / Adam b=512"]["value"] == pytest.approx(1.2)
     assert goals["oscillator HIG b=128 / Adam b=512"]["reached"]
     assert goals["Poisson b=16 naive SVD / Gram (speed-up)"]["value"] == pytest.approx(10.0)
+
+
+def test_paper_costs_are_one_copy_shared_by_the_benchmark_and_the_tables():
+    from higbench.figures.tables import PAPER_TIMINGS, PROBLEMS
+
+    from_tables = {(PROBLEMS[tid], o, b): cost for tid, rows in PAPER_TIMINGS.items() for (o, b), cost in rows.items()}
+    assert from_tables == PAPER_COSTS and len(PAPER_COSTS) == 13
+    assert {f"table{n}": p for p, n in PROBLEM_TABLES.items()} == PROBLEMS
+    assert PAPER_COSTS[("poisson", "hig", 64)] == (3560, 13.8, 0.0035)  # spot check against the paper's table 4
+
+
+def test_script_is_a_thin_entry_point_to_the_package():
+    script = (ROOT / "scripts" / "bench_step.py").read_text()
+    assert "from higbench.bench.step import main" in script and "def " not in script
+    out = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_step.py"), "--help"], capture_output=True, text=True)
+    assert out.returncode == 0 and "--paper-tables" in out.stdout

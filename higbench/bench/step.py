@@ -1,0 +1,547 @@
+"""Time one training update, by phase, and measure its peak memory (paper tables 3, 4, 5).
+
+One configuration = problem x optimizer x batch size (x Jacobian path x solver). For each,
+prints one JSON object with the medians over ``--repeats`` timed updates after
+``--warmup`` untimed ones:
+
+    problem, optimizer, batch_size, jacobian, solver, update_s, jacobian_s, inversion_s,
+    apply_s, peak_mem_mb, repeats, threads, dtype
+
+Phases are those of ``higbench.runner.updates``: ``jacobian_s`` = all derivatives (the
+backward pass for first-order optimizers; for GN/HIG the solver Jacobians, the network
+factors or J, and the Gram matrix), ``inversion_s`` = eigh/SVD and the product mapping the
+coefficients back to the parameters, ``apply_s`` = the parameter update; ``update_s`` is
+their sum. Each update starts from the same weights (restored after every update, outside
+the clock) and the same batch, so every repeat does the same work.
+
+Timing: all configurations of one invocation are built in ONE process and timed
+interleaved (round robin over configurations, one update each per round), so a noisy,
+shared machine slows them alike and their ratios hold.
+
+Peak memory: each configuration once more in a fresh subprocess: the resident-set peak
+(VmHWM, reset through /proc/self/clear_refs just before the first update) minus the
+resident set at that moment, over warm-up plus one update. So it is the extra host memory
+the updates need on top of the process with its data and model (the paper reports GPU
+memory; first-order numbers here are therefore small). ``--no-memory`` skips it.
+
+Examples (``python scripts/bench_step.py`` and ``make bench`` are the same entry point):
+
+    python -m higbench.bench.step --problem oscillator --optimizer adam hig --batch-size 128 512
+    python -m higbench.bench.step --problem poisson --optimizer hig --batch-size 16 --jacobian structured naive --solver gram svd
+    python -m higbench.bench.step --paper-tables --out outputs/bench      # tables 3-5 (+ naive path)
+
+``--paper-tables`` writes ``paper_tables.csv`` and ``paper_tables.md`` to ``--out``
+(default outputs/bench/) for the figures pipeline, with the paper's GPU figures beside
+(``higbench.bench.paper``, the one copy of them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
+
+PHASES = ("jacobian_s", "inversion_s", "apply_s")
+DEFAULT_OUT = Path("outputs") / "bench"
+
+
+@dataclass(frozen=True)
+class Config:
+    problem: str
+    optimizer: str
+    batch_size: int
+    jacobian: str = "-"  # structured | naive for GN/HIG, "-" for first-order optimizers
+    solver: str = "-"  # auto | gram | svd for GN/HIG
+    overrides: tuple[str, ...] = ()
+
+    @property
+    def jacobian_power(self) -> bool:
+        return self.jacobian != "-"
+
+    def hydra_overrides(self) -> list[str]:
+        out = [f"problem={self.problem}", f"optimizer={self.optimizer}", f"batch_size={self.batch_size}"]
+        if self.jacobian_power:
+            out += [f"optimizer.jacobian={self.jacobian}", f"optimizer.solver={self.solver}"]
+        return out + list(self.overrides)
+
+    def label(self) -> str:
+        extra = f" {self.jacobian}/{self.solver}" if self.jacobian_power else ""
+        return f"{self.problem} {self.optimizer} b={self.batch_size}{extra}"
+
+
+@dataclass
+class Timing:
+    wall: list[float] = field(default_factory=list)
+    cpu: list[float] = field(default_factory=list)
+    phases: dict[str, list[float]] = field(default_factory=lambda: {k: [] for k in PHASES})
+    finite: bool = True
+
+
+def compose(cfg: Config):
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    from higbench.cli import config_dir
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        return hydra_compose(config_name="config", overrides=cfg.hydra_overrides())
+
+
+def is_jacobian_power(optimizer: str) -> bool:
+    from hydra.utils import get_class
+
+    from higbench.optim.hig import JacobianPower
+
+    c = compose(Config("toy", optimizer, 1))
+    return issubclass(get_class(c.optimizer._target_), JacobianPower)
+
+
+class Runner:
+    """One configuration, ready to run updates from fixed weights on a fixed batch."""
+
+    def __init__(self, cfg: Config, dtype: torch.dtype):
+        from higbench.problems import build_problem
+        from higbench.runner.updates import build_update
+
+        c = compose(cfg)
+        self.cfg = cfg
+        self.problem = build_problem(c.problem, dtype=dtype, device=torch.device("cpu"), seed=0)
+        self.model = self.problem.build_model()
+        gen = torch.Generator().manual_seed(0)
+        self.batch = next(iter(self.problem.epoch(cfg.batch_size, gen)))
+        self.update = build_update(self.problem, self.model, c.optimizer)
+        self.state = {k: v.clone() for k, v in self.model.state_dict().items()}
+        self.opt_state = self.update.optimizer.state_dict()
+
+    def __call__(self):
+        result = self.update(self.batch)
+        self.model.load_state_dict(self.state)
+        self.update.optimizer.load_state_dict(self.opt_state)
+        return result
+
+
+def time_configs(configs: list[Config], repeats: int, warmup: int, dtype: torch.dtype, log=print) -> dict[Config, Timing]:
+    """Interleaved timing: every round runs one update of every configuration."""
+    runners = {}
+    for cfg in configs:
+        runners[cfg] = Runner(cfg, dtype)
+        for _ in range(warmup):
+            runners[cfg]()
+    timings = {cfg: Timing() for cfg in configs}
+    for r in range(repeats):
+        for cfg, run in runners.items():
+            t0, c0 = time.perf_counter(), time.process_time()
+            result = run()
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            t = timings[cfg]
+            t.wall.append(wall)
+            t.cpu.append(cpu)
+            t.finite &= result.finite
+            for k in PHASES:
+                t.phases[k].append(result.timings.get(k, float("nan")))
+        log(f"  round {r + 1}/{repeats} done", file=sys.stderr)
+    return timings
+
+
+# -- memory: one configuration per fresh subprocess --
+
+
+def _status_mb() -> dict[str, float]:
+    out = {}
+    with open("/proc/self/status") as f:
+        for line in f:
+            key = line.split(":")[0]
+            if key in ("VmRSS", "VmHWM"):
+                out[key] = int(line.split()[1]) / 1024
+    return out
+
+
+def memory_probe(cfg: Config, warmup: int, dtype: torch.dtype) -> float:
+    """Peak extra resident memory (MB) of warm-up + one update, in this (fresh) process."""
+    run = Runner(cfg, dtype)
+    import gc
+
+    gc.collect()
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # reset VmHWM to the current resident set
+    base = _status_mb()["VmRSS"]
+    for _ in range(max(warmup, 0) + 1):
+        run()
+    return max(0.0, _status_mb()["VmHWM"] - base)
+
+
+def measure_memory(cfg: Config, warmup: int, dtype: str, threads: int) -> float | None:
+    cmd = [
+        sys.executable,
+        "-m",
+        "higbench.bench.step",
+        "--memory-probe",
+        json.dumps(asdict(cfg)),
+        "--warmup",
+        str(min(warmup, 1)),
+    ]
+    cmd += ["--dtype", dtype, "--threads", str(threads)]
+    package_parent = str(Path(__file__).resolve().parents[2])  # the same higbench in the probe
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([package_parent, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        print(f"memory probe failed for {cfg.label()}: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
+        return None
+    return float(proc.stdout.strip().splitlines()[-1])
+
+
+# -- results --
+
+
+def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str) -> dict:
+    med = {k: statistics.median(v) for k, v in t.phases.items()}
+    out = {
+        "problem": cfg.problem,
+        "optimizer": cfg.optimizer,
+        "batch_size": cfg.batch_size,
+        "jacobian": cfg.jacobian,
+        "solver": cfg.solver,
+        "update_s": sum(med.values()),
+        **med,
+        "wall_s": statistics.median(t.wall),
+        # Less sensitive to other processes on a shared machine: the least disturbed repeat,
+        # and the CPU time of this process (with 1 thread: the time it actually ran).
+        "update_min_s": min(sum(v[i] for v in t.phases.values()) for i in range(len(t.wall))),
+        "cpu_s": statistics.median(t.cpu) if t.cpu else float("nan"),
+        "load": os.getloadavg()[0],
+        "peak_mem_mb": mem,
+        "repeats": len(t.wall),
+        "threads": threads,
+        "dtype": dtype,
+        "finite": t.finite,
+    }
+    if cfg.overrides:
+        out["overrides"] = list(cfg.overrides)
+    return out
+
+
+def paper_configs(naive_all: bool) -> list[list[Config]]:
+    """Groups timed together, one per problem: the paper's rows, plus the naive path beside.
+
+    The naive rows (torch.func J of network + solver, SVD of J) sit in the same interleaved
+    group as the structured ones, so their ratios hold on a noisy machine too.
+    """
+    groups = []
+    for problem, adam_b, hig_b, naive_b in (
+        ("oscillator", (256, 512, 1024), (32, 64, 128), (32, 64, 128)),
+        ("poisson", (64,), (16, 64), (16, 64) if naive_all else (16,)),
+        ("dipole", (256, 512, 1024), (8, 16), (8, 16)),
+    ):
+        group = [Config(problem, "adam", b) for b in adam_b]
+        group += [Config(problem, "hig", b, "structured", "auto") for b in hig_b]
+        group += [Config(problem, "hig", b, "naive", "svd") for b in naive_b]
+        groups.append(group)
+    return groups
+
+
+def fmt(x, digits=3) -> str:
+    if x is None or (isinstance(x, float) and x != x):
+        return "-"
+    if isinstance(x, float):
+        return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
+    return str(x)
+
+
+def markdown_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
+    lines = ["| " + " | ".join(title for _, title in columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt(r.get(key)) for key, _ in columns) + " |")
+    return "\n".join(lines)
+
+
+def targets(rows: list[dict]) -> list[dict]:
+    """The issue's figures to reach, from the measured rows."""
+
+    def find(problem, optimizer, b, jacobian="-", solver=None):
+        for r in rows:
+            if (r["problem"], r["optimizer"], r["batch_size"], r["jacobian"]) == (problem, optimizer, b, jacobian) and (
+                solver is None or r["solver"] == solver
+            ):
+                return r
+        return None
+
+    out = []
+
+    def ratio(name, a, b, limit, text):
+        if a and b:
+            value = a["update_s"] / b["update_s"]
+            best = a["update_min_s"] / b["update_min_s"]
+            out.append(
+                {"target": name, "value": value, "value_min": best, "limit": limit, "reached": value <= limit, "how": text}
+            )
+
+    adam512 = find("oscillator", "adam", 512)
+    if adam512:
+        out.append(
+            {
+                "target": "oscillator Adam b=512 update (s)",
+                "value": adam512["update_s"],
+                "value_min": adam512["update_min_s"],
+                "limit": 0.017,
+                "reached": adam512["update_s"] <= 0.017,
+                "how": "update_s",
+            }
+        )
+
+    ratio(
+        "oscillator HIG b=128 / Adam b=512",
+        find("oscillator", "hig", 128, "structured"),
+        find("oscillator", "adam", 512),
+        1.5,
+        "update_s ratio",
+    )
+    ratio(
+        "dipole HIG b=16 / Adam b=256",
+        find("dipole", "hig", 16, "structured"),
+        find("dipole", "adam", 256),
+        1.5,
+        "update_s ratio",
+    )
+    p64 = find("poisson", "hig", 64, "structured")
+    if p64:
+        out.append(
+            {
+                "target": "Poisson HIG b=64 update (s)",
+                "value": p64["update_s"],
+                "value_min": p64["update_min_s"],
+                "limit": 3.0,
+                "reached": p64["update_s"] <= 3.0,
+                "how": "update_s",
+            }
+        )
+        if p64["peak_mem_mb"] is not None:
+            out.append(
+                {
+                    "target": "Poisson HIG b=64 peak memory (MB)",
+                    "value": p64["peak_mem_mb"],
+                    "limit": 1024.0,
+                    "reached": p64["peak_mem_mb"] < 1024,
+                    "how": "peak_mem_mb",
+                }
+            )
+    gram, naive = find("poisson", "hig", 16, "structured"), find("poisson", "hig", 16, "naive", "svd")
+    if gram and naive:
+        value = naive["update_s"] / gram["update_s"]
+        out.append(
+            {
+                "target": "Poisson b=16 naive SVD / Gram (speed-up)",
+                "value": value,
+                "limit": 5.0,
+                "reached": value >= 5.0,
+                "how": "update_s ratio, >= limit",
+            }
+        )
+    return out
+
+
+def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
+    import pandas as pd
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for r in rows:
+        paper = PAPER_COSTS.get((r["problem"], r["optimizer"], r["batch_size"])) if r["jacobian"] in ("-", "structured") else None
+        r["table"] = PROBLEM_TABLES[r["problem"]]
+        r["paper_mem_mb"], r["paper_update_s"], r["paper_jacobian_s"] = paper if paper else (None, None, None)
+    df = pd.DataFrame(rows)
+    df.to_csv(out_dir / "paper_tables.csv", index=False)
+    columns = [
+        ("optimizer", "optimizer"),
+        ("batch_size", "b"),
+        ("jacobian", "Jacobian"),
+        ("solver", "solver"),
+        ("peak_mem_mb", "memory (MB)"),
+        ("update_s", "update (s)"),
+        ("update_min_s", "best (s)"),
+        ("cpu_s", "CPU (s)"),
+        ("jacobian_s", "Jacobian (s)"),
+        ("inversion_s", "inversion (s)"),
+        ("paper_mem_mb", "paper memory (MB)"),
+        ("paper_update_s", "paper update (s)"),
+        ("paper_jacobian_s", "paper Jacobian (s)"),
+    ]
+    parts = [
+        f"# Update cost, paper tables 3-5 (measured {meta['date']})",
+        "",
+        f"Machine: {meta['machine']}; torch {meta['torch']}, {meta['threads']} thread(s), {meta['dtype']}; "
+        f"medians over {meta['repeats']} interleaved updates after {meta['warmup']} warm-up. "
+        "Paper columns: the paper's GPU figures. Memory: extra resident memory of the update (see higbench/bench/step.py).",
+        "",
+    ]
+    for problem, table in PROBLEM_TABLES.items():
+        sub = [r for r in rows if r["problem"] == problem]
+        if sub:
+            parts += [f"## Table {table}: {problem}", "", markdown_table(sub, columns), ""]
+    speedups = []
+    for r in rows:
+        if r["jacobian"] == "naive":
+            fast = [
+                q
+                for q in rows
+                if (q["problem"], q["optimizer"], q["batch_size"], q["jacobian"])
+                == (r["problem"], r["optimizer"], r["batch_size"], "structured")
+            ]
+            if fast:
+                speedups.append(
+                    {
+                        "problem": r["problem"],
+                        "batch_size": r["batch_size"],
+                        "naive_s": r["update_s"],
+                        "structured_s": fast[0]["update_s"],
+                        "speedup": r["update_s"] / fast[0]["update_s"],
+                        "naive_mb": r["peak_mem_mb"],
+                        "structured_mb": fast[0]["peak_mem_mb"],
+                    }
+                )
+    if speedups:
+        parts += [
+            "## Naive path (torch.func J + SVD) against the structured path",
+            "",
+            markdown_table(
+                speedups,
+                [
+                    ("problem", "problem"),
+                    ("batch_size", "b"),
+                    ("naive_s", "naive update (s)"),
+                    ("structured_s", "structured update (s)"),
+                    ("speedup", "speed-up"),
+                    ("naive_mb", "naive memory (MB)"),
+                    ("structured_mb", "structured memory (MB)"),
+                ],
+            ),
+            "",
+        ]
+    goal = targets(rows)
+    if goal:
+        parts += [
+            "## Targets",
+            "",
+            markdown_table(
+                goal,
+                [
+                    ("target", "figure"),
+                    ("value", "measured (median)"),
+                    ("value_min", "best repeat"),
+                    ("limit", "target"),
+                    ("reached", "reached"),
+                ],
+            ),
+            "",
+        ]
+    (out_dir / "paper_tables.md").write_text("\n".join(parts))
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m higbench.bench.step", description="Time GN/HIG and first-order updates by phase (see module docstring)."
+    )
+    parser.add_argument("--problem", nargs="+", default=["oscillator"])
+    parser.add_argument("--optimizer", nargs="+", default=["adam", "hig"])
+    parser.add_argument("--batch-size", nargs="+", type=int, default=None, help="default: the problem x optimizer default")
+    parser.add_argument(
+        "--pairs",
+        nargs="+",
+        default=None,
+        metavar="OPTIMIZER:B",
+        help="optimizer/batch-size pairs instead of --optimizer x --batch-size (e.g. adam:256 hig:16)",
+    )
+    parser.add_argument("--jacobian", nargs="+", default=["structured"], choices=["structured", "naive"])
+    parser.add_argument("--solver", nargs="+", default=["auto"], choices=["auto", "gram", "svd"])
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra Hydra overrides for every configuration")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument(
+        "--threads",
+        default="1",
+        help="torch and BLAS threads: N or auto (as the runner's threads=auto); 1: robust on a shared machine",
+    )
+    parser.add_argument("--dtype", default="float32", choices=["float32", "float64"])
+    parser.add_argument("--no-memory", action="store_true", help="skip the per-configuration memory subprocesses")
+    parser.add_argument("--paper-tables", action="store_true", help="the rows of paper tables 3-5, plus the naive path")
+    parser.add_argument(
+        "--naive-all", action="store_true", help="with --paper-tables: also the naive Poisson b=64 row (~5 GB, minutes)"
+    )
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="--paper-tables: where to write (outputs/bench)")
+    parser.add_argument("--memory-probe", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+
+    from higbench.runner.threads import resolve_threads
+
+    args.threads = resolve_threads(args.threads if args.threads == "auto" else int(args.threads))
+    torch.set_num_threads(args.threads)
+    dtype = {"float32": torch.float32, "float64": torch.float64}[args.dtype]
+    if args.memory_probe:
+        spec = json.loads(args.memory_probe)
+        spec["overrides"] = tuple(spec["overrides"])
+        print(memory_probe(Config(**spec), args.warmup, dtype))
+        return
+
+    if args.paper_tables:
+        groups = paper_configs(args.naive_all)
+    else:
+        configs = []
+        pairs = [(p.split(":")[0], int(p.split(":")[1])) for p in args.pairs] if args.pairs else None
+        for problem, optimizer in itertools.product(args.problem, [o for o, _ in pairs] if pairs else args.optimizer):
+            sizes = [b for o, b in pairs if o == optimizer][:1] if pairs else None
+            sizes = sizes or args.batch_size or [default_batch(problem, optimizer)]
+            paths = list(itertools.product(args.jacobian, args.solver)) if is_jacobian_power(optimizer) else [("-", "-")]
+            for b, (jac, solver) in itertools.product(sizes, paths):
+                configs.append(Config(problem, optimizer, b, jac, solver, tuple(args.set)))
+        groups = [configs]
+
+    rows = []
+    for group in groups:
+        repeats, warmup = args.repeats, args.warmup
+        print(f"timing {len(group)} configuration(s) interleaved: {', '.join(c.label() for c in group)}", file=sys.stderr)
+        timings = time_configs(group, repeats, warmup, dtype)
+        for cfg in group:
+            mem = None if args.no_memory else measure_memory(cfg, warmup, args.dtype, args.threads)
+            r = row(cfg, timings[cfg], mem, args.threads, args.dtype)
+            rows.append(r)
+            print(json.dumps(r), flush=True)
+    if args.paper_tables:
+        import platform
+
+        meta = {
+            "date": time.strftime("%Y-%m-%d %H:%M"),
+            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}",
+            "torch": torch.__version__,
+            "threads": args.threads,
+            "dtype": args.dtype,
+            "repeats": args.repeats,
+            "warmup": args.warmup,
+        }
+        write_tables(rows, args.out, meta)
+        for t in targets(rows):
+            print(json.dumps(t), flush=True)
+        print(f"wrote {args.out / 'paper_tables.csv'} and {args.out / 'paper_tables.md'}", file=sys.stderr)
+
+
+def default_batch(problem: str, optimizer: str) -> int:
+    """The batch size the configs give this pair (conf/problem_optimizer/)."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    from higbench.cli import config_dir
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        return int(hydra_compose(config_name="config", overrides=[f"problem={problem}", f"optimizer={optimizer}"]).batch_size)
+
+
+if __name__ == "__main__":
+    main()
