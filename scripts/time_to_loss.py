@@ -118,7 +118,9 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
 
     if args.from_runs is not None:
-        files = sorted(args.from_runs.rglob("*.h5"))
+        from higbench.results.index import find_run_files
+
+        files = find_run_files(args.from_runs)
     else:
         files = []
         for spec in args.runs:

@@ -15,6 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
+from higbench.runfile.reader import RUN_FILE_GLOB
 
 SUMMARY_COLUMNS = [
     "path",
@@ -64,7 +65,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--threshold", action="append", type=float, help="add a time_to_<t> column (repeatable)")
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
-    p.add_argument("--pattern", default="*.h5", help="run file name pattern (default: *.h5)")
+    p.add_argument("--pattern", default=RUN_FILE_GLOB, help=f"run file name pattern (default: {RUN_FILE_GLOB})")
     p.add_argument(
         "--figure-runs", action="store_true", help="also list the runs `make figures` made (under figures-runs/; off by default)"
     )

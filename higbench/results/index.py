@@ -29,6 +29,7 @@ import pandas as pd
 import yaml
 
 from higbench.runfile.reader import (
+    RUN_FILE_GLOB,
     RunFileLocked,
     RunFileOpenForWrite,
     RunTables,
@@ -83,7 +84,7 @@ def threshold_column(threshold: float) -> str:
     return f"time_to_{mantissa}e{int(exponent)}"
 
 
-def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") -> list[Path]:
+def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_FILE_GLOB) -> list[Path]:
     """Run files under ``root`` (a directory, a file, or several of them), sorted."""
     roots = [root] if isinstance(root, (str, os.PathLike)) else list(root)
     found: set[Path] = set()
@@ -361,7 +362,7 @@ def load_runs(
     root: str | Path | Iterable[str | Path],
     curves: bool = False,
     thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
-    pattern: str = "*.h5",
+    pattern: str = RUN_FILE_GLOB,
     jobs: int = 1,
     figure_runs: bool = False,
 ) -> pd.DataFrame | tuple[pd.DataFrame, pd.DataFrame]:
@@ -451,7 +452,7 @@ def under_figure_runs(path: Path, roots: list[Path]) -> bool:
     return False
 
 
-def load_curves(root: str | Path | Iterable[str | Path], pattern: str = "*.h5") -> pd.DataFrame:
+def load_curves(root: str | Path | Iterable[str | Path], pattern: str = RUN_FILE_GLOB) -> pd.DataFrame:
     """The long curves table alone (see ``load_runs``)."""
     return load_runs(root, curves=True, pattern=pattern)[1]
 

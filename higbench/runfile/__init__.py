@@ -2,6 +2,7 @@
 
 from higbench.runfile.reader import (
     RUN_FILE,
+    RUN_FILE_GLOB,
     RunFileLocked,
     RunFileOpenForWrite,
     RunHead,
@@ -19,6 +20,7 @@ from higbench.runfile.writer import FORMAT_VERSION, H5PY_VERSION, STATUSES, RunF
 
 __all__ = [
     "RUN_FILE",
+    "RUN_FILE_GLOB",
     "RunHead",
     "UnreadableRunFile",
     "RunFileLocked",

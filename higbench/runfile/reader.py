@@ -22,6 +22,7 @@ import pandas as pd
 import yaml
 
 RUN_FILE = "run.h5"  # the file name of a run inside its output directory
+RUN_FILE_GLOB = "*.h5"  # what an index looks for: run files, also renamed copies; never checkpoints (run.h5.ckpt)
 
 
 def run_file_path(path: str | Path) -> Path:

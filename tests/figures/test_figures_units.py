@@ -144,6 +144,33 @@ def test_a_box_is_one_higbench_multirun_on_a_hydra_launcher(tmp_path):
         Launcher("slurm", ("optimizer.lr=1",))  # would change the runs, not where they run
 
 
+def test_launch_runs_one_multirun_per_box_one_after_another(tmp_path, monkeypatch):
+    from higbench.figures import runs
+
+    calls = []
+
+    def fake_run(cmd, **kwargs):
+        calls.append(cmd)
+        sweep = Path(next(a for a in cmd if a.startswith("hydra.sweep.dir=")).split("=", 1)[1])
+        for i in range(len([a for a in cmd if a.startswith("seed=")][0].split(","))):  # one run file per seed
+            (sweep / str(i)).mkdir()
+            (sweep / str(i) / "run.h5").write_bytes(b"")
+
+        class Done:
+            returncode = 0
+
+        return Done()
+
+    monkeypatch.setattr(runs.subprocess, "run", fake_run)
+    grid = [{"optimizer": o, "seed": s, "budget.seconds": 60.0} for o in ("adam", "sgd") for s in (0, 1)]
+    alone = [{"optimizer": "hig", "seed": 0, "batch_size": 128, "budget.seconds": 60.0}]
+    written = runs.launch(_jobs(grid + alone), tmp_path, n_jobs=3, launcher="joblib", log=lambda *a: None)
+    assert len(calls) == 2 and len(written) == 2 + 1  # fake: one file per seed value of each multirun
+    assert calls[0][-2:] == ["hydra/launcher=joblib", "hydra.launcher.n_jobs=3"] and "optimizer=adam,sgd" in calls[0]
+    assert not any(a.startswith("hydra/launcher") for a in calls[1])  # one run: Hydra's basic launcher
+    assert all(Path(w).is_relative_to(tmp_path / "figures-runs" / "f") for w in written)
+
+
 def test_figures_runs_has_no_scheduler_of_its_own():
     import ast
     import inspect

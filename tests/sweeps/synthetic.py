@@ -22,6 +22,7 @@ def write_run(
     close: bool = True,
     n_updates: int = 20,
     problem_extra: dict | None = None,
+    config_extra: dict | None = None,
 ) -> Path:
     """A run file as the runner leaves it; ``close=False`` returns the open writer's file."""
     test_loss = [1.0, 0.1, 0.02, 0.005] if test_loss is None else test_loss
@@ -31,6 +32,7 @@ def write_run(
         "batch_size": batch_size,
         "seed": 0,
         "budget": {"seconds": None, "max_updates": n_updates},
+        **(config_extra or {}),
     }
     overrides = [f"optimizer={optimizer}", f"optimizer.lr={lr}", f"batch_size={batch_size}"]
     w = RunFileWriter(

@@ -17,7 +17,7 @@ from synthetic import write_run
 
 from higbench.results import best_runs, load_curves, load_runs
 from higbench.results.__main__ import main as results_main
-from higbench.results.index import threshold_column
+from higbench.results.index import config_id, one_per_config, threshold_column
 
 
 @pytest.fixture
@@ -233,3 +233,36 @@ def test_parallel_reading_gives_the_same_tables(tree):
     runs2, curves2 = load_runs(tree, curves=True, jobs=2)
     pd.testing.assert_frame_equal(runs, runs2)
     pd.testing.assert_frame_equal(curves, curves2)
+
+
+def test_config_id_ignores_cosmetic_keys_and_follows_init_from(tmp_path):
+    parent = write_run(tmp_path / "p/run.h5", config_extra={"threads": 1, "init_from": None})
+    again = write_run(tmp_path / "again/run.h5", config_extra={"threads": 4, "progress": True, "init_from": None})
+    other = write_run(tmp_path / "other/run.h5", lr=0.5, config_extra={"init_from": None})
+    child = write_run(tmp_path / "c/run.h5", config_extra={"init_from": str(parent.parent)})  # a run dir
+    child2 = write_run(tmp_path / "c2/run.h5", config_extra={"init_from": str(again)})  # the same config's other file
+    orphan = write_run(tmp_path / "o/run.h5", config_extra={"init_from": str(tmp_path / "gone/run.h5")})
+    ids = load_runs(tmp_path).set_index("path")["config_id"]
+    assert ids[str(parent)] == ids[str(again)] != ids[str(other)]  # threads/progress do not make another run
+    assert ids[str(child)] == ids[str(child2)] != ids[str(orphan)]  # continued from the same config: the same run
+    child_cfg = load_runs(tmp_path).set_index("path").loc[str(child)]
+    assert child_cfg["init_from"] == str(parent.parent) and ids[str(child)] != ids[str(parent)]
+
+
+def test_one_run_per_config_newest_done_first(tmp_path):
+    import time
+
+    failed = write_run(tmp_path / "a/run.h5", status="failed")
+    done = write_run(tmp_path / "b/run.h5", status="diverged", test_loss=[1.0, math.inf])  # a result: done
+    time.sleep(1.1)  # started/finished have one-second resolution
+    newer = write_run(tmp_path / "c/run.h5", status="completed")
+    later_failed = write_run(tmp_path / "d/run.h5", status="interrupted")
+    lonely = write_run(tmp_path / "e/run.h5", lr=0.7, status="failed")
+    runs = load_runs(tmp_path)
+    assert runs["config_id"].nunique() == 2
+    chosen = one_per_config(runs).set_index("config_id")["path"]
+    assert chosen[runs.set_index("path").loc[str(newer), "config_id"]] == str(newer)  # newest done, not the later failure
+    assert chosen[runs.set_index("path").loc[str(lonely), "config_id"]] == str(lonely)  # no done run: the newest of any
+    assert config_id({"a": 1, "threads": 3}) == config_id({"a": 1})
+    only_old = one_per_config(runs[runs["path"].isin([str(failed), str(done), str(later_failed)])])
+    assert only_old["path"].tolist() == [str(done)]  # diverged counts as done; failed/interrupted do not
