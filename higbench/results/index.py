@@ -8,7 +8,11 @@
 ``path``, ``source``, ``status``, ``overrides``, ``steps``, ``train_time_s`` (the training
 clock at the end: evaluations excluded), ``final_test_loss``,
 ``best_test_loss``, ``time_to_<threshold>`` (training clock at the first evaluation whose
-test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``.
+test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
+``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``).
+
+This is the one run index: ``make figures`` finds its runs here too (``one_per_config``,
+``DONE_STATUSES``). Files are read through ``higbench.runfile.read_tables``.
 
 A file that cannot be read never stops the index; it becomes a row with a ``status`` of
 ``running`` (another process holds it open for writing, or the writer died with the file
