@@ -56,25 +56,19 @@ def collect(out_dir: Path) -> list[dict]:
     for info in _json_sidecars(out_dir).values():
         for c in info.get("claims", []):
             rows[c["id"]] = c
-    out = []
-    for cid, c in registry.claims().items():
-        if cid in rows:
-            out.append(rows[cid])
-        else:
-            out.append(
-                {
-                    "id": cid,
-                    "figures": list(c.figures),
-                    "statement": c.statement,
-                    "paper": c.paper,
-                    "measured": "-",
-                    "budget": "-",
-                    "verdict": "n/a",
-                    "why": f"{c.figures[0]} not drawn yet",
-                    "preset": "-",
-                }
-            )
-    return out
+    blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-"}
+    return [
+        rows.get(cid)
+        or {
+            "id": cid,
+            "figures": list(c.figures),
+            "statement": c.statement,
+            "paper": c.paper,
+            **blank,
+            "why": f"{c.figures[0]} not drawn yet",
+        }
+        for cid, c in registry.claims().items()
+    ]
 
 
 def _num(v) -> str:
