@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from higbench.figures.checks import Claim, e, final, need, stable
+from higbench.figures.checks import claim, e, final, need, stable
 from higbench.figures.data import num
 from higbench.figures.oscillator import gn_search, gn_search_summary
 from higbench.figures.plot import Curves, Series
@@ -67,7 +67,10 @@ FIGURES = [
 ]
 
 
+@claim("abl-1", "fig12", "little influence")
 def beta(datas):
+    """Ablation: β has little influence on the outcome. Rule: final losses over β within 10x, none diverged (partly:
+    within 100x)"""
     need(len(runs := datas["fig12"].runs("beta")) >= 2, what="fig12a")
     fin = {r.cfg("optimizer.beta"): final([r]) for r in runs}
     finite = [v for v in fin.values() if math.isfinite(v)]
@@ -76,7 +79,10 @@ def beta(datas):
     return measured, spread < 10 and len(finite) == len(fin), spread < 100
 
 
+@claim("abl-2", "fig12", "orders of magnitude")
 def kappa(datas):
+    """Ablation: κ > 0 stagnates early; κ < 0 ends orders of magnitude lower. Rule: best negative-κ run >= 100x below
+    the best positive-κ run (partly: >= 10x)"""
     runs = datas["fig12"].runs("kappa")
     pos, neg = ([final([r]) for r in runs if sign * r.cfg("optimizer.kappa") > 0] for sign in (1, -1))
     need(pos, neg, what="fig12b (needs kappa > 0 and < 0)")
@@ -84,7 +90,11 @@ def kappa(datas):
     return f"best κ>0 {e(min(pos))}, best κ<0 {e(min(neg))} ({ratio:.0f}x)", ratio >= 100, ratio >= 10
 
 
+@claim("abl-3", "fig13", "GN diverges, HIG stable")
 def tau(datas):
+    """Ablation: GN becomes unstable for small τ (diverges at 1e-9, 1e-10); HIG tolerates τ and ends lower. Rule: GN
+    (best stable seed) stable at τ >= 1e-6 and diverging or >10x worse at τ <= 1e-9, every HIG run stable and HIG's
+    best below GN's (partly: the GN part or the HIG part)"""
     d = datas["fig13"]
     hig, gn = d.runs("hig"), d.runs("gn")
     need(hig, gn, what="fig13")
@@ -103,32 +113,3 @@ def tau(datas):
     gn_part = all(map(stable, large)) and all(r.status == "diverged" or final([r]) > 10 * gn_best for r in small)
     hig_part = all(map(stable, hig)) and min(final([r]) for r in hig) < gn_best
     return measured, gn_part and hig_part, gn_part or hig_part
-
-
-CLAIMS = [
-    Claim(
-        "abl-1",
-        ("fig12",),
-        "Ablation: β has little influence on the outcome",
-        "little influence",
-        "final losses over β within 10x, none diverged (partly: within 100x)",
-        beta,
-    ),
-    Claim(
-        "abl-2",
-        ("fig12",),
-        "Ablation: κ > 0 stagnates early; κ < 0 ends orders of magnitude lower",
-        "orders of magnitude",
-        "best negative-κ run >= 100x below the best positive-κ run (partly: >= 10x)",
-        kappa,
-    ),
-    Claim(
-        "abl-3",
-        ("fig13",),
-        "Ablation: GN becomes unstable for small τ (diverges at 1e-9, 1e-10); HIG tolerates τ and ends lower",
-        "GN diverges, HIG stable",
-        "GN (best stable seed) stable at τ >= 1e-6 and diverging or >10x worse at τ <= "
-        "1e-9, every HIG run stable and HIG's best below GN's (partly: the GN part or the HIG part)",
-        tau,
-    ),
-]

@@ -155,13 +155,13 @@ def judge(c, datas: dict, preset: str) -> dict:
         why += f" ({missing} run(s) missing)"
     seconds, seeds = claim_budget(datas), claim_seeds(datas)
     if c.min_seconds and verdict != "n/a" and seconds is not None and seconds < c.min_seconds:
-        why = f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; the rule would say '{verdict}'. {why}"
+        why = f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; {would(verdict)}{why}"
         verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
     elif verdict == "reproduced" and seeds < c.min_seeds:
         why = f"only {seeds} seed(s) per setting (a comparison needs the median of {c.min_seeds}): at most partly. {why}"
         verdict, cause = "partly", ("seeds", f"{seeds} seed(s) per setting at this preset")
     if preset in UPDATES_ONLY and verdict != "n/a" and any(d.jobs for d in datas.values()):
-        why = f"smoke preset ({preset}: a few updates per run) checks code paths only, no verdict; the rule would say '{verdict}'. {why}"
+        why = f"smoke preset ({preset}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
         verdict = "n/a"
     if verdict in ("not", "partly") and not cause:
         cause = ("open", "no targeted run has examined this verdict yet")
@@ -179,6 +179,10 @@ def judge(c, datas: dict, preset: str) -> dict:
         "seeds": seeds,
         "preset": preset,
     }
+
+
+def would(verdict: str) -> str:
+    return f"the rule would say '{verdict}'. "
 
 
 def _main_jobs(datas: dict) -> list:

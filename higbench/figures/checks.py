@@ -58,6 +58,20 @@ class Claim:
         return measured, REPRODUCED if full else (PARTLY if partly else NOT), f"rule: {self.rule}"
 
 
+CLAIMS: list[Claim] = []
+
+
+def claim(cid: str, figures: str, paper: str):
+    """Declare the decorated measurement a claim: its docstring is the statement, then "Rule: " the rule."""
+
+    def declare(measure: Callable) -> Callable:
+        statement, _, rule = " ".join(measure.__doc__.split()).partition(" Rule: ")
+        CLAIMS.append(Claim(cid, tuple(figures.split()), statement.removesuffix("."), paper, rule, measure))
+        return measure
+
+    return declare
+
+
 def need(*groups, what: str) -> None:
     if any(not g for g in groups):
         raise Missing(what)

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import Claim, best, e, final, loss_at, median, need
-from higbench.figures.data import FigureData, RunData, num
+from higbench.figures.checks import best, claim, e, final, loss_at, median, need
+from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, By, Figure, Preset, Sweep, paper_grid
 
@@ -27,11 +27,42 @@ def notes(p: Preset) -> list[str]:
     )
 
 
-def grid(name: str, problem: str, experiment: str, **values) -> Sweep:
-    """A sweep over the paper's grid of ``conf/experiment/<experiment>.yaml``, reduced per preset."""
-    keys = {"lr": "optimizer.lr", "b": "batch_size", "tau": "optimizer.tau"}
-    g = {keys[k]: By(paper_grid(experiment, keys[k]), **v) for k, v in values.items()}
-    return Sweep(name, {"problem": problem, "optimizer": name}, GRID, grid=g)
+# The appendix's grids (conf/experiment/<experiment>.yaml) and their reductions per preset.
+GRIDS = {
+    "fig8": ("Dipole: Adam for several learning rates and batch sizes", "dipole", "adam", "fig8_dipole_adam"),
+    "fig9": ("Dipole: HIG for several learning rates, batch sizes and truncations tau", "dipole", "hig", "fig9_dipole_hig"),
+    "fig10": (
+        "Dipole with a CNN: Adam for several learning rates and batch sizes",
+        "dipole_cnn",
+        "adam",
+        "fig10_dipole_cnn_adam",
+    ),
+    "fig11": (
+        "Dipole with a CNN: HIG for several learning rates, batch sizes and tau",
+        "dipole_cnn",
+        "hig",
+        "fig11_dipole_cnn_hig",
+    ),
+}
+REDUCED = {
+    "fig8": {"lr": {"quick": [1e-4, 1e-3, 1e-2], "smoke": [1e-3]}, "b": {"quick": [16, 256], "smoke": [16]}},
+    "fig9": {"lr": {"quick": [0.5]}, "b": {"quick": [16], "smoke": [8]}, "tau": {"smoke": [1e-5, 1e-2]}},
+    "fig10": {"lr": {"smoke": [2e-4]}, "b": {"quick": [256]}},
+    "fig11": {"lr": {"quick": [0.7]}, "b": {"quick": [16], "smoke": [8]}, "tau": {"smoke": [1e-4]}},
+}
+KEYS = {"lr": "optimizer.lr", "b": "batch_size", "tau": "optimizer.tau"}
+
+
+def grid_figure(fid: str, title: str, problem: str, opt: str, experiment: str) -> Figure:
+    """Adam: one panel per η, a line per b; HIG: one row per b, a panel per τ, a line per η."""
+    grid = {KEYS[k]: By(paper_grid(experiment, KEYS[k]), **v) for k, v in REDUCED[fid].items()}
+    sweep = Sweep(opt, {"problem": problem, "optimizer": opt}, GRID, grid=grid)
+    cnn, name = ("CNN " if problem == "dipole_cnn" else ""), OPTIMIZER_NAMES[opt]
+    if opt == "adam":
+        facets = Facets([opt], "optimizer.lr", "batch_size", prefix=cnn + name)
+    else:
+        facets = Facets([opt], "optimizer.tau", "optimizer.lr", rows="batch_size", prefix=cnn + name, size=(3.3, 2.6))
+    return Figure(fid, title, [sweep], panels=[facets], notes=notes)
 
 
 def dip(opt: str, **kw) -> Sweep:
@@ -110,60 +141,7 @@ FIGURES = [
             )
         ],
     ),
-    Figure(
-        "fig8",
-        "Dipole: Adam for several learning rates and batch sizes",
-        notes=notes,
-        sweeps=[
-            grid(
-                "adam",
-                "dipole",
-                "fig8_dipole_adam",
-                lr=dict(quick=[1e-4, 1e-3, 1e-2], smoke=[1e-3]),
-                b=dict(quick=[16, 256], smoke=[16]),
-            )
-        ],
-        panels=[Facets(["adam"], "optimizer.lr", "batch_size", prefix="Adam")],
-    ),
-    Figure(
-        "fig9",
-        "Dipole: HIG for several learning rates, batch sizes and truncations tau",
-        notes=notes,
-        sweeps=[
-            grid(
-                "hig",
-                "dipole",
-                "fig9_dipole_hig",
-                lr=dict(quick=[0.5]),
-                b=dict(quick=[16], smoke=[8]),
-                tau=dict(smoke=[1e-5, 1e-2]),
-            )
-        ],
-        panels=[Facets(["hig"], "optimizer.tau", "optimizer.lr", rows="batch_size", prefix="HIG", size=(3.3, 2.6))],
-    ),
-    Figure(
-        "fig10",
-        "Dipole with a CNN: Adam for several learning rates and batch sizes",
-        notes=notes,
-        sweeps=[grid("adam", "dipole_cnn", "fig10_dipole_cnn_adam", lr=dict(smoke=[2e-4]), b=dict(quick=[256]))],
-        panels=[Facets(["adam"], "optimizer.lr", "batch_size", prefix="CNN Adam")],
-    ),
-    Figure(
-        "fig11",
-        "Dipole with a CNN: HIG for several learning rates, batch sizes and tau",
-        notes=notes,
-        sweeps=[
-            grid(
-                "hig",
-                "dipole_cnn",
-                "fig11_dipole_cnn_hig",
-                lr=dict(quick=[0.7]),
-                b=dict(quick=[16], smoke=[8]),
-                tau=dict(smoke=[1e-4]),
-            )
-        ],
-        panels=[Facets(["hig"], "optimizer.tau", "optimizer.lr", rows="batch_size", prefix="CNN HIG", size=(3.3, 2.6))],
-    ),
+    *(grid_figure(fid, *spec) for fid, spec in GRIDS.items()),
 ]
 
 
@@ -193,20 +171,30 @@ def _pair(datas, fid: str):
     return adam, hig
 
 
+@claim("dip-1", "fig4c", "plateau at 0.5")
 def plateau(datas):
+    """Dipole: Adam (η=1e-4) first stagnates at a loss of 0.5. Rule: Adam spends >= 20% of its time near 0.5, more than
+    HIG, and ends below it (partly: more than HIG)"""
     adam, hig = _pair(datas, "fig4c")
     fa, fh = median(map(plateau_fraction, adam)), median(map(plateau_fraction, hig))
-    measured = f"share of training time with loss in [{PLATEAU[0]}, {PLATEAU[1]}]: Adam {fa:.0%}, HIG {fh:.0%}; Adam final {e(final(adam))}"
+    measured = f"share of training time with loss in [{PLATEAU[0]}, {PLATEAU[1]}]: Adam {fa:.0%}, HIG {fh:.0%}; Adam final "
+    measured += e(final(adam))
     return measured, fa >= 0.2 and fa > fh and final(adam) < PLATEAU[0], fa > fh  # a stall is one once Adam has left it
 
 
+@claim("dip-2", "fig4c", "LE before HE for Adam")
 def energy(datas):
+    """Dipole: Adam fits the low-energy component first; HIG minimises both uniformly. Rule: Adam's high-energy loss >= 3x
+    its low-energy loss and HIG's ratio <= a third of Adam's (partly: Adam's ratio above HIG's)"""
     adam, hig = _pair(datas, "fig4c")
     ra, rh = median(map(energy_ratio, adam)), median(map(energy_ratio, hig))
     return f"median HE/LE loss ratio: Adam {ra:.1f}, HIG {rh:.1f}", ra >= 3 and rh <= ra / 3, ra > rh
 
 
+@claim("dip-3", "fig4b", "HIG below Adam")
 def hig_below(datas):
+    """Dipole: HIG minimises the loss faster and to a lower level than Adam. Rule: best HIG run's final loss <= half of
+    the best Adam run's of the same-budget η grid (partly: below it)"""
     adam, hig = _pair(datas, "fig4b")
     ba, bh = min(final([r]) for r in adam), min(final([r]) for r in hig)
     paper = [final([r]) for r in adam if r.cfg("optimizer.lr") == 1e-4]
@@ -218,13 +206,19 @@ def hig_below(datas):
     )
 
 
+@claim("dip-4", "fig4b", "~1e-6")
 def limit(datas):
+    """Dipole: the attainable accuracy (pure physics optimisation) is about 1e-6. Rule: the best run reaches [1e-7, 1e-5]
+    (partly: (1e-5, 1e-4]); higher means the budget was too short to approach the limit"""
     need(runs := datas["fig4b"].runs(), what="fig4b")
     low = min(best([r]) for r in runs)
     return f"lowest test loss of any fig4b run: {e(low)}", 1e-7 <= low <= 1e-5, 1e-5 < low <= 1e-4
 
 
+@claim("dip-5", "fig4b", "fast start, worst end")
 def adam_large_lr(datas):
+    """Dipole: the largest-η Adam run drops fastest initially but ends worst. Rule: the largest-η Adam run is the lowest
+    at 10% of the budget and the highest at the end (partly: one of the two)"""
     adam = datas["fig4b"].runs("adam")
     need(len(adam) >= 2, what="fig4b Adam")
     lr = max(adam, key=lambda r: r.cfg("optimizer.lr")).cfg("optimizer.lr")
@@ -238,7 +232,10 @@ def adam_large_lr(datas):
     )
 
 
+@claim("dip-6", "fig9", "stable 1e-5..1e-3, 1e-2 worse")
 def tau(datas):
+    """Dipole: HIG trains stably for τ from 1e-5 to 1e-3; τ=1e-2 cuts off information. Rule: τ in 1e-5..1e-3 within 10x
+    of the best τ and τ=1e-2 worse than all of them (partly: one of the two)"""
     need(runs := datas["fig9"].runs("hig"), what="fig9")
     lr_b = {(r.cfg("optimizer.lr"), r.cfg("batch_size")) for r in runs}
     key = (0.5, 16) if (0.5, 16) in lr_b else sorted(lr_b)[0]
@@ -254,7 +251,10 @@ def tau(datas):
     )
 
 
+@claim("cnn-1", "fig10 fig11", "HIG (η=0.7,b=16,τ=1e-4) below Adam (η=2e-4,b=256)")
 def cnn(datas):
+    """Dipole CNN: the best HIG run beats the best Adam run. Rule: best HIG CNN run's final loss <= half of the best Adam
+    CNN run's (partly: below it)"""
     adam, hig = datas["fig10"].runs("adam"), datas["fig11"].runs("hig")
     need(adam, hig, what="fig10/fig11")
     a, h = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
@@ -263,64 +263,3 @@ def cnn(datas):
     vs_paper = f"; Adam at the paper's η=2e-4 b=256 {e(paper[0])} ({paper[0] / fh:.2g}x)" if paper else ""
     measured = f"best HIG {e(fh)} ({h.label()}), best Adam of the grid {e(fa)} ({a.label()}; HIG's advantage {fa / fh:.2g}x)"
     return measured + vs_paper, fh <= 0.5 * fa, fh < fa
-
-
-CLAIMS = [
-    Claim(
-        "dip-1",
-        ("fig4c",),
-        "Dipole: Adam (η=1e-4) first stagnates at a loss of 0.5",
-        "plateau at 0.5",
-        "Adam spends >= 20% of its time near 0.5, more than HIG, and ends below it (partly: more than HIG)",
-        plateau,
-    ),
-    Claim(
-        "dip-2",
-        ("fig4c",),
-        "Dipole: Adam fits the low-energy component first; HIG minimises both uniformly",
-        "LE before HE for Adam",
-        "Adam's high-energy loss >= 3x its low-energy loss and HIG's ratio <= a third of Adam's "
-        "(partly: Adam's ratio above HIG's)",
-        energy,
-    ),
-    Claim(
-        "dip-3",
-        ("fig4b",),
-        "Dipole: HIG minimises the loss faster and to a lower level than Adam",
-        "HIG below Adam",
-        "best HIG run's final loss <= half of the best Adam run's of the same-budget η grid (partly: below it)",
-        hig_below,
-    ),
-    Claim(
-        "dip-4",
-        ("fig4b",),
-        "Dipole: the attainable accuracy (pure physics optimisation) is about 1e-6",
-        "~1e-6",
-        "the best run reaches [1e-7, 1e-5] (partly: (1e-5, 1e-4]); higher means the budget was too short to approach the limit",
-        limit,
-    ),
-    Claim(
-        "dip-5",
-        ("fig4b",),
-        "Dipole: the largest-η Adam run drops fastest initially but ends worst",
-        "fast start, worst end",
-        "the largest-η Adam run is the lowest at 10% of the budget and the highest at the end (partly: one of the two)",
-        adam_large_lr,
-    ),
-    Claim(
-        "dip-6",
-        ("fig9",),
-        "Dipole: HIG trains stably for τ from 1e-5 to 1e-3; τ=1e-2 cuts off information",
-        "stable 1e-5..1e-3, 1e-2 worse",
-        "τ in 1e-5..1e-3 within 10x of the best τ and τ=1e-2 worse than all of them (partly: one of the two)",
-        tau,
-    ),
-    Claim(
-        "cnn-1",
-        ("fig10", "fig11"),
-        "Dipole CNN: the best HIG run beats the best Adam run",
-        "HIG (η=0.7,b=16,τ=1e-4) below Adam (η=2e-4,b=256)",
-        "best HIG CNN run's final loss <= half of the best Adam CNN run's (partly: below it)",
-        cnn,
-    ),
-]

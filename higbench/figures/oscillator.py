@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import Claim, budget_of, crossing_time, e, end_time, final, loss_at, median, need
+from higbench.figures.checks import budget_of, claim, crossing_time, e, end_time, final, loss_at, median, need
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, By, Figure, SeedSearch, Sweep, paper_grid
@@ -198,7 +198,10 @@ def gn_search_summary(d: FigureData, sweep: str) -> str:
     )
 
 
+@claim("osc-1", "fig2b", "Adam ~1e-4")
 def adam_best(datas):
+    """Oscillators: Adam is the best of the gradient-descent family, final loss ~1e-4. Rule: Adam best of
+    SGD/Adagrad/Adadelta/RMSprop/Adam and final loss in [1e-5, 1e-3] (partly: one of the two)"""
     gd = {o: v for o, v in _finals(datas["fig2b"]).items() if o in GD_FAMILY}
     need("adam" in gd, what="fig2b Adam")
     best = min(gd, key=gd.get)
@@ -210,7 +213,10 @@ def adam_best(datas):
     )
 
 
+@claim("osc-2", "fig2b", "GN ~1e-6")
 def gn_level(datas):
+    """Oscillators: GN's best stable run reaches ~1e-6. Rule: GN's best stable run (best seed of the search) ends in
+    [1e-7, 1e-5] without diverging (partly: below Adam's)"""
     f, runs = _finals(datas["fig2b"]), datas["fig2b"].runs("best", optimizer__name="gn")
     need("gn" in f and "adam" in f, what="fig2b GN/Adam")
     search = gn_search_summary(datas["fig2b"], "best/search")
@@ -218,7 +224,10 @@ def gn_level(datas):
     return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"]
 
 
+@claim("osc-3", "fig2b", "HIG ~1e-7")
 def hig_best(datas):
+    """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven
+    and of re-tuned Adam (partly: one of the two)"""
     d, f = datas["fig2b"], _finals(datas["fig2b"])
     need("hig" in f, what="fig2b HIG")
     ft, tlabel = tuned_adam(d)
@@ -236,7 +245,10 @@ def hig_best(datas):
     )
 
 
+@claim("osc-4", "fig2b", "~180 s")
 def crossing(datas):
+    """Oscillators: HIG passes Adam after about three minutes. Rule: HIG stays below Adam from a time in [60, 540] s on
+    (partly: from any time on)"""
     d = datas["fig2b"]
     hig, adam, tuned = d.runs("best", optimizer__name="hig"), d.runs("best", optimizer__name="adam"), d.runs("adam_tuned")
     need(hig, adam, what="fig2b HIG/Adam")
@@ -255,7 +267,10 @@ def crossing(datas):
     return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True
 
 
+@claim("osc-5", "fig2c", "Adam ~b-independent; HIG/GN better at larger b")
 def batch_sizes(datas):
+    """Oscillators: Adam's runs converge alike for all b; HIG and GN improve with larger b. Rule: Adam's final losses
+    within 3x over b, and HIG and GN lower at the largest b than at the smallest (partly: one of these)"""
     d = datas["fig2c"]
     fin = {(o, b): final(rs) for o, bs in FIG2C_BATCHES.items() for b in bs if (rs := d.runs(o, batch_size=b))}
     adam = [fin[("adam", b)] for b in FIG2C_BATCHES["adam"] if ("adam", b) in fin]
@@ -267,47 +282,3 @@ def batch_sizes(datas):
         f"{OPTIMIZER_NAMES[o]} b={lo}->{hi}: {e(fin[(o, lo)])}->{e(fin[(o, hi)])}" for o, (lo, hi) in ends.items()
     )
     return measured, spread < 3 and all(improves.values()) and len(improves) == 2, spread < 3 or any(improves.values())
-
-
-CLAIMS = [
-    Claim(
-        "osc-1",
-        ("fig2b",),
-        "Oscillators: Adam is the best of the gradient-descent family, final loss ~1e-4",
-        "Adam ~1e-4",
-        "Adam best of SGD/Adagrad/Adadelta/RMSprop/Adam and final loss in [1e-5, 1e-3] (partly: one of the two)",
-        adam_best,
-    ),
-    Claim(
-        "osc-2",
-        ("fig2b",),
-        "Oscillators: GN's best stable run reaches ~1e-6",
-        "GN ~1e-6",
-        "GN's best stable run (best seed of the search) ends in [1e-7, 1e-5] without diverging (partly: below Adam's)",
-        gn_level,
-    ),
-    Claim(
-        "osc-3",
-        ("fig2b",),
-        "Oscillators: HIG gives the best result, ~1e-7",
-        "HIG ~1e-7",
-        "HIG's final loss in [1e-8, 1e-6] and the lowest of the seven and of re-tuned Adam (partly: one of the two)",
-        hig_best,
-    ),
-    Claim(
-        "osc-4",
-        ("fig2b",),
-        "Oscillators: HIG passes Adam after about three minutes",
-        "~180 s",
-        "HIG stays below Adam from a time in [60, 540] s on (partly: from any time on)",
-        crossing,
-    ),
-    Claim(
-        "osc-5",
-        ("fig2c",),
-        "Oscillators: Adam's runs converge alike for all b; HIG and GN improve with larger b",
-        "Adam ~b-independent; HIG/GN better at larger b",
-        "Adam's final losses within 3x over b, and HIG and GN lower at the largest b than at the smallest (partly: one of these)",
-        batch_sizes,
-    ),
-]

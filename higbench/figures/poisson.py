@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import Claim, best, e, end_time, final, loss_at, need
+from higbench.figures.checks import best, claim, e, end_time, final, loss_at, need
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Series, epochs, legend, new_figure
 from higbench.figures.spec import Budget, By, Figure, Preset, Sweep
@@ -135,7 +135,10 @@ FIGURES = [
 # -- claims ---------------------------------------------------------------------------------
 
 
+@claim("poi-1", "fig3b", "~3 decades")
 def both_decrease(datas):
+    """Poisson: Adam and HIG both decrease the loss by up to three orders of magnitude. Rule: both optimizers' best runs
+    >= 2.5 decades below the initial loss (partly: >= 1)"""
     adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
     need(adam, hig, what="fig3b")
     dec = {name: max(np.log10(r.initial_loss / best([r])) for r in runs) for name, runs in (("Adam", adam), ("HIG", hig))}
@@ -143,7 +146,10 @@ def both_decrease(datas):
     return measured, all(v >= 2.5 for v in dec.values()), all(v >= 1.0 for v in dec.values())
 
 
+@claim("poi-2", "fig3c", "quick drop, HIG below Adam")
 def pretrained(datas):
+    """Poisson: HIG after Adam pre-training drops the loss quickly and ends below Adam. Rule: HIG's final loss <= half of
+    the best Adam continued from the same weights, paper η or re-tuned (partly: below it)"""
     d = datas["fig3c"]
     hig, adam = d.runs("hig_cont"), d.runs("adam_cont")
     need(hig, adam, what="fig3c continuations")
@@ -161,14 +167,20 @@ def pretrained(datas):
     return measured, fh <= 0.5 * fa_best, fh < fa_best
 
 
+@claim("poi-3", "fig7", "loss goes back up")
 def adam_after_hig(datas):
+    """Poisson: Adam started from the HIG run loses HIG's progress. Rule: Adam after HIG ends >= 2x above the HIG run's
+    final loss (partly: above it)"""
     hig, after = datas["fig7"].runs("hig_cont"), datas["fig7"].runs("adam_after_hig")
     need(hig, after, what="fig7b")
     fh, fa = final(hig), final(after)
     return f"HIG ended at {e(fh)}; Adam continued from it ends at {e(fa)}", fa >= 2 * fh, fa > fh
 
 
+@claim("poi-4", "fig7", "HIG faster per epoch")
 def per_epoch(datas):
+    """Poisson: per epoch, HIG converges faster than Adam. Rule: at equal samples seen HIG <= half of Adam's loss
+    (partly: below it)"""
     adam, hig = datas["fig7"].runs("adam"), datas["fig7"].runs("hig")
     need(adam, hig, what="fig7a")
     # Best run of each (lowest final loss), compared at the same number of samples seen.
@@ -179,39 +191,3 @@ def per_epoch(datas):
         float(10 ** np.interp(x, xs, np.log10(r.curves["test_loss"].to_numpy(dtype=float)))) for xs, r in ((xa, a), (xh, h))
     )
     return f"at {x:.2f} epochs: HIG {e(lh)} vs Adam {e(la)} (best runs)", lh <= 0.5 * la, lh < la
-
-
-CLAIMS = [
-    Claim(
-        "poi-1",
-        ("fig3b",),
-        "Poisson: Adam and HIG both decrease the loss by up to three orders of magnitude",
-        "~3 decades",
-        "both optimizers' best runs >= 2.5 decades below the initial loss (partly: >= 1)",
-        both_decrease,
-    ),
-    Claim(
-        "poi-2",
-        ("fig3c",),
-        "Poisson: HIG after Adam pre-training drops the loss quickly and ends below Adam",
-        "quick drop, HIG below Adam",
-        "HIG's final loss <= half of the best Adam continued from the same weights, paper η or re-tuned (partly: below it)",
-        pretrained,
-    ),
-    Claim(
-        "poi-3",
-        ("fig7",),
-        "Poisson: Adam started from the HIG run loses HIG's progress",
-        "loss goes back up",
-        "Adam after HIG ends >= 2x above the HIG run's final loss (partly: above it)",
-        adam_after_hig,
-    ),
-    Claim(
-        "poi-4",
-        ("fig7",),
-        "Poisson: per epoch, HIG converges faster than Adam",
-        "HIG faster per epoch",
-        "at equal samples seen HIG <= half of Adam's loss (partly: below it)",
-        per_epoch,
-    ),
-]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import Claim, e, final, loss_at, median, need
+from higbench.figures.checks import claim, e, final, loss_at, median, need
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
 from higbench.figures.spec import Budget, By, Figure, Sweep
@@ -108,13 +108,19 @@ def _by_opt(datas, gamma: float, *needed: str) -> dict[str, list[RunData]]:
     return runs
 
 
+@claim("toy-1", "fig1", "~3 decades")
 def well_conditioned(datas):
+    """Toy, gamma=1: Adam, GN and HIG all decrease the loss by about three orders of magnitude.
+    Rule: every optimizer >= 2.5 decades below its initial loss (partly: >= 1.5)"""
     orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in _by_opt(datas, 1.0).items()}
     measured = ", ".join(f"{OPTIMIZER_NAMES[o]} {v:.1f}" for o, v in orders.items()) + " decades"
     return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values())
 
 
+@claim("toy-2", "fig1", "plateau ~0.2 (figure 1b)")
 def stall(datas):
+    """Toy, gamma=0.01: Adam and GN stall (loss plateau near 0.2). Rule: both final losses in [0.1, 0.4] and flat over
+    the second half of the run (partly: both flat above 0.05, or both in [0.1, 0.4])"""
     runs = _by_opt(datas, 0.01, "adam", "gn")
     fa, fg = final(runs["adam"]), final(runs["gn"])
     # A stall is a plateau: the final loss no lower than 1/1.5 of the loss at half the run.
@@ -125,7 +131,10 @@ def stall(datas):
     return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level
 
 
+@claim("toy-3", "fig1", "HIG lowest")
 def hig_best(datas):
+    """Toy, gamma=0.01: HIG reaches a better loss than Adam and GN. Rule: HIG below half of the better of GN and the
+    best Adam (paper η or re-tuned) (partly: below it)"""
     d, runs = datas["fig1"], _by_opt(datas, 0.01)
     fh, fa, fg = final(runs["hig"]), final(runs["adam"]), final(runs["gn"])
     tuned = {lr: final(rs) for lr in TUNED_LRS if (rs := d.runs("adam_tuned", optimizer__lr=lr))}
@@ -138,46 +147,11 @@ def hig_best(datas):
     return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg)
 
 
+@claim("toy-4", "fig1", "GN saturates, HIG not")
 def saturation(datas):
+    """Toy, gamma=0.01: GN oversaturates neurons, HIG does not. Rule: GN >= 1 and HIG 0 (partly: GN > HIG), saturated:
+    |mean| > 0.9 and std < 0.1 over the data at the end"""
     runs = _by_opt(datas, 0.01, "gn", "hig")
     sg, sh = median(saturated(r) for r in runs["gn"]), median(saturated(r) for r in runs["hig"])
     sa = median(saturated(r) for r in runs["adam"]) if runs["adam"] else float("nan")
     return f"saturated neurons (of 7, median over seeds): GN {sg:g}, HIG {sh:g}, Adam {sa:g}", sg >= 1 and sh == 0, sg > sh
-
-
-CLAIMS = [
-    Claim(
-        "toy-1",
-        ("fig1",),
-        "Toy, gamma=1: Adam, GN and HIG all decrease the loss by about three orders of magnitude",
-        "~3 decades",
-        "every optimizer >= 2.5 decades below its initial loss (partly: >= 1.5)",
-        well_conditioned,
-    ),
-    Claim(
-        "toy-2",
-        ("fig1",),
-        "Toy, gamma=0.01: Adam and GN stall (loss plateau near 0.2)",
-        "plateau ~0.2 (figure 1b)",
-        "both final losses in [0.1, 0.4] and flat over the second half of the run (partly: both flat above 0.05, or "
-        "both in [0.1, 0.4])",
-        stall,
-    ),
-    Claim(
-        "toy-3",
-        ("fig1",),
-        "Toy, gamma=0.01: HIG reaches a better loss than Adam and GN",
-        "HIG lowest",
-        "HIG below half of the better of GN and the best Adam (paper η or re-tuned) (partly: below it)",
-        hig_best,
-    ),
-    Claim(
-        "toy-4",
-        ("fig1",),
-        "Toy, gamma=0.01: GN oversaturates neurons, HIG does not",
-        "GN saturates, HIG not",
-        f"GN >= 1 and HIG 0 (partly: GN > HIG), saturated: |mean| > {SATURATED_MEAN} and std < {SATURATED_STD} over the "
-        "data at the end",
-        saturation,
-    ),
-]
