@@ -42,6 +42,7 @@ COLORS = {
     "adadelta": "tab:brown",
     "rmsprop": "tab:orange",
 }
+COLUMNS = ("panel", "series", "seed", "run", "x_name", "x", "y_name", "y")  # of a figure's data table
 SYMBOLS = {
     "optimizer.lr": "η",
     "optimizer.tau": "τ",
@@ -180,19 +181,7 @@ class FigureData:
     def record(self, panel: str, series: str, run: RunData | None, x_name: str, x, y_name: str, y, **extra) -> None:
         path, seed = ("", "") if run is None else (show_path(run.path), run.seed)
         for xi, yi in zip(np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()):
-            self.rows.append(
-                {
-                    "panel": panel,
-                    "series": series,
-                    "seed": seed,
-                    "run": path,
-                    "x_name": x_name,
-                    "x": xi,
-                    "y_name": y_name,
-                    "y": yi,
-                    **extra,
-                }
-            )
+            self.rows.append(dict(zip(COLUMNS, (panel, series, seed, path, x_name, xi, y_name, yi)), **extra))
 
     # -- writing ------------------------------------------------------------------------
 
@@ -219,7 +208,7 @@ class FigureData:
         plt.close(fig)
 
     def write_data(self) -> None:
-        cols = ["panel", "series", "seed", "run", "x_name", "x", "y_name", "y"]
+        cols = list(COLUMNS)
         df = pd.DataFrame(self.rows) if self.rows else pd.DataFrame(columns=cols)
         df[cols + [c for c in df.columns if c not in cols]].to_csv(self.out_dir / f"{self.figure.id}.csv", index=False)
 
@@ -234,15 +223,9 @@ class FigureData:
             pass
 
     def write_sidecar(self, extra: dict | None = None) -> dict:
+        keys = ("sweep", "seed", "overrides", "identity", "status", "path")
         runs = [
-            {
-                "sweep": j.sweep,
-                "seed": j.seed,
-                "overrides": j.override_list(),
-                "identity": j.identity,
-                "status": j.status,
-                "path": show_path(j.path) if j.path else None,
-            }
+            dict(zip(keys, (j.sweep, j.seed, j.override_list(), j.identity, j.status, j.path and show_path(j.path))))
             for j in self.jobs
         ]
         f = self.figure

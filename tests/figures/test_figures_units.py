@@ -229,3 +229,50 @@ def test_claim_helpers_crossing_time_and_plateau():
     )
     assert plateau_fraction(stall) == pytest.approx(0.75)
     assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30, 5]))
+
+
+# Grids of the appendix's figures: conf/experiment/<name>.yaml (the one copy) -> (figure, sweep).
+CONF_GRIDS = {
+    "fig5_adadelta": ("fig5", "adadelta"), "fig5_adagrad": ("fig5", "adagrad"), "fig5_sgd": ("fig5", "sgd"),
+    "fig5_rmsprop": ("fig5", "rmsprop"), "fig6_adam": ("fig6", "adam"), "fig8_dipole_adam": ("fig8", "adam"),
+    "fig9_dipole_hig": ("fig9", "hig"), "fig10_dipole_cnn_adam": ("fig10", "adam"), "fig11_dipole_cnn_hig": ("fig11", "hig"),
+    "fig12a_beta": ("fig12", "beta"), "fig12b_kappa": ("fig12", "kappa"), "fig13_tau": ("fig13", "hig"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("experiment", CONF_GRIDS)
+def test_paper_preset_runs_the_experiment_configs_grids(experiment):
+    import yaml
+
+    from higbench.cli import config_dir
+
+    params = yaml.safe_load((Path(config_dir()) / "experiment" / f"{experiment}.yaml").read_text())["hydra"]["sweeper"]["params"]
+    fid, sweep = CONF_GRIDS[experiment]
+    jobs = [j for j in expand(registry.figures()[fid], Preset("paper")) if j.sweep == sweep]
+    for key, text in params.items():
+        if key == "optimizer":
+            continue  # fig13 sweeps the optimizer as two sweeps
+        want = sorted(float(v) for v in str(text).split(","))
+        assert sorted({float(j.overrides[key]) for j in jobs}) == want, (experiment, key)
+    grid = [k for k in params if k != "optimizer"]
+    assert len(jobs) == np.prod([len(str(params[k]).split(",")) for k in grid]), experiment  # the full cartesian grid
+
+
+def test_table2_paper_column_is_the_per_pair_defaults():
+    from higbench.figures.tables import paper_table2
+
+    assert paper_table2("adam") == "512 / 3e-4 / -" and paper_table2("gn") == "128 / - / 1e-6"
+    assert paper_table2("hig") == "128 / 1 / 1e-6" and paper_table2("rmsprop") == "512 / 1e-4 / -"
+
+
+def test_a_new_preset_is_one_entry_and_falls_back(monkeypatch):
+    from higbench.figures import spec
+
+    monkeypatch.setitem(spec.PRESETS, "standard", "quick")  # what adding a preset takes
+    quick, standard = Preset("quick"), Preset("standard")
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60}).overrides(standard) == {"budget.seconds": 60.0}
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60, "standard": 300}).overrides(standard) == {"budget.seconds": 300.0}
+    assert spec.By([1, 2, 3], quick=[1]).at(standard) == [1] and spec.By([1, 2, 3], standard=[2]).at(quick) == [1, 2, 3]
+    assert standard.problem_overrides("dipole") == quick.problem_overrides("dipole")
+    for fid, fig in registry.figures().items():  # every figure expands, as at its fallback
+        assert [j.override_list() for j in expand(fig, standard)] == [j.override_list() for j in expand(fig, quick)], fid
