@@ -162,7 +162,7 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
     return line
 
 
-def _pick(spec: Any, i: int, n: int, value: Any, opt: str) -> Any:
+def _pick(spec: Any, i: int, n: int, opt: str) -> Any:
     if spec == "optimizer":
         return COLORS.get(opt)
     if isinstance(spec, str) and spec in ("viridis", "plasma"):
@@ -193,7 +193,7 @@ def draw_curves(d: FigureData, ax, p: Curves) -> None:
             label = join_label(s.name, run.label()) if s.name else label
             opt = run.cfg("optimizer.name", "")
             kw = {"lw": s.lw} if s.lw else {}
-            color, ls = _pick(s.color, i, len(values), v, opt), _pick(s.ls, i, len(values), v, opt)
+            color, ls = _pick(s.color, i, len(values), opt), _pick(s.ls, i, len(values), opt)
             curve(d, ax, runs, label, panel=p.panel, x=p.x, y=s.y, color=color, ls=ls, x_offset=offset, **kw)
             ends[s.sweep] = offset + float(run.curves["wall_time"].iloc[-1])
     if p.extra is not None:

@@ -79,10 +79,8 @@ def compare(before: Path, after: Path) -> tuple[list[str], list[str]]:
             if a["kind"] == "table":
                 why = same_frame(pd.read_csv(csv_a, index_col=0), pd.read_csv(csv_b, index_col=0))
             else:  # plotted points: the same rows, in any order
-                da, db = (pd.read_csv(p).fillna("<nan>") for p in (csv_a, csv_b))
-                why = same_frame(
-                    *(x.sort_values(list(x.columns), key=lambda c: c.astype(str)).reset_index(drop=True) for x in (da, db))
-                )
+                da, db = (pd.read_csv(p).astype(str) for p in (csv_a, csv_b))
+                why = same_frame(*(x.sort_values(list(x.columns)).reset_index(drop=True) for x in (da, db)))
                 if not why and not da.equals(db):
                     notes.append(f"{fid}.csv: the same rows in another order")
             if why:
