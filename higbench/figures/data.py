@@ -254,9 +254,13 @@ def _match(value: Any, want: Any) -> bool:
     return value == want
 
 
+def md_table(header: list[str], rows: list) -> list[str]:
+    """The lines of a GitHub table (without the tabulate package)."""
+    lines = ["| " + " | ".join(map(str, r)) + " |" for r in [header, *rows]]
+    return [lines[0], "|" + "---|" * len(header), *lines[1:]]
+
+
 def _markdown(df: pd.DataFrame, index: bool) -> str:
-    """A GitHub table without the tabulate package."""
     frame = df.reset_index() if index else df
     cell = lambda v: ("-" if math.isnan(v) else f"{v:.3g}") if isinstance(v, float) else str(v)  # noqa: E731
-    lines = ["| " + " | ".join(map(str, frame.columns)) + " |", "|" + "|".join("---" for _ in frame.columns) + "|"]
-    return "\n".join(lines + ["| " + " | ".join(map(cell, row)) + " |" for row in frame.itertuples(index=False)])
+    return "\n".join(md_table(list(frame.columns), [map(cell, row) for row in frame.itertuples(index=False)]))
