@@ -54,9 +54,6 @@ class Preset:
         if self.name not in PRESETS:
             raise ValueError(f"--preset {self.name!r}: expected one of {', '.join(PRESETS)}")
 
-    def pick(self, paper: Any, quick: Any = None, smoke: Any = None, **more: Any) -> Any:
-        return By(paper, quick, smoke, **more).at(self)
-
     def problem_overrides(self, problem: str) -> dict[str, Any]:
         return dict(lookup({k: v[problem] for k, v in PROBLEM_OVERRIDES.items() if problem in v}, self.name, {}))
 

@@ -27,7 +27,7 @@ import pandas as pd
 from higbench.figures.checks import Missing, claim
 from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.oscillator import FIG2B, FIG2B_OPTIMIZERS
-from higbench.figures.spec import Budget, Figure, Preset, Sweep, paper_setting
+from higbench.figures.spec import UPDATES_ONLY, Budget, By, Figure, Preset, Sweep, paper_setting
 
 # -- the paper's per-update timings (tables 3-5): one block, to be imported from the benchmark module --
 # (table, optimizer, batch size) -> paper's (memory MB, update s, Jacobian s); GPU, TensorFlow.
@@ -103,7 +103,7 @@ def ensure_bench(p: Preset, log=print) -> bool:
     target = bench_file(p)
     if target.is_file():
         return True
-    if p.name == "smoke" or not BENCH_SCRIPT.is_file():
+    if p.name in UPDATES_ONLY or not BENCH_SCRIPT.is_file():
         return False
     log(f"[figures] tables 3-5: running {BENCH_SCRIPT.name} --paper-tables (minutes) -> {target.parent}")
     t0 = time.perf_counter()
@@ -124,10 +124,9 @@ def timing_runs(tid: str):
         out = []
         for opt in ("adam", "hig"):
             batches = sorted({b for (o, b) in PAPER_TIMINGS[tid] if o == opt})
-            if p.name == "smoke":
-                batches = [SMOKE_BATCH[tid][opt]] if opt in SMOKE_BATCH.get(tid, {}) else batches[:1]
+            small = [SMOKE_BATCH[tid][opt]] if opt in SMOKE_BATCH.get(tid, {}) else batches[:1]
             fixed = {"problem": PROBLEMS[tid], "optimizer": opt}
-            out.append(Sweep(opt, fixed, Budget(updates=TIMING[tid][opt]), grid={"batch_size": batches}))
+            out.append(Sweep(opt, fixed, Budget(updates=TIMING[tid][opt]), grid={"batch_size": By(batches, smoke=small)}))
         return out
 
     return runs
