@@ -175,6 +175,14 @@ class FigureData:
         ov = [j.overrides for j in self.jobs if j.sweep == sweep]
         return sorted({o[key] if key in o else o[key.removesuffix(".name")] for o in ov})
 
+    def trajectory(self, sweep: str):
+        """(run, problem, sample, states, controls): the sweep's first run rebuilt, on its first test sample; None if not run."""
+        if not (runs := self.runs(sweep)):
+            return None
+        problem, model = runs[0].build_model()
+        batch = problem.test_set()[:1]
+        return (runs[0], problem, batch, *problem.trajectory(model, batch))
+
     def missing(self) -> list[Job]:
         return [j for j in self.jobs if not j.done]
 

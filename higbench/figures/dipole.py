@@ -70,11 +70,8 @@ def dip(opt: str, **kw) -> Sweep:
 
 
 def fig4a(d: FigureData, ax) -> None:
-    if runs := d.runs("hig"):
-        run = runs[0]
-        problem, model = run.build_model()
-        batch = problem.test_set()[:1]
-        states, u = problem.trajectory(model, batch)
+    if found := d.trajectory("hig"):
+        run, problem, batch, states, u = found
         prob = (states[0].double().numpy() ** 2).sum(-1)  # |Psi|^2 over (steps+1, 14)
         dt, n_x = float(problem.cfg.dt), prob.shape[1]
         t, x = np.arange(prob.shape[0]) * dt, np.arange(1, n_x + 1) * 2.0 / (n_x + 1)

@@ -65,11 +65,8 @@ def _grid(opt: str, lrs: list) -> Sweep:
 def fig2a(d: FigureData, ax) -> None:
     import torch
 
-    if runs := d.runs("hig"):
-        run = runs[0]
-        problem, model = run.build_model()
-        batch = problem.test_set()[:1]
-        states, u = problem.trajectory(model, batch)
+    if found := d.trajectory("hig"):
+        run, problem, batch, states, u = found
         states, u = states[0].double().numpy(), u[0].double().numpy()
         dt = float(problem.cfg.dt)
         t, tu = np.arange(states.shape[0]) * dt, (np.arange(len(u)) + 0.5) * dt
@@ -87,7 +84,7 @@ def fig2a(d: FigureData, ax) -> None:
         err = float(((torch.as_tensor(states[-1]) - batch.targets[0].double()) ** 2).sum())
         ax.set_title(f"a) oscillators under the HIG-trained network ({run.label()}); final squared error {e(err)}", fontsize=8)
         ax.plot([], [], "o", color="k", mfc="none", label="targets (= initial state)")
-    legend(ax, **({"loc": "upper left"} if runs else {}))
+    legend(ax, **({"loc": "upper left"} if found else {}))
     ax.set(xlabel="time t", ylabel="oscillator position")
 
 
