@@ -62,7 +62,7 @@ def grid_figure(fid: str, title: str, problem: str, opt: str, experiment: str) -
         facets = Facets([opt], "optimizer.lr", "batch_size", prefix=cnn + name)
     else:
         facets = Facets([opt], "optimizer.tau", "optimizer.lr", rows="batch_size", prefix=cnn + name, size=(3.3, 2.6))
-    return Figure(fid, title, [sweep], panels=[facets], notes=notes)
+    return Figure(fid, title, [sweep], panels=[facets])
 
 
 def dip(opt: str, **kw) -> Sweep:
@@ -102,7 +102,6 @@ FIGURES = [
         [dip("hig")],
         panels=[Custom(fig4a)],
         size=(1, 1, 6.6, 4.4),
-        notes=notes,
     ),
     Figure(
         "fig4b",
@@ -121,13 +120,11 @@ FIGURES = [
             )
         ],
         size=(1, 1, 6.2, 4.0),
-        notes=notes,
     ),
     Figure(
         "fig4c",
         "Dipole: low- and high-energy losses, Adam (eta=1e-4) vs HIG (eta=0.5)",
         FIG4C,
-        notes=notes,
         size=(1, 1, 6.2, 4.0),
         panels=[
             Curves(
@@ -140,6 +137,8 @@ FIGURES = [
     ),
     *(grid_figure(fid, *spec) for fid, spec in GRIDS.items()),
 ]
+for _f in FIGURES:
+    _f.notes = notes  # every figure of the family states the preset's deviations
 
 
 # -- claims ---------------------------------------------------------------------------------

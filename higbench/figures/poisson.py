@@ -94,13 +94,11 @@ FIGURES = [
         "Poisson: example source and inferred potential (HIG after Adam pre-training)",
         FIG3C[0:3:2],
         plot=plot_fig3a,
-        notes=notes,
     ),
     Figure(
         "fig3b",
         "Poisson: Adam and HIG for several learning rates",
         FIG3B,
-        notes=notes,
         size=(2, 1, 4.6, 3.6),
         panels=[
             Curves(f"b) Poisson: Adam and HIG ({x} time axis)", BY_LR, f"loss ({x} time)", xscale=x) for x in ("linear", "log")
@@ -110,7 +108,6 @@ FIGURES = [
         "fig3c",
         "Poisson: Adam vs HIG pre-trained with Adam",
         FIG3C,
-        notes=notes,
         size=(1, 1, 6.2, 4.0),
         panels=[Curves("c) Poisson: Adam vs HIG pre-trained with Adam", CHAIN)],
     ),
@@ -118,7 +115,6 @@ FIGURES = [
         "fig7",
         "Poisson: a) loss per epoch, b) pre-training in both directions",
         [*FIG3B, *FIG3C, poi("adam_after_hig", "adam", "hig_cont", **{"optimizer.lr": ADAM_LR})],
-        notes=notes,
         size=(2, 1, 4.8, 3.8),
         panels=[
             Curves("a) Poisson: loss per epoch", BY_LR, "a) loss per epoch", "epoch", "log", "epochs (samples seen / 1024)"),
@@ -130,6 +126,8 @@ FIGURES = [
         ],
     ),
 ]
+for _f in FIGURES:
+    _f.notes = notes  # every figure of the family states the preset's deviations
 
 
 # -- claims ---------------------------------------------------------------------------------
