@@ -19,36 +19,48 @@ import sys
 
 from higbench.figures.spec import PRESETS
 
-OPTIONS = [
-    ("--runs-root", dict(default="outputs", help="where runs are looked for and written (default: outputs)")),
-    ("--out", dict(default="figures", help="output directory (default: figures)")),
-    ("--jobs", dict(type=int, help="runs trained at the same time (default: min(cores, 2)); one torch thread each")),
-    (
-        "--launcher",
-        dict(
-            default="auto",
-            choices=("auto", "basic", "joblib"),
-            help="Hydra launcher for missing runs "
-            "(auto = basic: multiruns split n ways and run side by side; joblib: one multirun per grid on joblib workers)",
-        ),
-    ),
-    ("--no-run", dict(action="store_true", help="run nothing; draw from the runs that exist")),
-    ("--plan", dict(action="store_true", help="print runs needed/missing and their training seconds; run and draw nothing")),
-    ("--no-bench", dict(action="store_true", help="tables 3-5: do not run scripts/bench_step.py; use its table or timing runs")),
-    ("--no-report", dict(action="store_true", help="do not rewrite REPORT.md")),
-    ("--list", dict(action="store_true", help="list the figures and exit")),
-]
-
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="higbench-figures", description=__doc__.split("\n\n")[0])
     p.add_argument("ids", nargs="*", default=["all"], help="figure/table ids (fig1 fig2b table2 ...) or 'all'")
-    presets = ", ".join(f"{k} (falls back to {v})" if v else k for k, v in PRESETS.items())
-    p.add_argument("--preset", default="quick", choices=PRESETS, help=f"budgets and grids: {presets}")
-    for name, kw in OPTIONS:
-        p.add_argument(name, **kw)
+    p.add_argument(
+        "--preset",
+        default="quick",
+        choices=PRESETS,
+        help="budgets and grids: smoke (minutes, every code path), quick (scaled down), paper; a value a preset does not "
+        "set is its fallback's (spec.PRESETS: smoke -> quick -> paper)",
+    )
+    p.add_argument("--runs-root", default="outputs", help="where runs are looked for and written (default: outputs)")
+    p.add_argument("--out", default="figures", help="output directory (default: figures)")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        help="runs trained at the same time (default: min(cores, 2)); each run uses one torch thread",
+    )
+    p.add_argument(
+        "--launcher",
+        default="auto",
+        choices=("auto", "basic", "joblib"),
+        help=(
+            "Hydra launcher for missing runs (auto = basic: multiruns split n ways and run side by side; joblib: one "
+            "multirun per grid on joblib workers)"
+        ),
+    )
+    p.add_argument("--no-run", action="store_true", help="run nothing; draw from the runs that exist")
+    p.add_argument(
+        "--plan", action="store_true", help="print runs needed/missing and their training seconds; run and draw nothing"
+    )
+    p.add_argument(
+        "--no-bench",
+        action="store_true",
+        help="tables 3-5: do not run scripts/bench_step.py; use its existing table or timing runs",
+    )
+    p.add_argument("--no-report", action="store_true", help="do not rewrite REPORT.md")
+    p.add_argument("--list", action="store_true", help="list the figures and exit")
     args = p.parse_args(argv)
-    from higbench.figures import build, registry
+
+    from higbench.figures import registry
 
     if args.list:
         for fid, f in registry.figures().items():
@@ -59,17 +71,26 @@ def main(argv: list[str] | None = None) -> int:
     except KeyError as exc:
         print(f"higbench-figures: error: {exc.args[0]}", file=sys.stderr)
         return 2
+
     if args.plan:
-        rows = build.plan(args.ids, args.preset, args.runs_root)
-        total, jobs = sum(r[3] for r in rows), args.jobs or 2
+        from higbench.figures.build import plan
+
+        rows = plan(args.ids, args.preset, args.runs_root)
+        total = 0.0
         print(f"{'figure':8s} {'runs':>5s} {'missing':>8s} {'train s':>9s}  (preset {args.preset}; shared runs counted once)")
-        print("\n".join(f"{fid:8s} {n:5d} {miss:8d} {secs:9.0f}" for fid, n, miss, secs in rows))
+        for fid, n, miss, secs in rows:
+            total += secs
+            print(f"{fid:8s} {n:5d} {miss:8d} {secs:9.0f}")
+        jobs = args.jobs or 2
         print(
             f"total training seconds missing: {total:.0f} (~{total / jobs / 60:.0f} min on {jobs} parallel jobs, plus "
             "start-up and evaluations)"
         )
         return 0
-    result = build.build(
+
+    from higbench.figures.build import build
+
+    result = build(
         args.ids,
         args.preset,
         args.runs_root,
@@ -86,9 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     if result.missing:
         print("[figures] runs still missing (failed or not run): " + ", ".join(f"{k}: {v}" for k, v in result.missing.items()))
-    for k, v in result.errors.items():
-        print(f"[figures] {k}: {v}", file=sys.stderr)
-    return 1 if result.errors else 0
+    if result.errors:
+        for k, v in result.errors.items():
+            print(f"[figures] {k}: {v}", file=sys.stderr)
+        return 1
+    return 0
 
 
 if __name__ == "__main__":
