@@ -172,8 +172,10 @@ class FigureData:
 
     def values(self, sweep: str, key: str) -> list:
         """The sorted values of an override over a sweep's jobs (``optimizer.name``: the optimizer)."""
-        ov = [j.overrides for j in self.jobs if j.sweep == sweep]
-        return sorted({o[key] if key in o else o[key.removesuffix(".name")] for o in ov})
+        found = {j.overrides.get(key, j.overrides.get(key.removesuffix(".name"))) for j in self.jobs if j.sweep == sweep}
+        if None in found:  # a value the sweep does not set: the resolved configs' (only known for runs composed)
+            found = {j.value(key) for j in self.jobs if j.sweep == sweep} - {None}
+        return sorted(found)
 
     def trajectory(self, sweep: str):
         """(run, problem, sample, states, controls): the sweep's first run rebuilt, on its first test sample; None if not run."""

@@ -276,3 +276,58 @@ def test_a_new_preset_is_one_entry_and_falls_back(monkeypatch):
     assert standard.problem_overrides("dipole") == quick.problem_overrides("dipole")
     for fid, fig in registry.figures().items():  # every figure expands, as at its fallback
         assert [j.override_list() for j in expand(fig, standard)] == [j.override_list() for j in expand(fig, quick)], fid
+
+
+def _fake_figure_data(figure, rows, tmp_path):
+    """A FigureData over fake finished runs: rows of (sweep, seed, overrides, status, losses)."""
+    import pandas as pd
+
+    from higbench.figures.data import FigureData, RunData
+
+    d = FigureData(figure, Preset("quick"), tmp_path, [], budgets={"all runs": "1 s"})
+    for sweep, seed, ov, status, losses in rows:
+        job = Job(figure.id, sweep, dict(ov), seed=seed, status=status)
+        job.path, job.config = tmp_path / f"{len(d.jobs)}.h5", {"seed": seed}
+        for key, value in {"optimizer.name": ov.get("optimizer", "hig"), **ov}.items():
+            if key == "optimizer":
+                continue  # the config group choice: optimizer.name
+            node = job.config
+            *parents, last = key.split(".")
+            for part in parents:
+                node = node.setdefault(part, {})
+            node[last] = value
+        run = RunData(job)
+        run.__dict__["_run"] = ({"status_step": 3}, pd.DataFrame({"wall_time": [0.0, 1.0, 2.0], "test_loss": losses}))
+        d.jobs.append(job)
+        d._cache[id(job)] = run
+    return d
+
+
+def test_plot_layer_facets_and_lines_record_what_they_draw(tmp_path):
+    from higbench.figures.plot import Curves, Facets, Series, draw, draw_curves, new_figure
+    from higbench.figures.spec import Figure
+
+    settings = [{"optimizer": "hig", "batch_size": b, "optimizer.tau": t, "optimizer.lr": lr} for b in (8, 16) for t in (1e-5, 1e-2)
+                for lr in (0.5, 1.0)]  # fmt: skip
+    grid = [("hig", seed, ov, "completed", [1.0, 0.5, 0.1]) for ov in settings for seed in (0, 1)]
+    facets = Figure("figF", "t", [], panels=[Facets(["hig"], "optimizer.tau", "optimizer.lr", rows="batch_size")])
+    d = _fake_figure_data(facets, grid, tmp_path)
+    draw(d)
+    panels = sorted({r["panel"] for r in d.rows})
+    assert panels == ["b=16 τ=0.01", "b=16 τ=1e-5", "b=8 τ=0.01", "b=8 τ=1e-5"]
+    assert {r["series"] for r in d.rows} == {"η=0.5", "η=1"}
+    assert len(d.rows) == len(grid) * 3 and d.banded and "shaded: min-max over seeds" in d.caption()
+    assert (tmp_path / "figF.png").stat().st_size > 0
+
+    kappas = [("kappa", 0, {"optimizer": "hig", "optimizer.kappa": k}, st, ls)
+              for k, st, ls in ((1.0, "diverged", [1.0, 5.0, float("nan")]), (-0.5, "completed", [1.0, 0.1, 0.01]))]  # fmt: skip
+    lines = Figure(
+        "figL", "t", [], panels=[Curves("k", [Series("kappa", "optimizer.kappa", label="{kv}", color="viridis", reverse=True)])]
+    )
+    d = _fake_figure_data(lines, kappas, tmp_path)
+    fig, axes = new_figure()
+    draw_curves(d, axes[0, 0], lines.panels[0])
+    legend = [t.get_text() for t in axes[0, 0].get_legend().get_texts()]
+    assert legend == ["κ=1 (diverged at step 3)", "κ=-0.5"]  # largest first, the divergence named once
+    assert [r["series"] for r in d.rows[::3]] == ["κ=1", "κ=-0.5"]
+    assert d.diverged_marked and "X: last finite evaluation" in d.caption()
