@@ -307,8 +307,8 @@ def test_plot_layer_facets_and_lines_record_what_they_draw(tmp_path):
     from higbench.figures.plot import Curves, Facets, Series, draw, draw_curves, new_figure
     from higbench.figures.spec import Figure
 
-    settings = [{"optimizer": "hig", "batch_size": b, "optimizer.tau": t, "optimizer.lr": lr} for b in (8, 16) for t in (1e-5, 1e-2)
-                for lr in (0.5, 1.0)]  # fmt: skip
+    values = [(b, t, lr) for b in (8, 16) for t in (1e-5, 1e-2) for lr in (0.5, 1.0)]
+    settings = [{"optimizer": "hig", "batch_size": b, "optimizer.tau": t, "optimizer.lr": lr} for b, t, lr in values]
     grid = [("hig", seed, ov, "completed", [1.0, 0.5, 0.1]) for ov in settings for seed in (0, 1)]
     facets = Figure("figF", "t", [], panels=[Facets(["hig"], "optimizer.tau", "optimizer.lr", rows="batch_size")])
     d = _fake_figure_data(facets, grid, tmp_path)
