@@ -3,9 +3,10 @@
     python -m higbench.figures all --preset quick     # `make figures`
     python -m higbench.figures fig1 --preset smoke --runs-root /tmp/o --out /tmp/f
 
-Layout: ``registry`` (the one list of figures and claims), one module per family
-(``toy``, ``oscillator``, ``poisson``, ``dipole``, ``ablation``, ``tables``), ``spec``
-(Figure/Sweep/Budget/Preset), ``runs`` (run identity, reuse, Hydra multiruns for missing
-runs), ``data`` (what plot functions read and write), ``build`` (the pipeline),
-``report`` (REPORT.md). See docs/figures.md.
+Layout: ``spec`` (Figure/Sweep/Budget/presets, paper facts read from conf/), ``plot`` (the
+one plotting layer: panels as data), ``checks`` (claims as data, with their rules), one
+module per family declaring its figures and claims (``toy``, ``oscillator``, ``poisson``,
+``dipole``, ``ablation``, ``tables``), ``registry`` (collects them), ``runs`` (run
+identity, reuse, Hydra multiruns for missing runs), ``data`` (what drawing reads and
+writes), ``build`` (the pipeline), ``report`` (REPORT.md). See docs/figures.md.
 """

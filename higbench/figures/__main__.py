@@ -26,7 +26,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="higbench-figures", description=__doc__.split("\n\n")[0])
     p.add_argument("ids", nargs="*", default=["all"], help="figure/table ids (fig1 fig2b table2 ...) or 'all'")
     p.add_argument(
-        "--preset", default="quick", choices=PRESETS, help="budgets: smoke (minutes, every code path), quick (scaled down), paper"
+        "--preset",
+        default="quick",
+        choices=PRESETS,
+        help="budgets and grids: smoke (minutes, every code path), quick (scaled down), paper; a value a preset does not "
+        "set is its fallback's (spec.PRESETS: smoke -> quick -> paper)",
     )
     p.add_argument("--runs-root", default="outputs", help="where runs are looked for and written (default: outputs)")
     p.add_argument("--out", default="figures", help="output directory (default: figures)")

@@ -15,7 +15,7 @@ from pathlib import Path
 from higbench.figures import registry
 from higbench.figures.data import FigureData
 from higbench.figures.runs import Composer, Job, RunIndex, expand, job_seconds, launch, resolve
-from higbench.figures.spec import Figure, Preset
+from higbench.figures.spec import UPDATES_ONLY, Figure, Preset
 
 
 @dataclass
@@ -119,7 +119,7 @@ class Builder:
         data = self.figure_data(figure)
         extra: dict = {}
         try:
-            figure.plot(data)
+            figure.draw(data)
             if figure.kind == "figure":
                 data.write_data()
             result.drawn.append(figure.id)
@@ -134,61 +134,55 @@ class Builder:
         data.write_sidecar(extra)
 
     def check_claims(self, figure: Figure) -> list[dict]:
-        out = []
-        for c in registry.claims().values():
-            if c.figures[0] != figure.id:
-                continue
-            known = registry.figures()
+        known, out = registry.figures(), []
+        for c in (c for c in registry.claims().values() if c.figures[0] == figure.id):
             datas = {fid: self.figure_data(known[fid]) for fid in c.figures}
-            missing = sum(len(d.missing()) for d in datas.values())
-            cause = c.cause
-            try:
-                out_ = c.check(datas)
-                measured, verdict, why = out_[:3]
-                if len(out_) > 3 and out_[3]:
-                    cause = out_[3]
-            except Exception as exc:  # noqa: BLE001
-                measured, verdict, why = "-", "n/a", f"could not be evaluated: {type(exc).__name__}: {exc}"
-            if missing and verdict != "n/a":
-                why += f" ({missing} run(s) missing)"
-            seconds, seeds = claim_budget(datas), claim_seeds(datas)
-            if c.min_seconds and verdict != "n/a" and seconds is not None and seconds < c.min_seconds:
-                why = (
-                    f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; the rule "
-                    f"would say '{verdict}'. {why}"
-                )
-                verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
-            elif verdict == "reproduced" and seeds < c.min_seeds:
-                why = f"only {seeds} seed(s) per setting (a comparison needs the median of {c.min_seeds}): at most partly. {why}"
-                verdict, cause = "partly", ("seeds", f"{seeds} seed(s) per setting at this preset")
-            if self.preset.name == "smoke" and verdict != "n/a" and any(d.jobs for d in datas.values()):
-                why = (
-                    f"smoke preset ({self.preset.name}: a few updates per run) checks code paths only, no verdict; the "
-                    f"rule would say '{verdict}'. {why}"
-                )
-                verdict = "n/a"
-            if verdict in ("not", "partly") and not cause:
-                cause = ("open", "no targeted run has examined this verdict yet")
-            budgets = "; ".join(sorted({b for d in datas.values() for b in d.budgets.values()}))
-            out.append(
-                {
-                    "id": c.id,
-                    "figures": list(c.figures),
-                    "statement": c.statement,
-                    "paper": c.paper,
-                    "measured": measured,
-                    "budget": budgets,
-                    "verdict": verdict,
-                    "why": why,
-                    "cause": list(cause) if cause and verdict not in ("reproduced", "n/a") else None,
-                    "seeds": seeds,
-                    "preset": self.preset.name,
-                }
-            )
+            out.append(judge(c, datas, self.preset.name))
         return out
 
     def close(self) -> None:
         self.composer.close()
+
+
+def judge(c, datas: dict, preset: str) -> dict:
+    """A claim's row of the report: its rule's verdict on the runs, then the budget, seed and smoke limits."""
+    missing, cause = sum(len(d.missing()) for d in datas.values()), c.cause
+    try:
+        measured, verdict, why = c.check(datas)
+    except Exception as exc:  # noqa: BLE001 - one broken claim does not stop the others
+        measured, verdict, why = "-", "n/a", f"could not be evaluated: {type(exc).__name__}: {exc}"
+    if missing and verdict != "n/a":
+        why += f" ({missing} run(s) missing)"
+    seconds, seeds = claim_budget(datas), claim_seeds(datas)
+    if c.min_seconds and verdict != "n/a" and seconds is not None and seconds < c.min_seconds:
+        why = f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; {would(verdict)}{why}"
+        verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
+    elif verdict == "reproduced" and seeds < c.min_seeds:
+        why = f"only {seeds} seed(s) per setting (a comparison needs the median of {c.min_seeds}): at most partly. {why}"
+        verdict, cause = "partly", ("seeds", f"{seeds} seed(s) per setting at this preset")
+    if preset in UPDATES_ONLY and verdict != "n/a" and any(d.jobs for d in datas.values()):
+        why = f"smoke preset ({preset}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
+        verdict = "n/a"
+    if verdict in ("not", "partly") and not cause:
+        cause = ("open", "no targeted run has examined this verdict yet")
+    budgets = "; ".join(sorted({b for d in datas.values() for b in d.budgets.values()}))
+    return {
+        "id": c.id,
+        "figures": list(c.figures),
+        "statement": c.statement,
+        "paper": c.paper,
+        "measured": measured,
+        "budget": budgets,
+        "verdict": verdict,
+        "why": why,
+        "cause": list(cause) if cause and verdict not in ("reproduced", "n/a") else None,
+        "seeds": seeds,
+        "preset": preset,
+    }
+
+
+def would(verdict: str) -> str:
+    return f"the rule would say '{verdict}'. "
 
 
 def _main_jobs(datas: dict) -> list:
@@ -197,8 +191,7 @@ def _main_jobs(datas: dict) -> list:
 
 def claim_budget(datas: dict) -> float | None:
     """The smallest training budget in seconds of the claim's runs (None: budgets in updates)."""
-    secs = [j.overrides.get("budget.seconds") for j in _main_jobs(datas)]
-    secs = [float(s) for s in secs if s is not None]
+    secs = [float(s) for j in _main_jobs(datas) if (s := j.overrides.get("budget.seconds")) is not None]
     return min(secs) if secs else None
 
 
@@ -206,12 +199,10 @@ def claim_seeds(datas: dict) -> int:
     """The fewest seeds of any setting (sweep and overrides but the seed) behind the claim;
     a setting whose seed came from a seed search counts as settled (the paper's fixed seed)."""
     groups: dict[tuple, set] = {}
-    for j in _main_jobs(datas):
-        if j.search:
-            continue
+    for j in (j for j in _main_jobs(datas) if not j.search):
         key = (j.figure, j.sweep, tuple(sorted((k, str(v)) for k, v in j.overrides.items() if k != "seed")))
         groups.setdefault(key, set()).add(j.seed)
-    return min((len(s) for s in groups.values()), default=0) if groups else 99
+    return min(len(s) for s in groups.values()) if groups else 99
 
 
 def build(

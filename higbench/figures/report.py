@@ -1,6 +1,6 @@
 """figures/REPORT.md: the paper's headline claims against the runs behind the figures.
 
-Each claim is checked (``registry.Claim.check``) when its first figure is drawn and the
+Each claim is checked (``checks.Claim.check``) when its first figure is drawn and the
 result is stored in that figure's sidecar ``<id>.json``; this module collects the
 sidecars in the output directory into one table, in the registry's order, so a partial
 rebuild (``higbench-figures fig1``) keeps the other figures' rows.
@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from pathlib import Path
 
 from higbench.figures import registry
+from higbench.figures.data import md_table
 
 HEADER = """# Reproduction report
 
@@ -56,25 +58,19 @@ def collect(out_dir: Path) -> list[dict]:
     for info in _json_sidecars(out_dir).values():
         for c in info.get("claims", []):
             rows[c["id"]] = c
-    out = []
-    for cid, c in registry.claims().items():
-        if cid in rows:
-            out.append(rows[cid])
-        else:
-            out.append(
-                {
-                    "id": cid,
-                    "figures": list(c.figures),
-                    "statement": c.statement,
-                    "paper": c.paper,
-                    "measured": "-",
-                    "budget": "-",
-                    "verdict": "n/a",
-                    "why": f"{c.figures[0]} not drawn yet",
-                    "preset": "-",
-                }
-            )
-    return out
+    blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-"}
+    return [
+        rows.get(cid)
+        or {
+            "id": cid,
+            "figures": list(c.figures),
+            "statement": c.statement,
+            "paper": c.paper,
+            **blank,
+            "why": f"{c.figures[0]} not drawn yet",
+        }
+        for cid, c in registry.claims().items()
+    ]
 
 
 def _num(v) -> str:
@@ -86,62 +82,71 @@ def reference_section(out_dir: Path) -> list[str]:
     info = _json_sidecars(out_dir).get("ref_oscillator", {}).get("reference")
     if not info:
         return []
-    lines = ["", "## Beside the authors' code (oscillators, figure ref_oscillator)", ""]
-    lines.append(f"Reference numbers: {info['source']} (`higbench/figures/reference.py`).")
-    lines.append("higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n")
-    lines.append("| optimizer | training time [s] | authors' code | higbench |")
-    lines.append("|---|---|---|---|")
-    for r in info["loss_points"]:
-        lines.append(f"| {r['optimizer']} | {r['t']:g} | {_num(r['reference'])} | {_num(r['higbench'])} |")
-    lines.append("\n| problem | optimizer | b | authors' code, s/update | higbench, s/update | authors' memory [GB] |")
-    lines.append("|---|---|---|---|---|---|")
-    for r in info["update_seconds"]:
-        lines.append(
-            f"| {r['problem']} | {r['optimizer']} | {r['batch_size']} | {r['update_s']:g} | {_num(r.get('higbench_update_s'))} "
-            f"| {_num(r.get('memory_gb'))} |"
-        )
-    return lines
+    return [
+        "",
+        "## Beside the authors' code (oscillators, figure ref_oscillator)",
+        "",
+        f"Reference numbers: {info['source']} (`higbench/figures/reference.py`).",
+        "higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n",
+        *md_table(
+            ["optimizer", "training time [s]", "authors' code", "higbench"],
+            [[r["optimizer"], f"{r['t']:g}", _num(r["reference"]), _num(r["higbench"])] for r in info["loss_points"]],
+        ),
+        "",
+        *md_table(
+            ["problem", "optimizer", "b", "authors' code, s/update", "higbench, s/update", "authors' memory [GB]"],
+            [
+                [
+                    r["problem"],
+                    r["optimizer"],
+                    r["batch_size"],
+                    f"{r['update_s']:g}",
+                    _num(r.get("higbench_update_s")),
+                    _num(r.get("memory_gb")),
+                ]
+                for r in info["update_seconds"]
+            ],
+        ),
+    ]
+
+
+def _claim_row(r: dict) -> list[str]:
+    cause, seeds = r.get("cause"), r.get("seeds")
+    seeds_text = f", {seeds} seed(s)" if isinstance(seeds, int) and 0 < seeds < 99 else ""
+    return [
+        f"{_cell(r['id'])}: {_cell(r['statement'])}",
+        ", ".join(r["figures"]),
+        _cell(r["paper"]),
+        _cell(r["measured"]),
+        f"{_cell(r['budget'])} ({r['preset']}{seeds_text})",
+        f"**{r['verdict']}**",
+        _cell(f"{cause[0]}: {cause[1]}" if cause else "-"),
+        _cell(r["why"]),
+    ]
+
+
+def _figure_row(fid: str, info: dict | None) -> list[str]:
+    if info is None:
+        return [fid, "-", "-", "not drawn", ""]
+    done = sum(r["status"] in ("completed", "diverged") for r in info["runs"])
+    budgets = "; ".join(f"{k}: {v}" for k, v in info.get("budgets", {}).items())
+    notes = " ".join(info.get("notes", [])) + (" plot failed: see the sidecar" if "error" in info else "")
+    return [fid, info["preset"], _cell(budgets), f"{done} / {len(info['runs'])}", _cell(notes)]
 
 
 def write_report(out_dir: Path) -> Path:
     rows = collect(out_dir)
-    counts: dict[str, int] = {}
-    for r in rows:
-        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
+    counts = Counter(r["verdict"] for r in rows)
     presets = sorted({r["preset"] for r in rows if r["preset"] != "-"})
-    lines = [HEADER]
-    lines.append(
-        f"Presets of the runs used: {', '.join(presets) or '-'}. Verdicts: "
-        + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
-        + "."
-    )
+    verdicts = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    lines = [HEADER, f"Presets of the runs used: {', '.join(presets) or '-'}. Verdicts: {verdicts}."]
     lines.append(f"Generated {time.strftime('%Y-%m-%d %H:%M:%S')}.\n")
-    lines.append("| claim | figure | paper | measured here | budget | verdict | root cause | rule / explanation |")
-    lines.append("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        fig = ", ".join(r["figures"])
-        cause = r.get("cause")
-        cause_text = f"{cause[0]}: {cause[1]}" if cause else "-"
-        seeds = r.get("seeds")
-        seeds_text = f", {seeds} seed(s)" if isinstance(seeds, int) and 0 < seeds < 99 else ""
-        lines.append(
-            f"| {_cell(r['id'])}: {_cell(r['statement'])} | {fig} | {_cell(r['paper'])} | {_cell(r['measured'])} | "
-            f"{_cell(r['budget'])} ({r['preset']}{seeds_text}) | **{r['verdict']}** | {_cell(cause_text)} | {_cell(r['why'])} |"
-        )
-    lines += reference_section(out_dir)
+    header = ["claim", "figure", "paper", "measured here", "budget", "verdict", "root cause", "rule / explanation"]
+    lines += md_table(header, map(_claim_row, rows)) + reference_section(out_dir)
     lines += ["", "## Figures and tables in this directory", ""]
-    lines.append("| id | preset | budget per run | runs done / needed | notes |")
-    lines.append("|---|---|---|---|---|")
     drawn = sidecars(out_dir)
-    for fid in registry.figures():
-        info = drawn.get(fid)
-        if info is None:
-            lines.append(f"| {fid} | - | - | not drawn | |")
-            continue
-        done = sum(r["status"] in ("completed", "diverged") for r in info["runs"])
-        budgets = "; ".join(f"{k}: {v}" for k, v in info.get("budgets", {}).items())
-        notes = " ".join(info.get("notes", [])) + (" plot failed: see the sidecar" if "error" in info else "")
-        lines.append(f"| {fid} | {info['preset']} | {_cell(budgets)} | {done} / {len(info['runs'])} | {_cell(notes)} |")
+    header = ["id", "preset", "budget per run", "runs done / needed", "notes"]
+    lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in registry.figures()])
     path = Path(out_dir) / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -1,24 +1,28 @@
-"""What a figure is: the runs it needs (as Hydra overrides) and a plot function.
+"""What a figure is, as data: its runs (``Sweep``s of Hydra overrides, values per preset) and
+its panels (``higbench.figures.plot``), or a plot function for the few that draw fields.
 
-A ``Figure`` declares its runs as ``Sweep`` objects: a cartesian product of Hydra
-overrides (one run per combination and seed), with the budget and the grid chosen by the
-``Preset``. ``higbench.figures.runs`` turns them into jobs, finds the ones already run
-(same resolved config), runs the missing ones through the CLI's Hydra multirun, and the
-plot function then reads only the run files (``higbench.figures.data.FigureData``).
+Presets. ``PRESETS`` maps each preset to the one it falls back to: a value (grid, seeds,
+budget, per-problem override) with no entry for a preset is taken from the next preset of
+its chain (smoke -> quick -> paper). Adding a preset is one entry here plus the values it
+wants different from its fallback (``Budget(seconds={..., "standard": 600})``,
+``By(paper, standard=[...])``); everything else it inherits.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
 from typing import Any
 
-PRESETS = ("smoke", "quick", "paper")
-
-# Per-problem overrides that a preset applies to every run of that problem (the config
-# group choice, e.g. "dipole_cnn", is the key). smoke: small test sets so that every figure
-# runs in a test; quick: a smaller dipole test set (an evaluation of 1024 samples through
-# 384 Crank-Nicolson steps costs about as much as 10 Adam updates on 2 cores).
+PRESETS: dict[str, str | None] = {"smoke": "quick", "quick": "paper", "paper": None}
+# Presets whose runs stop after this many updates whatever their seconds budget (code paths only).
+UPDATES_ONLY = {"smoke": 2}
+# Overrides a preset applies to every run of a problem (key: the problem's config group).
+# smoke: small test sets; quick: a smaller dipole test set (an evaluation of 1024 samples
+# through 384 Crank-Nicolson steps costs about as much as 10 Adam updates on 2 cores).
 PROBLEM_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
     "smoke": {
         "toy": {"problem.test_size": 64},
@@ -27,20 +31,22 @@ PROBLEM_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
         "dipole": {"problem.test_size": 16},
         "dipole_cnn": {"problem.test_size": 16},
     },
-    "quick": {
-        "dipole": {"problem.test_size": 256},
-        "dipole_cnn": {"problem.test_size": 256},
-    },
-    "paper": {},
+    "quick": {"dipole": {"problem.test_size": 256}, "dipole_cnn": {"problem.test_size": 256}},
 }
 
-SMOKE_UPDATES = 2  # smoke preset: every run stops after this many updates
+
+def lookup(values: dict[str, Any], preset: str, default: Any = None) -> Any:
+    """``values[preset]``, else the value of the next preset of its fallback chain."""
+    name: str | None = preset
+    while name is not None:
+        if name in values:
+            return values[name]
+        name = PRESETS.get(name)
+    return default
 
 
 @dataclass(frozen=True)
 class Preset:
-    """smoke (code paths, tiny budgets), quick (scaled-down budgets), paper (the paper's)."""
-
     name: str
     runs_root: str = "outputs"  # where runs and benchmark outputs (<runs_root>/bench) are looked for
 
@@ -48,91 +54,134 @@ class Preset:
         if self.name not in PRESETS:
             raise ValueError(f"--preset {self.name!r}: expected one of {', '.join(PRESETS)}")
 
-    def pick(self, paper: Any, quick: Any = None, smoke: Any = None) -> Any:
-        """The value for this preset; quick falls back to paper, smoke to quick."""
-        if self.name == "paper":
-            return paper
-        if self.name == "quick":
-            return paper if quick is None else quick
-        return smoke if smoke is not None else (paper if quick is None else quick)
-
     def problem_overrides(self, problem: str) -> dict[str, Any]:
-        return dict(PROBLEM_OVERRIDES[self.name].get(problem, {}))
+        return dict(lookup({k: v[problem] for k, v in PROBLEM_OVERRIDES.items() if problem in v}, self.name, {}))
+
+
+class By:
+    """A value per preset: ``By([1e-4, 1e-3, 1e-2], smoke=[1e-4])``; missing presets fall back."""
+
+    def __init__(self, paper: Any, quick: Any = None, smoke: Any = None, **more: Any):
+        self.values = {"paper": paper, **{k: v for k, v in dict(quick=quick, smoke=smoke, **more).items() if v is not None}}
+
+    def at(self, preset: Preset) -> Any:
+        return lookup(self.values, preset.name)
+
+
+def at(value: Any, preset: Preset) -> Any:
+    """``value`` with every ``By`` inside it (dicts, lists, dataclasses) chosen for ``preset``."""
+    if isinstance(value, By):
+        return value.at(preset)
+    if isinstance(value, dict):
+        return {k: at(v, preset) for k, v in value.items()}
+    if isinstance(value, list):
+        return [at(v, preset) for v in value]
+    if isinstance(value, (Sweep, SeedSearch)):
+        return dataclasses.replace(value, **{f.name: at(getattr(value, f.name), preset) for f in dataclasses.fields(value)})
+    return value
 
 
 @dataclass(frozen=True)
 class Budget:
-    """A run's budget under each preset.
-
-    seconds: training-clock seconds per preset (``{"paper": 3600, "quick": 120}``); the
-    smoke preset always stops after ``SMOKE_UPDATES`` updates. updates: a budget in updates
-    instead (timing runs of the tables), with one evaluation at the start and one at the end.
-    """
+    """A run's budget per preset: training seconds (``{"paper": 3600, "quick": 120}``) or a number
+    of updates (timing runs, one evaluation at the start and one at the end)."""
 
     seconds: dict[str, float] | None = None
     updates: dict[str, int] | None = None
 
     def overrides(self, preset: Preset) -> dict[str, Any]:
         if self.updates is not None:
-            n = int(self.updates.get(preset.name, self.updates.get("quick", 1)))
+            n = int(lookup(self.updates, preset.name, 1))
             return {"budget.seconds": None, "budget.max_updates": n, "eval_unit": "updates", "eval_every": n}
-        if preset.name == "smoke" or self.seconds is None:
-            return {"budget.seconds": None, "budget.max_updates": SMOKE_UPDATES, "eval_unit": "updates", "eval_every": 1}
-        return {"budget.seconds": float(self.seconds[preset.name])}
+        if preset.name in UPDATES_ONLY or self.seconds is None:
+            n = UPDATES_ONLY.get(preset.name, 2)
+            return {"budget.seconds": None, "budget.max_updates": n, "eval_unit": "updates", "eval_every": 1}
+        return {"budget.seconds": float(lookup(self.seconds, preset.name))}
 
     def describe(self, preset: Preset) -> str:
         o = self.overrides(preset)
-        if o.get("budget.max_updates") is not None:
-            return f"{o['budget.max_updates']} updates"
-        return f"{o['budget.seconds']:g} s"
+        return f"{o['budget.max_updates']} updates" if o.get("budget.max_updates") is not None else f"{o['budget.seconds']:g} s"
 
 
 @dataclass
 class SeedSearch:
-    """The authors' "best stable run of a fixed seed": short runs over ``seeds`` first, then
-    the sweep's run with the best stable one (``runs.pick_seed``: completed, final test loss
-    finite and below the initial one, lowest final loss). ``overrides`` replace the sweep's
-    values in the search runs (e.g. fig13 searches at the default tau and then sweeps tau
-    with that seed). The search runs form the sweep ``<name>/search`` of the figure."""
+    """The authors' "best stable run of a fixed seed": short runs over ``seeds`` first, then the
+    sweep's run with the best stable one (``runs.pick_seed``). ``overrides`` replace the sweep's
+    values in the search runs; the search runs form the sweep ``<name>/search``."""
 
-    seeds: list[int]
+    seeds: list[int] | By
     budget: Budget
     overrides: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
 class Sweep:
-    """Runs of one setting family: fixed overrides x grid (cartesian) x seeds.
-
-    name: the sweep's key inside its figure (plots and init_from refer to it).
-    fixed: overrides every run gets, in order ("problem", "optimizer" first).
-    grid: swept overrides, key -> values (already chosen for the preset).
-    init_from: the name of another sweep of the same figure; each run here starts from the
-    final weights of that sweep's run with the same seed (or its only run).
-    """
+    """Runs of one setting: fixed overrides x grid (cartesian) x seeds; values may be ``By``.
+    init_from: another sweep of the figure whose final weights (same seed) each run starts from."""
 
     name: str
     fixed: dict[str, Any]
     budget: Budget
-    grid: dict[str, list[Any]] = field(default_factory=dict)
-    seeds: list[int] = field(default_factory=lambda: [0])
+    grid: dict[str, Any] = field(default_factory=dict)
+    seeds: Any = field(default_factory=lambda: [0])
     init_from: str | None = None
-    seed_search: SeedSearch | None = None  # seeds then come from a search (one run per grid point)
+    seed_search: SeedSearch | None = None
 
 
 @dataclass
 class Figure:
-    """One figure or table of the paper.
-
-    runs(preset) -> list[Sweep]; plot(data) draws/writes the outputs from the run files
-    (``data`` is a ``FigureData``). kind: "figure" (png + pdf + data csv) or "table"
-    (md + csv). title: the paper's caption, shortened.
-    """
+    """One figure or table: its sweeps (a list, or a function of the preset) and either its
+    panels (drawn by ``plot.draw``) or a plot function ``plot(data)``."""
 
     id: str
     title: str
-    runs: Callable[[Preset], list[Sweep]]
-    plot: Callable[..., None]
+    sweeps: list[Sweep] | Callable[[Preset], list[Sweep]]
+    plot: Callable[..., None] | None = None
+    panels: list = field(default_factory=list)
+    size: tuple = (1, 1, 6.4, 4.2)  # columns, rows, width and height of one panel (inches)
     kind: str = "figure"
-    family: str = ""
     notes: Callable[[Preset], list[str]] | None = None  # deviations from the paper at a preset
+    sharey: bool = False
+
+    def runs(self, preset: Preset) -> list[Sweep]:
+        return at(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)
+
+    def draw(self, data) -> None:
+        from higbench.figures import plot
+
+        (self.plot or plot.draw)(data)
+
+
+# -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----
+
+
+@cache
+def _conf(rel: str) -> dict:
+    import yaml
+
+    from higbench.cli import config_dir
+
+    return yaml.safe_load((Path(config_dir()) / rel).read_text()) or {}
+
+
+def _scalar(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+def paper_grid(experiment: str, key: str) -> list:
+    """A swept key's values in ``conf/experiment/<experiment>.yaml`` (the paper's grid), in order."""
+    params = _conf(f"experiment/{experiment}.yaml")["hydra"]["sweeper"]["params"]
+    return [_scalar(v) for v in str(params[key]).split(",")]
+
+
+def paper_setting(pair: str, key: str) -> Any:
+    """A per-pair default of ``conf/problem_optimizer/<pair>.yaml`` (the paper's table 2), dotted key."""
+    node: Any = _conf(f"problem_optimizer/{pair}.yaml")
+    for part in key.split("."):
+        node = node.get(part) if isinstance(node, dict) else None
+    return node

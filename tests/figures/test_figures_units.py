@@ -273,3 +273,105 @@ def test_claim_helpers_crossing_time_and_plateau():
     )
     assert plateau_fraction(stall) == pytest.approx(0.75)
     assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30, 5]))
+
+
+# Grids of the appendix's figures: conf/experiment/<name>.yaml (the one copy) -> (figure, sweep).
+CONF_GRIDS = {
+    "fig5_adadelta": ("fig5", "adadelta"), "fig5_adagrad": ("fig5", "adagrad"), "fig5_sgd": ("fig5", "sgd"),
+    "fig5_rmsprop": ("fig5", "rmsprop"), "fig6_adam": ("fig6", "adam"), "fig8_dipole_adam": ("fig8", "adam"),
+    "fig9_dipole_hig": ("fig9", "hig"), "fig10_dipole_cnn_adam": ("fig10", "adam"), "fig11_dipole_cnn_hig": ("fig11", "hig"),
+    "fig12a_beta": ("fig12", "beta"), "fig12b_kappa": ("fig12", "kappa"), "fig13_tau": ("fig13", "hig"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("experiment", CONF_GRIDS)
+def test_paper_preset_runs_the_experiment_configs_grids(experiment):
+    import yaml
+
+    from higbench.cli import config_dir
+
+    params = yaml.safe_load((Path(config_dir()) / "experiment" / f"{experiment}.yaml").read_text())["hydra"]["sweeper"]["params"]
+    fid, sweep = CONF_GRIDS[experiment]
+    jobs = [j for j in expand(registry.figures()[fid], Preset("paper")) if j.sweep == sweep]
+    for key, text in params.items():
+        if key == "optimizer":
+            continue  # fig13 sweeps the optimizer as two sweeps
+        want = sorted(float(v) for v in str(text).split(","))
+        assert sorted({float(j.overrides[key]) for j in jobs}) == want, (experiment, key)
+    grid = [k for k in params if k != "optimizer"]
+    assert len(jobs) == np.prod([len(str(params[k]).split(",")) for k in grid]), experiment  # the full cartesian grid
+
+
+def test_table2_paper_column_is_the_per_pair_defaults():
+    from higbench.figures.tables import paper_table2
+
+    assert paper_table2("adam") == "512 / 3e-4 / -" and paper_table2("gn") == "128 / - / 1e-6"
+    assert paper_table2("hig") == "128 / 1 / 1e-6" and paper_table2("rmsprop") == "512 / 1e-4 / -"
+
+
+def test_a_new_preset_is_one_entry_and_falls_back(monkeypatch):
+    from higbench.figures import spec
+
+    monkeypatch.setitem(spec.PRESETS, "standard", "quick")  # what adding a preset takes
+    quick, standard = Preset("quick"), Preset("standard")
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60}).overrides(standard) == {"budget.seconds": 60.0}
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60, "standard": 300}).overrides(standard) == {"budget.seconds": 300.0}
+    assert spec.By([1, 2, 3], quick=[1]).at(standard) == [1] and spec.By([1, 2, 3], standard=[2]).at(quick) == [1, 2, 3]
+    assert standard.problem_overrides("dipole") == quick.problem_overrides("dipole")
+    for fid, fig in registry.figures().items():  # every figure expands, as at its fallback
+        assert [j.override_list() for j in expand(fig, standard)] == [j.override_list() for j in expand(fig, quick)], fid
+
+
+def _fake_figure_data(figure, rows, tmp_path):
+    """A FigureData over fake finished runs: rows of (sweep, seed, overrides, status, losses)."""
+    import pandas as pd
+
+    from higbench.figures.data import FigureData, RunData
+
+    d = FigureData(figure, Preset("quick"), tmp_path, [], budgets={"all runs": "1 s"})
+    for sweep, seed, ov, status, losses in rows:
+        job = Job(figure.id, sweep, dict(ov), seed=seed, status=status)
+        job.path, job.config = tmp_path / f"{len(d.jobs)}.h5", {"seed": seed}
+        for key, value in {"optimizer.name": ov.get("optimizer", "hig"), **ov}.items():
+            if key == "optimizer":
+                continue  # the config group choice: optimizer.name
+            node = job.config
+            *parents, last = key.split(".")
+            for part in parents:
+                node = node.setdefault(part, {})
+            node[last] = value
+        run = RunData(job)
+        run.__dict__["_run"] = ({"status_step": 3}, pd.DataFrame({"wall_time": [0.0, 1.0, 2.0], "test_loss": losses}))
+        d.jobs.append(job)
+        d._cache[id(job)] = run
+    return d
+
+
+def test_plot_layer_facets_and_lines_record_what_they_draw(tmp_path):
+    from higbench.figures.plot import Curves, Facets, Series, draw, draw_curves, new_figure
+    from higbench.figures.spec import Figure
+
+    values = [(b, t, lr) for b in (8, 16) for t in (1e-5, 1e-2) for lr in (0.5, 1.0)]
+    settings = [{"optimizer": "hig", "batch_size": b, "optimizer.tau": t, "optimizer.lr": lr} for b, t, lr in values]
+    grid = [("hig", seed, ov, "completed", [1.0, 0.5, 0.1]) for ov in settings for seed in (0, 1)]
+    facets = Figure("figF", "t", [], panels=[Facets(["hig"], "optimizer.tau", "optimizer.lr", rows="batch_size")])
+    d = _fake_figure_data(facets, grid, tmp_path)
+    draw(d)
+    panels = sorted({r["panel"] for r in d.rows})
+    assert panels == ["b=16 τ=0.01", "b=16 τ=1e-5", "b=8 τ=0.01", "b=8 τ=1e-5"]
+    assert {r["series"] for r in d.rows} == {"η=0.5", "η=1"}
+    assert len(d.rows) == len(grid) * 3 and d.banded and "shaded: min-max over seeds" in d.caption()
+    assert (tmp_path / "figF.png").stat().st_size > 0
+
+    kappas = [("kappa", 0, {"optimizer": "hig", "optimizer.kappa": k}, st, ls)
+              for k, st, ls in ((1.0, "diverged", [1.0, 5.0, float("nan")]), (-0.5, "completed", [1.0, 0.1, 0.01]))]  # fmt: skip
+    lines = Figure(
+        "figL", "t", [], panels=[Curves("k", [Series("kappa", "optimizer.kappa", label="{kv}", color="viridis", reverse=True)])]
+    )
+    d = _fake_figure_data(lines, kappas, tmp_path)
+    fig, axes = new_figure()
+    draw_curves(d, axes[0, 0], lines.panels[0])
+    legend = [t.get_text() for t in axes[0, 0].get_legend().get_texts()]
+    assert legend == ["κ=1 (diverged at step 3)", "κ=-0.5"]  # largest first, the divergence named once
+    assert [r["series"] for r in d.rows[::3]] == ["κ=1", "κ=-0.5"]
+    assert d.diverged_marked and "X: last finite evaluation" in d.caption()
