@@ -14,7 +14,7 @@ from higbench.figures.data import FigureData, legend, new_figure, num, semilogy_
 from higbench.figures.registry import Claim, claim, register
 from higbench.figures.spec import Budget, Figure, Preset, Sweep
 
-BUDGET = Budget(seconds={"paper": 3600, "quick": 30})
+BUDGET = Budget(seconds={"paper": 3600, "quick": 30, "standard": 120})
 BETAS = [0.0, -0.1, -0.2, -0.3, -0.4, -0.5]
 KAPPAS = [1.0, 0.5, 0.0, -0.25, -0.5, -0.75, -1.0]
 TAUS = [1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]

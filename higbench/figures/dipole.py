@@ -13,8 +13,8 @@ from higbench.figures.data import COLORS, FigureData, RunData, legend, new_figur
 from higbench.figures.registry import Claim, claim, register
 from higbench.figures.spec import Budget, Figure, Preset, Sweep
 
-MAIN = Budget(seconds={"paper": 3600, "quick": 60})
-GRID = Budget(seconds={"paper": 3600, "quick": 20})
+MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 270})
+GRID = Budget(seconds={"paper": 3600, "quick": 20, "standard": 120})
 FIG4B_ADAM = [1e-4, 1e-3, 1e-2]
 FIG4B_HIG = [0.1, 0.5, 1.0]
 TAUS = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2]

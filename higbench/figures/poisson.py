@@ -20,7 +20,7 @@ from higbench.figures.data import COLORS, FigureData, RunData, join_label, legen
 from higbench.figures.registry import Claim, claim, register
 from higbench.figures.spec import Budget, Figure, Preset, Sweep
 
-MAIN = Budget(seconds={"paper": 3600, "quick": 60})
+MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 60})
 ADAM_LRS = [1e-4, 1e-3, 1e-2]
 HIG_LRS = [0.005, 0.02, 0.1]
 ADAM_LR, HIG_LR = 1e-4, 0.02  # figure 3c

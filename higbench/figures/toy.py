@@ -18,7 +18,7 @@ from higbench.figures.spec import Budget, Figure, Preset, Sweep
 
 GAMMAS = (1.0, 0.01)
 OPTIMIZERS = ("adam", "gn", "hig")
-BUDGET = Budget(seconds={"paper": 120, "quick": 30})
+BUDGET = Budget(seconds={"paper": 120, "quick": 30, "standard": 60})
 # A tanh neuron whose output hardly varies over the data set and sits near +-1.
 SATURATED_STD, SATURATED_MEAN = 0.1, 0.9
 
