@@ -115,8 +115,9 @@ FIDELITY: dict[str, dict] = {
             "disagreement",
             "HIG passes Adam (paper setting) much earlier here than the paper's ~3 min: in the quick preset (idle "
             "machine, 120 s) from t = 8 s on, after ~300 HIG updates where the paper's 3 minutes are ~1,230 HIG "
-            "updates (0.146 s each); it passes both re-tuned Adam settings (b=2048) by t = 16 s. The time of a crossing does not carry over between machines: HIG's update costs 1.8 Adam "
-            "updates in the paper and 7-10 here",
+            "updates (0.146 s each); it passes both re-tuned Adam settings (b=2048) by t = 16 s. The time of a "
+            "crossing does not carry over between machines: HIG's update costs 1.8 Adam updates in the paper and "
+            "7-10 here",
         ),
     },
     "osc-5": {
