@@ -14,7 +14,7 @@ from higbench.figures.oscillator import gn_search, gn_search_summary
 from higbench.figures.plot import Curves, Series
 from higbench.figures.spec import Budget, By, Figure, Sweep, paper_grid
 
-BUDGET = Budget(seconds={"paper": 3600, "quick": 30})
+BUDGET = Budget(seconds={"paper": 3600, "quick": 30, "standard": 120})
 BETAS = paper_grid("fig12a_beta", "optimizer.beta")
 KAPPAS = paper_grid("fig12b_kappa", "optimizer.kappa")
 TAUS = paper_grid("fig13_tau", "optimizer.tau")

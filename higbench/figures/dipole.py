@@ -13,8 +13,8 @@ from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, By, Figure, Preset, Sweep, paper_grid
 
-MAIN = Budget(seconds={"paper": 3600, "quick": 60})
-GRID = Budget(seconds={"paper": 3600, "quick": 20})
+MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 270})
+GRID = Budget(seconds={"paper": 3600, "quick": 20, "standard": 120})
 FIG4B_ADAM, FIG4B_HIG = [1e-4, 1e-3, 1e-2], [0.1, 0.5, 1.0]  # not given in the paper
 PLATEAU = (0.4, 0.6)  # "Adam stagnates at a loss value of 0.5"
 LE, HE = "test_low_energy_loss", "test_high_energy_loss"

@@ -12,8 +12,44 @@ from __future__ import annotations
 
 PAPER = 1800.0  # claims on final levels after the paper's hour: half of it at least
 
+
+# Budgets sized by updates rather than seconds. A claim about the level the paper reached
+# after its hour is a claim about what that many updates achieve; higbench's cost per update
+# on this CPU differs from the paper's GPU (and differently for each optimizer), so such a
+# claim needs the paper's update count at higbench's per-update time, not 3600 s:
+#
+#     seconds here = 3600 / (paper's s per update) * (higbench's s per update here)
+#
+# Paper, tables 3-5 (GPU): oscillator HIG b=128 0.146 s, Adam b=512 0.081 s; Poisson HIG
+# b=64 13.8 s; dipole HIG b=16 0.60 s, Adam b=256 0.40 s. GN's update is the same
+# computation as HIG's (another exponent), so GN is given HIG's count. higbench, one core
+# each (as the figures run them: threads=1, two jobs on two cores; docs/benchmarks.md,
+# sitting A and the 300 s run on an idle machine): oscillator HIG b=128 26-35 ms (30 ms
+# taken), Adam b=512 3.3-4.5 ms (4.5 ms taken); dipole HIG b=16 43.6 ms; Poisson HIG b=64
+# 11.4 s. Under other load the per-update times grow (oscillator HIG b=128 39 ms at load
+# 4-7), so a budget sized this way is a lower bound.
+def paper_hour_here(paper_update_s: float, here_update_s: float) -> float:
+    """Training seconds in which higbench makes the paper's hour of updates (rounded up to 10 s)."""
+    return float(-(-3600.0 / paper_update_s * here_update_s // 10) * 10)
+
+
+OSC_HIG_HOUR = paper_hour_here(0.146, 0.030)  # 24,658 updates: 740 s
+OSC_ADAM_HOUR = paper_hour_here(0.081, 0.0045)  # 44,444 updates: 200 s
+DIPOLE_HIG_HOUR = paper_hour_here(0.60, 0.0436)  # 6,000 updates: 270 s
+POISSON_HIG_HOUR = paper_hour_here(13.8, 11.4)  # 261 updates at b=64: 2,980 s
+
 FIDELITY: dict[str, dict] = {
-    "toy-1": {"min_seconds": 20},
+    "toy-1": {
+        "min_seconds": 20,
+        "cause": (
+            "disagreement",
+            "Adam at the paper's eta=0.3 (appendix B.1, both gamma) reaches a noise floor within 5 s and stays there: "
+            "90 s probes (3 seeds, load 3.6-6.4 on 2 cores) give test losses jumping between 3e-3 and 5e-2 from 5 s "
+            "to 90 s (17-23k updates), 1.5/1.6/2.3 decades at the end, no trend from 30 s to 90 s; a longer budget does "
+            "not help. A smaller eta does reach the paper's ~3 decades: at 30 s eta=0.03 2.8 decades (1.0e-3), eta=0.01 "
+            "2.8 (1.1e-3), both still falling (eta=0.1 sticks at 0.46, seed 0). GN and HIG pass at the paper's settings",
+        ),
+    },
     "toy-2": {
         "min_seconds": 30,
         "min_seeds": 3,
@@ -30,42 +66,76 @@ FIDELITY: dict[str, dict] = {
         "min_seconds": 20,
         "min_seeds": 3,
         "cause": (
-            "open",
-            "at load 7-9 HIG made 1100-1350 updates in 30 s and ended at 2.9-3.8e-2 (3 seeds) behind Adam eta=0.3 "
-            "(5.6e-3-2.5e-2); an earlier measurement gave HIG 6.1e-4 against Adam 3.0e-3 at 30 s on a quieter machine"
-            ": likely updates lost to load, to be re-run on an idle machine",
+            "budget",
+            "how far HIG gets ahead within 30 s depends on its updates per second, and HIG is the one still falling: "
+            "at 30 s on an idle machine (quick preset) HIG 7.9e-4 vs Adam 4.1e-3 (5.2x); re-measured at load 3.4-5.8 "
+            "(3 seeds, 30 s): HIG 1.5/3.1/4.4e-3 after 3,345-4,798 updates vs Adam (eta=0.3) 2.9/3.6/3.8e-3 and GN "
+            "9.2e-3-5.9e-2 -- HIG lowest by median (3.1e-3 vs 3.6e-3) but by less than 2x. HIG keeps falling (seed 0: "
+            "3.8e-3 at 20 s, 1.6e-3 at 30 s; seed 1 run for 60 s: 2.3e-3 at 30 s, 8.5e-4 at 60 s, 7,475 updates) "
+            "while Adam sits on its noise floor (4.3e-3 at 20 s, 4.0e-3 at 30 s): the standard preset's 60 s "
+            "leave HIG ~4x ahead even under load",
         ),
     },
     "toy-4": {"min_seconds": 20, "min_seeds": 3},
     "osc-1": {
-        "min_seconds": 600,
+        "min_seconds": OSC_ADAM_HOUR,
         "cause": (
             "budget",
-            "the authors' own code on this CPU kind reaches 2.1e-3 at 120 s and 4.2e-4 at 240 s with Adam "
-            "(reference.py): ~1e-4 needs 10 min or more",
+            "Adam's ~1e-4 is its level after the paper's hour, 44,400 updates at 0.081 s (b=512); higbench makes them "
+            "in ~200 s (4.5 ms per update on one idle core), while the authors' TensorFlow code on this CPU kind "
+            "(0.034 s per update) reaches only 4.2e-4 at 240 s (reference.py)",
         ),
     },
     "osc-2": {
-        "min_seconds": PAPER,
+        "min_seconds": OSC_HIG_HOUR,
         "cause": (
             "budget",
-            "GN's best stable seed (7 of 8 searched seeds diverge or end above their start at 15 s) falls to "
-            "8.5e-3 in 120 s (246 updates, load 4); the paper's 1e-6 is after an hour",
+            "GN's 1e-6 is its level after the paper's hour: ~24,700 updates (0.146 s per b=128 update in the paper), "
+            "~740 s here. Within 120 s (load 4-7, 2 cores) GN's best stable seed (7) falls to 8.0e-6 at b=128 (2,079 "
+            "updates, 59 ms each) and 1.2e-5 at b=32 (7,889 updates), still falling; of 8 searched seeds 7 diverge "
+            "or end above their start at 15 s",
         ),
     },
-    "osc-3": {"min_seconds": PAPER, "min_seeds": 3},
-    "osc-4": {
-        "min_seconds": 540,
+    "osc-3": {
+        "min_seconds": OSC_HIG_HOUR,
         "min_seeds": 3,
         "cause": (
             "budget",
-            "a crossing at ~3 min needs runs of several minutes; the authors' own HIG needs 149 s for its first "
-            "0.097 on this CPU kind (graph tracing included)",
+            "HIG's 1e-7 is its level after the paper's hour: ~24,700 updates at 0.146 s (b=128), ~740 s here at "
+            "26-35 ms per update on one idle core. Measured so far: 2.2e-6 at 300 s (11,638 updates, idle machine, "
+            "docs/benchmarks.md), 2.4e-5 at 120 s (2,545 updates, load 4-7), still falling",
         ),
     },
-    "osc-5": {"min_seconds": 120},
+    "osc-4": {
+        # The crossing's time is hardware-bound (HIG/Adam cost per update: 1.8 in the paper, 7-10 here);
+        # a run must at least last past the paper's ~3 minutes to judge it.
+        "min_seconds": 180,
+        "min_seeds": 3,
+        "cause": (
+            "disagreement",
+            "HIG passes Adam (paper setting) much earlier here than the paper's ~3 min: in the quick preset (idle "
+            "machine, 120 s) from t = 8 s on, after ~300 HIG updates where the paper's 3 minutes are ~1,230 HIG "
+            "updates (0.146 s each); it passes both re-tuned Adam settings (b=2048) by t = 16 s. The time of a "
+            "crossing does not carry over between machines: HIG's update costs 1.8 Adam updates in the paper and "
+            "7-10 here",
+        ),
+    },
+    "osc-5": {
+        "min_seconds": 120,
+        "cause": (
+            "deviation",
+            "at a fixed wall clock a smaller batch buys more updates on this CPU than on the paper's GPU: HIG b=32 "
+            "costs 13.7 ms per update, b=128 39.1 ms (2.9x; the paper's table 3: 0.087 vs 0.146 s, 1.7x). 120 s "
+            "probes from one seed each (load 4-7, 2 cores): HIG b=32 makes 7,879 updates to 1.1e-5, b=128 2,545 "
+            "updates to 2.4e-5 (b=32 lower at equal time), but at equal update counts b=128 is lower: 6.2e-5 vs "
+            "2.2e-4 at 1,000 updates, 3.2e-5 vs 1.2e-4 at 2,000. GN (seed 7): b=128 lower both ways (8.0e-6 in "
+            "2,079 updates vs 1.2e-5 in 7,889 at b=32; at 1,000 updates 1.5e-5 vs 8.5e-5). The paper's trend holds "
+            "per update; per second on this CPU it holds for GN and not for HIG",
+        ),
+    },
     "poi-1": {
-        "min_seconds": PAPER,
+        # The paper's hour of b=64 HIG updates (261 at 13.8 s) takes ~3,000 s here (11.4 s each).
+        "min_seconds": max(PAPER, POISSON_HIG_HOUR),
         "cause": ("budget", "Adam falls 440 -> 65 in 60 s and to 26 in 60 s more (1.2 decades in 2 min); still falling"),
     },
     "poi-2": {
@@ -82,12 +152,44 @@ FIDELITY: dict[str, dict] = {
     },
     "poi-3": {"min_seconds": 300},
     "poi-4": {"min_seconds": 60, "min_seeds": 3},
-    "dip-1": {"min_seconds": 300, "min_seeds": 3},
-    "dip-2": {"min_seconds": 60, "min_seeds": 3},
+    "dip-1": {
+        # The plateau is over within ~30 s here (Adam eta=1e-4, b=16, ~2,500 updates), so 60 s show it;
+        # longer runs shrink its share of the run below the rule's 20% (see the cause).
+        "min_seconds": 60,
+        "min_seeds": 3,
+        "cause": (
+            "bug",
+            "open, in the rule: it asks for >= 20% of the run's time near 0.5, a share that shrinks with the budget. "
+            "A 90 s probe (seed 0, load 4-5) shows the plateau plainly: Adam (eta=1e-4, b=16) sits at 0.43-0.48 from "
+            "4 s to 24 s (600-2,900 updates) and leaves it at ~28 s (27% of 90 s, 9% of a 270 s run); HIG leaves the "
+            "initial loss within ~12 s without a plateau. The duration of the plateau, not its share, is the measure",
+        ),
+    },
+    "dip-2": {
+        "min_seconds": 60,
+        "min_seeds": 3,
+        "cause": (
+            "bug",
+            "open, in the rule: it takes the median of HE/LE over every evaluation of the run, while the paper's "
+            "claim is about the initial stage; once Adam leaves its plateau both losses fall together and dominate "
+            "the median. 90 s probe (seed 0, 256 test states, load 4-5): during Adam's plateau (total loss 0.43-0.48, "
+            "4-24 s) LE is 0.05-0.11 and HE 0.41-0.44, HE/LE 8.6, 7.0, 5.7, 4.8, 3.9, 2.9 -- Adam fits the low-energy "
+            "component first and LE even rises again (0.05 -> 0.11) before HE falls, as the paper describes; after "
+            "28 s the ratio is 0.5-1.0 and the median over the run 0.71. HIG (eta=0.5) passes the same stage in ~130 "
+            "updates (HE/LE 0.94 and 2.8 at losses 1.0 and 0.87), then 0.3-0.6 (median over the run 0.34). Measured "
+            "while the total loss is >= 0.4: Adam 5.2 (6 evaluations), HIG 1.9 (2): Adam's part of the rule holds, "
+            "HIG's 3x margin narrowly does not (one seed, evaluations every 4 s resolve HIG's stage poorly)",
+        ),
+    },
     "dip-3": {"min_seconds": 60, "min_seeds": 3},
     "dip-4": {
-        "min_seconds": PAPER,
-        "cause": ("budget", "the pure-physics limit ~1e-6 is the end point of hour-long runs"),
+        "min_seconds": DIPOLE_HIG_HOUR,
+        "cause": (
+            "budget",
+            "the pure-physics limit ~1e-6 is the end point of the paper's hour-long runs: ~6,000 HIG updates at "
+            "0.60 s (b=16), ~270 s here at 44 ms per update (idle core). A 90 s probe (seed 0, eta=0.5, load 4-5, "
+            "62 ms per update) reached 1.3e-6 after 1,386 updates",
+        ),
     },
     "dip-5": {"min_seconds": 60},
     "dip-6": {"min_seconds": 120},

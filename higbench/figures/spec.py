@@ -17,7 +17,10 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-PRESETS: dict[str, str | None] = {"smoke": "quick", "quick": "paper", "paper": None}
+# Each preset falls back to another for what it does not set. smoke: code paths, tiny budgets;
+# quick: scaled-down budgets (~45 min on 2 cores); standard: quick's grids with budgets sized so
+# that most claims can show (~2 h on 2 cores); paper: the paper's grids and budgets.
+PRESETS: dict[str, str | None] = {"smoke": "quick", "quick": "paper", "standard": "quick", "paper": None}
 # Presets whose runs stop after this many updates whatever their seconds budget (code paths only).
 UPDATES_ONLY = {"smoke": 2}
 # Overrides a preset applies to every run of a problem (key: the problem's config group).

@@ -23,6 +23,7 @@ Usable without the runner, three ways (fastest first):
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 
 import torch
@@ -133,8 +134,13 @@ class JacobianPower(torch.optim.Optimizer):
     def _inversion(self, route: str, J, K, grad_y: torch.Tensor) -> torch.Tensor:
         g = grad_y.reshape(-1)
         if route == "gram":
-            c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True)
-            return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
+            try:
+                c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True)
+                return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
+            except torch.linalg.LinAlgError as exc:
+                # K may be destroyed (overwrite=True); J is intact: retry on the SVD route.
+                warnings.warn(f"Gram route failed ({exc}); retrying with the SVD of J", RuntimeWarning, stacklevel=2)
+                J = J.matrix().to(self.group["precision"]) if isinstance(J, StructuredJacobian) else J
         return jacobian_power(J, g.to(J.dtype), **self._opts())
 
     def direction(self, J: torch.Tensor | StructuredJacobian, grad_y: torch.Tensor) -> torch.Tensor:

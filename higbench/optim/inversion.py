@@ -15,11 +15,15 @@ Two equivalent routes:
   Since V diag(s^kappa) U^T = J^T U diag(s^(kappa-1)) U^T, the direction is J^T c with
   c = max(s)^beta U diag(s^(kappa-1)) U^T g: one vector-Jacobian product, no SVD of J.
 
-Failures. LAPACK's default drivers (gesdd for the SVD, syevd for eigh) occasionally fail
-to converge on ill-conditioned matrices (torch raises ``LinAlgError``). Before giving up,
-``svd`` and ``eigh`` below retry with other algorithms for the same factorisation: the
-QR-iteration SVD ``gesvd`` (SciPy) or the SVD through eigh, and SciPy's ``syevr``/``syev``
-or the SVD of K for eigh. A run is declared diverged only when every route fails.
+Failures. LAPACK's default drivers (gesdd for the SVD, syevd for eigh, stevd for the
+tridiagonal route) occasionally fail to converge on ill-conditioned matrices (torch raises
+``LinAlgError``). Before giving up, each retries with other algorithms for the same
+factorisation, always on an intact input (no driver here overwrites what a retry needs):
+the QR-iteration SVD ``gesvd`` (SciPy) or the SVD through eigh; SciPy's ``syevr``/``syev``
+or the SVD of K for eigh; MRRR, QR iteration or a dense eigh of the tridiagonal matrix for
+the tridiagonal route (``tridiagonal.tridiagonal_eigen``). ``gram_coefficients`` with
+``overwrite=True`` can only fail in the reduction itself; its caller then still has J and
+takes the SVD route (``JacobianPower``). A run is declared diverged only when every route fails.
 """
 
 from __future__ import annotations
@@ -56,7 +60,7 @@ def svd(A: torch.Tensor):
     """``torch.linalg.svd(A, full_matrices=False)`` with fallbacks when it does not converge."""
     routes = [("gesdd", lambda: torch.linalg.svd(A, full_matrices=False)), ("gesvd", lambda: _scipy_svd(A)),
               ("eigh of the Gram matrix", lambda: _svd_via_eigh(A))]  # fmt: skip
-    return _first_success("SVD", routes)
+    return first_success("SVD", routes)
 
 
 def _scipy_eigh(K: torch.Tensor, driver: str):
@@ -77,10 +81,12 @@ def eigh(K: torch.Tensor):
     """``torch.linalg.eigh(K)`` (lower triangle) with fallbacks when it does not converge."""
     routes = [("syevd", lambda: torch.linalg.eigh(K)), ("syevr", lambda: _scipy_eigh(K, "evr")),
               ("syev", lambda: _scipy_eigh(K, "ev")), ("SVD of K", lambda: _eigh_via_svd(K))]  # fmt: skip
-    return _first_success("eigh", routes)
+    return first_success("eigh", routes)
 
 
-def _first_success(what: str, routes):
+def first_success(what: str, routes):
+    """The result of the first route (name, thunk) that neither raises nor returns non-finite
+    tensors; a warning names the routes that failed. LinAlgError when every route fails."""
     errors = []
     for name, route in routes:
         try:
@@ -196,7 +202,9 @@ def gram_coefficients(
             eig = TridiagonalEigen(K, overwrite=overwrite)
             lam, project, expand = eig.values, eig.project, eig.expand
         except torch.linalg.LinAlgError:
-            if overwrite:  # K is destroyed: nothing left to retry on
+            # After the reduction the tridiagonal solver has its own fallbacks; a failed
+            # reduction with overwrite may have left K destroyed: the caller retries from J.
+            if overwrite:
                 raise
             warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=2)
             tridiagonal = False

@@ -9,6 +9,10 @@ U f(Lambda) U^T g for ONE vector g, so here the reflectors of Q are applied to t
 syevd/syevr (backward stable; eigenvalues err by ~eps * max |lambda|), 3-4x faster at
 n = 4096 and ~2x at n = 512 on this machine.
 
+When the divide-and-conquer tridiagonal solver fails to converge, ``tridiagonal_eigen``
+retries with MRRR, QR iteration and a dense eigh of T, each on the intact (d, e): the
+reduction's output is all they need, so a K overwritten by the reduction loses nothing.
+
 Needs SciPy's LAPACK (``dsytrd`` and the divide-and-conquer tridiagonal solver ``dstevd``); without
 SciPy, ``available()`` is False and callers use eigh. SciPy's OpenBLAS is multi-threaded
 by default, which on a shared, loaded machine is catastrophically slow (oversubscription:
@@ -92,6 +96,57 @@ except ImportError:  # pragma: no cover
         return x
 
 
+def _dstevd(d: np.ndarray, e: np.ndarray):
+    from scipy.linalg.lapack import dstevd
+
+    # Divide and conquer (as syevd): 0.66 s at n = 4096 against 3.6 s for MRRR (stemr).
+    values, W, info = dstevd(d, e, compute_v=1)  # d and e are copied (overwrite_d/e = 0)
+    if info != 0:
+        raise torch.linalg.LinAlgError(f"dstevd failed (info={info})")
+    return values, W
+
+
+def _dstev(d: np.ndarray, e: np.ndarray):
+    from scipy.linalg.lapack import dstev
+
+    values, W, info = dstev(d, e, compute_v=1)  # implicit QL/QR iteration
+    if info != 0:
+        raise torch.linalg.LinAlgError(f"dstev failed (info={info})")
+    return values, W
+
+
+def _dense_eigh(d: np.ndarray, e: np.ndarray):
+    from higbench.optim.inversion import eigh
+
+    T = torch.from_numpy(np.diag(d) + np.diag(e, -1))  # lower triangle is all eigh reads
+    lam, W = eigh(T)
+    return lam.numpy(), W.numpy()
+
+
+def tridiagonal_eigen(d: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and eigenvectors of the symmetric tridiagonal T = (d, e).
+
+    LAPACK's divide and conquer first; when it fails to converge, MRRR (stemr), QR
+    iteration (stev) and finally the dense eigh of T (with its own fallbacks) are tried,
+    each on the same intact d and e (no driver here writes into them).
+    """
+    import scipy.linalg
+
+    from higbench.optim.inversion import first_success
+
+    def stemr():
+        return scipy.linalg.eigh_tridiagonal(d, e, lapack_driver="stemr", check_finite=False)
+
+    routes = [("dstevd", lambda: _dstevd(d, e)), ("stemr", stemr), ("dstev", lambda: _dstev(d, e)),
+              ("dense eigh of T", lambda: _dense_eigh(d, e))]  # fmt: skip
+    values, W = first_success("tridiagonal eigen-solver", [(n, _as_torch(r)) for n, r in routes])
+    return values.numpy(), W.numpy()
+
+
+def _as_torch(route):
+    return lambda: tuple(torch.from_numpy(np.asarray(x)) for x in route())
+
+
 class TridiagonalEigen:
     """K = Q W diag(values) W^T Q^T, with Q kept as reflectors (never formed).
 
@@ -101,7 +156,7 @@ class TridiagonalEigen:
     """
 
     def __init__(self, K: torch.Tensor, overwrite: bool = False):
-        from scipy.linalg.lapack import dstevd, dsytrd, dsytrd_lwork
+        from scipy.linalg.lapack import dsytrd, dsytrd_lwork
 
         if K.dtype != torch.float64:
             raise TypeError(f"TridiagonalEigen needs float64, got {K.dtype}")
@@ -121,10 +176,7 @@ class TridiagonalEigen:
                 if info != 0:
                     raise torch.linalg.LinAlgError(f"dsytrd failed (info={info})")
             if n > 1:
-                # Divide and conquer (as syevd): 0.66 s at n = 4096 against 3.6 s for MRRR (stemr).
-                values, self.W, info = dstevd(d, e, compute_v=1)
-                if info != 0:
-                    raise torch.linalg.LinAlgError(f"dstevd failed (info={info})")
+                values, self.W = tridiagonal_eigen(d, e)
             else:
                 values, self.W = d, np.ones((1, 1))
         self.values = torch.from_numpy(np.ascontiguousarray(values)).to(self.device)

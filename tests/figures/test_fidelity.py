@@ -154,3 +154,38 @@ def test_gn_runs_of_fig2b_2c_13_use_a_seed_search(preset):
     for fid in ("fig2b", "fig2c", "fig13"):
         gn = [j for j in expand(figs[fid], Preset(preset)) if j.overrides.get("optimizer") == "gn" and "/search" not in j.sweep]
         assert gn and all(len(j.search) == 8 for j in gn), fid
+
+
+def test_budgets_sized_by_the_papers_update_count():
+    from higbench.figures import fidelity
+
+    # 3600 s / 0.146 s per paper update = 24,658 updates; at 30 ms each: 739.7 s, rounded up to 10 s.
+    assert fidelity.paper_hour_here(0.146, 0.030) == 740.0
+    assert fidelity.paper_hour_here(1.0, 1.0) == 3600.0
+    claims = registry.claims()
+    assert claims["osc-3"].min_seconds == fidelity.OSC_HIG_HOUR < fidelity.PAPER
+    assert claims["poi-1"].min_seconds >= fidelity.PAPER  # the hour of b=64 HIG updates is longer here
+
+
+def test_every_fidelity_entry_names_a_real_claim_and_no_cause_is_left_open():
+    from higbench.figures.fidelity import FIDELITY
+
+    claims = registry.claims()
+    for cid, settings in FIDELITY.items():
+        assert cid in claims, cid
+        if "cause" in settings:
+            category, evidence = settings["cause"]
+            assert category in registry.CAUSES and category != "open", cid
+            assert len(evidence) > 40, cid
+
+
+def test_standard_preset_budgets_let_the_sized_claims_show():
+    """At the standard preset every claim whose minimum the preset was sized for gets its budget."""
+    claims = registry.claims()
+    figs = registry.figures()
+    p = Preset("standard")
+    for cid in ("toy-1", "toy-3", "osc-1", "osc-4", "osc-5", "poi-4", "dip-1", "dip-2", "dip-4", "dip-6", "cnn-1", "abl-1"):
+        c = claims[cid]
+        seconds = [j.overrides.get("budget.seconds") for fid in c.figures for j in expand(figs[fid], p)]
+        main = [s for s in seconds if s is not None]
+        assert main and max(main) >= c.min_seconds, (cid, max(main), c.min_seconds)
