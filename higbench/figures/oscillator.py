@@ -251,14 +251,11 @@ def crossing(datas):
     need(hig, adam, what="fig2b HIG/Adam")
     t_tuned = [crossing_time(hig[0], r) for r in tuned]
     late = max((x for x in t_tuned if x is not None), default=None)
-    tuned_text = (
-        (
-            f"; against re-tuned Adam ({len(tuned)} settings): HIG never passes {sum(x is None for x in t_tuned)}"
-            + (f", passes the others by t = {late:.0f} s" if late is not None else "")
-        )
-        if tuned
-        else ""
+    never = sum(x is None for x in t_tuned)
+    parts = ([f"never passes {never} of them"] if never else []) + (
+        [f"passes {'the others' if never else 'all'} by t = {late:.0f} s"] if late is not None else []
     )
+    tuned_text = f"; against re-tuned Adam ({len(tuned)} settings): HIG " + ", ".join(parts) if tuned else ""
     if (t := crossing_time(hig[0], adam[0])) is None:
         return "HIG does not pass Adam within the budget" + tuned_text, False, False
     return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True

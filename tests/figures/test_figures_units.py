@@ -257,7 +257,7 @@ def _fake_run(t, loss, **cols):
 
 def test_claim_helpers_crossing_time_and_plateau():
     from higbench.figures.checks import crossing_time, final, loss_at
-    from higbench.figures.dipole import energy_ratio, plateau_fraction
+    from higbench.figures.dipole import energy_ratio, plateau_seconds
 
     adam = _fake_run([0, 100, 200, 300], [1.0, 1e-3, 1e-4, 1e-4])
     hig = _fake_run([0, 100, 200, 300], [1.0, 1e-2, 1e-5, 1e-7])
@@ -271,8 +271,12 @@ def test_claim_helpers_crossing_time_and_plateau():
         test_low_energy_loss=[0.5, 0.01, 0.01, 0.01, 0.01],
         test_high_energy_loss=[0.5, 0.4, 0.4, 0.3, 0.05],
     )
-    assert plateau_fraction(stall) == pytest.approx(0.75)
-    assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30, 5]))
+    assert plateau_seconds(stall) == pytest.approx(30)  # a duration: a longer run keeps it
+    longer = _fake_run([0, 10, 20, 30, 40, 400], [1.0, 0.5, 0.5, 0.5, 0.1, 1e-3])
+    assert plateau_seconds(longer) == pytest.approx(30)
+    # the initial stage only (loss >= 0.4, after the first evaluation): the last evaluation (0.1) is left out
+    assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30]))
+    assert np.isnan(energy_ratio(_fake_run([0, 10], [1.0, 0.1], test_low_energy_loss=[0.5, 0.01], test_high_energy_loss=[0.5, 0.05])))
 
 
 # Grids of the appendix's figures: conf/experiment/<name>.yaml (the one copy) -> (figure, sweep).
