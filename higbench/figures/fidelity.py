@@ -160,7 +160,8 @@ FIDELITY: dict[str, dict] = {
         "cause": (
             "bug",
             "fixed in the rule after the runs of this report: it asked for >= 20% of the run's time near 0.5, a share "
-            "that shrinks with the budget; it now asks for >= 10 s and twice HIG's time. A 90 s probe (seed 0, load 4-5) shows the plateau plainly: Adam (eta=1e-4, b=16) sits at 0.43-0.48 from "
+            "that shrinks with the budget; it now asks for >= 10 s and twice HIG's time. A 90 s probe (seed 0, "
+            "load 4-5) shows the plateau plainly: Adam (eta=1e-4, b=16) sits at 0.43-0.48 from "
             "4 s to 24 s (600-2,900 updates) and leaves it at ~28 s (27% of 90 s, 9% of a 270 s run); HIG leaves the "
             "initial loss within ~12 s without a plateau. The duration of the plateau, not its share, is the measure",
         ),
@@ -171,7 +172,8 @@ FIDELITY: dict[str, dict] = {
         "cause": (
             "bug",
             "fixed in the rule after the runs of this report: it took the median of HE/LE over every evaluation of "
-            "the run, while the paper's claim is about the initial stage (it now takes the evaluations with loss >= 0.4); once Adam leaves its plateau both losses fall together and dominate "
+            "the run, while the paper's claim is about the initial stage (it now takes the evaluations with loss "
+            ">= 0.4); once Adam leaves its plateau both losses fall together and dominate "
             "the median. 90 s probe (seed 0, 256 test states, load 4-5): during Adam's plateau (total loss 0.43-0.48, "
             "4-24 s) LE is 0.05-0.11 and HE 0.41-0.44, HE/LE 8.6, 7.0, 5.7, 4.8, 3.9, 2.9 -- Adam fits the low-energy "
             "component first and LE even rises again (0.05 -> 0.11) before HE falls, as the paper describes; after "

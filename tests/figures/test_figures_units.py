@@ -276,7 +276,8 @@ def test_claim_helpers_crossing_time_and_plateau():
     assert plateau_seconds(longer) == pytest.approx(30)
     # the initial stage only (loss >= 0.4, after the first evaluation): the last evaluation (0.1) is left out
     assert energy_ratio(stall) == pytest.approx(np.median([40, 40, 30]))
-    assert np.isnan(energy_ratio(_fake_run([0, 10], [1.0, 0.1], test_low_energy_loss=[0.5, 0.01], test_high_energy_loss=[0.5, 0.05])))
+    passed = _fake_run([0, 10], [1.0, 0.1], test_low_energy_loss=[0.5, 0.01], test_high_energy_loss=[0.5, 0.05])
+    assert np.isnan(energy_ratio(passed))  # no evaluation in the initial stage
 
 
 # Grids of the appendix's figures: conf/experiment/<name>.yaml (the one copy) -> (figure, sweep).
