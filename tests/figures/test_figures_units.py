@@ -317,14 +317,14 @@ def test_table2_paper_column_is_the_per_pair_defaults():
 def test_a_new_preset_is_one_entry_and_falls_back(monkeypatch):
     from higbench.figures import spec
 
-    monkeypatch.setitem(spec.PRESETS, "standard", "quick")  # what adding a preset takes
-    quick, standard = Preset("quick"), Preset("standard")
-    assert spec.Budget(seconds={"paper": 3600, "quick": 60}).overrides(standard) == {"budget.seconds": 60.0}
-    assert spec.Budget(seconds={"paper": 3600, "quick": 60, "standard": 300}).overrides(standard) == {"budget.seconds": 300.0}
-    assert spec.By([1, 2, 3], quick=[1]).at(standard) == [1] and spec.By([1, 2, 3], standard=[2]).at(quick) == [1, 2, 3]
-    assert standard.problem_overrides("dipole") == quick.problem_overrides("dipole")
+    monkeypatch.setitem(spec.PRESETS, "mine", "quick")  # what adding a preset takes
+    quick, mine = Preset("quick"), Preset("mine")
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60}).overrides(mine) == {"budget.seconds": 60.0}
+    assert spec.Budget(seconds={"paper": 3600, "quick": 60, "mine": 300}).overrides(mine) == {"budget.seconds": 300.0}
+    assert spec.By([1, 2, 3], quick=[1]).at(mine) == [1] and spec.By([1, 2, 3], mine=[2]).at(quick) == [1, 2, 3]
+    assert mine.problem_overrides("dipole") == quick.problem_overrides("dipole")
     for fid, fig in registry.figures().items():  # every figure expands, as at its fallback
-        assert [j.override_list() for j in expand(fig, standard)] == [j.override_list() for j in expand(fig, quick)], fid
+        assert [j.override_list() for j in expand(fig, mine)] == [j.override_list() for j in expand(fig, quick)], fid
 
 
 def _fake_figure_data(figure, rows, tmp_path):
