@@ -1,23 +1,26 @@
-"""`higbench` console script: compose the config with Hydra, validate, train, report.
+"""`higbench` console script: Hydra composes the config, higbench checks it, trains, reports.
 
     higbench problem=oscillator optimizer=hig
     higbench -m problem=toy optimizer=adam,hig        # one run file per job
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
-Bad input never gets as far as Hydra's run directory. Before Hydra runs the job, ``main``
-composes the same config(s) with Hydra's compose API (every job of a basic-sweeper
-multirun) and checks them: unknown keys, types and ranges (``higbench.config``), then the
-checks that need the network (``train.preflight``: ``init_from`` weights that fit, the
-GN/HIG memory guard), an existing run file in ``hydra.run.dir``, and what ``resume=``
-points at. Any problem is one line on stderr, ``higbench: error: <key>=<value>: <why>``,
-and exit code 2, with nothing written. The job itself checks again (sweepers whose jobs
-cannot be listed in advance, e.g. Optuna); a job that fails there removes the files
-Hydra made for it and exits 2.
+Bad input never gets as far as a run directory. ``main`` is Hydra's own ``@hydra.main``
+app; the checks run in a Hydra callback (``Checks``, listed under ``hydra.callbacks`` in
+conf/config.yaml) whose ``on_run_start`` / ``on_multirun_start`` Hydra calls after
+composing the config and before it creates any directory. They check what would run
+(every job of a basic-sweeper multirun): types, ranges and unknown keys
+(``higbench.config``), then what needs the network (``train.preflight``: ``init_from``
+weights that fit, the GN/HIG memory guard), the output directory, an existing run file in
+``hydra.run.dir``, and what ``resume=`` points at. Hydra's own composition errors (an
+unknown key or config, an override that does not parse) are caught by ``main``. Any
+problem is one line on stderr, ``higbench: error: <key>=<value>: <why>``, and exit code 2,
+with nothing written. The job checks again (sweepers whose jobs cannot be listed in
+advance, e.g. Optuna); a job refused there removes the files Hydra made for it, exit 2.
 
 Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
-refused (exit 2, before Hydra touches the directory), and of two runs racing for one
-directory the second fails to create the file ("w-") and exits 2. The only way to write
-into an existing run file is ``resume=`` (see ``higbench.runner.checkpoint``).
+refused, and of two runs racing for one directory the second fails to create the file
+("w-") and exits 2. The only way to write into an existing run file is ``resume=`` (see
+``higbench.runner.checkpoint``); it points Hydra's run directory at the run's own.
 
 Output locations are checked too (``higbench.runner.outputs``): a directory that is a
 file, read-only, too long a name, too little free space, a ``run.h5`` that is a link.
@@ -35,7 +38,7 @@ a file-system fault such as a full disk is one line, ``RunFileFault``).
 from __future__ import annotations
 
 import contextlib
-import io
+import itertools
 import logging
 import math
 import os
@@ -47,11 +50,15 @@ from importlib import resources
 from pathlib import Path
 
 import hydra
+from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.errors import HydraException
+from hydra.experimental.callback import Callback
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict, read_write
+from omegaconf.errors import OmegaConfBaseException
 
-from higbench.config import ConfigError, check_hydra_references, to_plain, validate
+from higbench.config import ConfigError, check_hydra_references, constructor_args, optimizer_class, to_plain, validate
 from higbench.runfile.reader import RUN_FILE
 
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
@@ -94,53 +101,32 @@ OmegaConf.register_new_resolver("higbench_output_subdir", _output_subdir, replac
 
 # -- checks before Hydra creates anything ---------------------------------------------------
 
-_SKIP_FLAGS = (
-    "help",
-    "hydra_help",
-    "version",
-    "cfg",
-    "info",
-    "shell_completion",
-    "experimental_rerun",
-    "config_path",
-    "config_dir",
-)
 
-
-def _parse_args(argv: list[str]):
-    from hydra._internal.utils import get_args_parser
-
-    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            return get_args_parser().parse_args(argv)
-        except SystemExit:
-            return None  # Hydra will report the bad flag itself
-
-
-def _composition_error(exc: Exception, overrides: list[str], config_name: str) -> ConfigError:
-    """A one-line ConfigError from Hydra's composition errors (unknown key, group, syntax)."""
-    from hydra import compose
-
-    cause = exc.__cause__
+def _composition_error(exc: Exception, overrides: list[str]) -> ConfigError:
+    """A one-line ConfigError from Hydra's composition errors (unknown key, config, syntax)."""
+    cause = exc.__cause__ if exc.__cause__ is not None else exc
     text = str(exc)
     full_key = getattr(cause, "full_key", None)
-    if full_key and "Could not override" in text:
-        value = next((o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+~") == full_key and "=" in o), "?")
+    if full_key and isinstance(cause, OmegaConfBaseException) and "Could not override" not in text and "not in" not in str(cause):
+        value = _explicit(overrides, str(full_key)) or "?"  # a bad type: Hydra's check against the schema
+        return ConfigError(str(full_key), value, " ".join(str(cause.msg if hasattr(cause, "msg") else cause).split("\n")[0].split()))
+    if full_key:
+        value = _explicit(overrides, str(full_key))
+        value = "<missing>" if value is None else value
         parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
         others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
-        target = None
-        try:
-            base = OmegaConf.to_container(compose(config_name, overrides=others), resolve=False)
-            node = OmegaConf.select(OmegaConf.create(base), parent) if parent else base
-            valid = sorted(node.keys()) if hasattr(node, "keys") else []
-            target = node.get("_target_") if parent == "optimizer" and hasattr(node, "get") else None
-        except Exception:  # noqa: BLE001
-            valid = []
-        leaf = full_key.rsplit(".", 1)[-1]
-        if target and leaf in _constructor_args(str(target)):
-            # A constructor argument the optimizer's YAML does not list: Hydra adds it with `+`.
-            yaml_file = f"conf/optimizer/{base['optimizer'].get('name')}.yaml"
-            return ConfigError(full_key, value, f"not set in {yaml_file}; add it with +{full_key}={value}")
+        base = None
+        with contextlib.suppress(Exception):  # list the keys that are there
+            base = _compose_plain(others)
+        node = OmegaConf.select(OmegaConf.create(base), parent) if base is not None and parent else base
+        valid = sorted(node.keys()) if hasattr(node, "keys") else []
+        if parent == "optimizer" and hasattr(node, "get") and node.get("_target_"):
+            leaf = full_key.rsplit(".", 1)[-1]
+            with contextlib.suppress(ConfigError):
+                if leaf in constructor_args(optimizer_class(dict(node))):
+                    # A constructor argument the optimizer's YAML does not list: Hydra adds it with `+`.
+                    yaml_file = f"conf/optimizer/{node.get('name')}.yaml"
+                    return ConfigError(full_key, value, f"not set in {yaml_file}; add it with +{full_key}={value}")
         where = f" under {parent}" if parent else ""
         return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
     if "Could not find" in text and "Available options in" in text:
@@ -163,158 +149,177 @@ def _composition_error(exc: Exception, overrides: list[str], config_name: str) -
     return ConfigError("overrides", " ".join(overrides), first)
 
 
-def _constructor_args(target: str) -> tuple[str, ...]:
-    from higbench.config import optimizer_args
+def _compose_plain(overrides: list[str]) -> dict:
+    """The task config of ``overrides``, unresolved (in the running Hydra app, or a new one)."""
+    from hydra import compose, initialize_config_dir
 
-    try:
-        return optimizer_args(target)
-    except ConfigError:
-        return ()
-
-
-def _job_overrides(overrides: list[str], sweeper_params: dict | None) -> tuple[list[list[str]], bool]:
-    """Override lists of the jobs a basic-sweeper multirun launches (and whether all are listed)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    lines = [f"{k}={v}" for k, v in (sweeper_params or {}).items()] + list(overrides)
-    parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
-    parsed = parser.parse_overrides(lines)
-    complete = True
-    discrete = []
-    for o in parsed:
-        if o.is_sweep_override() and not o.is_discrete_sweep():
-            complete = False  # interval sweeps (Optuna): checked in-job
-            continue
-        discrete.append(o)
-    jobs = BasicSweeper.split_arguments(discrete, None)[0]
-    if len(jobs) > MAX_PRECHECK_JOBS:
-        jobs, complete = jobs[:MAX_PRECHECK_JOBS], False
-    return jobs, complete
+    if GlobalHydra.instance().is_initialized():
+        return OmegaConf.to_container(compose("config", overrides=overrides), resolve=False)
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        return OmegaConf.to_container(compose("config", overrides=overrides), resolve=False)
 
 
 def _explicit(overrides: list[str], key: str) -> str | None:
     for o in overrides:
         k, sep, v = o.partition("=")
-        if sep and k.lstrip("+") == key:
-            return v
+        if k.lstrip("+~") == key:
+            return v if sep else "<missing>"
     return None
 
 
-def precheck(argv: list[str]) -> list[str]:
-    """Check what ``argv`` would run before Hydra writes anything; return the argv to run.
+def sweep_jobs(config: DictConfig) -> list[list[str]]:
+    """Override lists of the jobs a multirun launches: all of them for Hydra's basic sweeper
+    (its ``params`` and the command line's comma lists, crossed), the first one for others
+    (Optuna samples its jobs as it goes; those are checked in-job)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    Raises ConfigError. For ``resume=<run>`` the returned argv also points Hydra's run
-    directory at the run's own directory (its Hydra files go to ``.hydra/resume-<time>``).
+    lines = list(config.hydra.overrides.task)
+    basic = "BasicSweeper" in str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
+    params = OmegaConf.select(config, "hydra.sweeper.params", default=None) if basic else None
+    if params is not None:
+        lines = [f"{k}={v}" for k, v in OmegaConf.to_container(params, resolve=False).items()] + lines
+    parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
+    axes = []
+    for o in parser.parse_overrides(lines):
+        if not o.is_sweep_override():
+            axes.append([o.input_line])
+        elif o.is_discrete_sweep():
+            axes.append([f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()])
+    jobs = [list(job) for job in itertools.islice(itertools.product(*axes), MAX_PRECHECK_JOBS)]
+    return jobs if basic else jobs[:1]
+
+
+def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: bool) -> tuple[dict, bool]:
+    """The config a ``resume=`` job runs, and whether it continues ``run_path``'s checkpoint.
+
+    A sweep job that never started starts now; a run that recorded nothing starts again
+    from the beginning with its own config; anything else continues from its checkpoint
+    (ConfigError when it cannot: finished, no checkpoint, another run's, a changed key).
     """
-    args = _parse_args(argv)
-    if args is None or any(getattr(args, flag, None) for flag in _SKIP_FLAGS):
-        return argv
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
+    from higbench.runner import checkpoint
 
-    overrides = list(args.overrides)
-    config_name = args.config_name or "config"
-    with initialize_config_dir(config_dir=config_dir(), version_base="1.3", job_name="higbench"):
-        first_job = overrides
+    if multirun and not run_path.exists():
+        return {**task, "resume": None}, False
+    if checkpoint.recorded_nothing(run_path):
+        stored = task if multirun else OmegaConf.to_container(OmegaConf.create(_stored_config(run_path, task["resume"])))
+        merged = checkpoint.resume_config(stored, task, overrides)
+        validate(merged)
+        return merged, False
+    _status, stored_yaml = checkpoint.inspect_run(run_path, task["resume"])
+    merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
+    validate(merged)
+    checkpoint.check_owner(checkpoint.load(run_path), run_path, task["resume"])  # readable, of this format, of this run
+    return merged, True
+
+
+def _checked_task(config: DictConfig) -> dict:
+    """The task part of a composed config (with its hydra node), validated."""
+    with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
+        HydraConfig.instance().set_config(config)
+    check_hydra_references(config)
+    task = to_plain(config)
+    validate(task)
+    return task
+
+
+def check_run(config: DictConfig) -> None:
+    """Everything a single run needs, before Hydra makes its directory (ConfigError otherwise).
+
+    For ``resume=<run>`` Hydra's run directory becomes the run's own directory (unless
+    ``hydra.run.dir`` is given) and its files go to ``.hydra/resume-<time>``.
+    """
+    from higbench.runner import checkpoint
+    from higbench.runner.outputs import check_output_dir
+    from higbench.runner.progress import announce, start_text
+
+    task = _checked_task(config)
+    # on a terminal, a line at once: torch and the pre-flight take seconds
+    announce(task.get("progress", True), start_text(OmegaConf.create(task)) + " - checking", transient=True)
+    from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
+
+    overrides = [*config.hydra.overrides.hydra, *config.hydra.overrides.task]
+    explicit_dir = _explicit(overrides, "hydra.run.dir") is not None
+    if task.get("resume"):
+        run_file = checkpoint.run_file_of(task["resume"], str(config.hydra.run.dir) if explicit_dir else None)
+        check_output_dir(run_file.parent, "resume")
+        merged, continues = resume_plan(task, run_file, list(config.hydra.overrides.task), multirun=False)
+        preflight(OmegaConf.create({**merged, "init_from": None} if continues else merged))  # weights: the checkpoint's
+        with read_write(config), open_dict(config):
+            if not explicit_dir:
+                config.hydra.run.dir = str(run_file.parent)
+            if _explicit(overrides, "hydra.output_subdir") is None:
+                config.hydra.output_subdir = f".hydra/resume-{time.strftime('%Y%m%d-%H%M%S')}"
+        return
+    out = Path(str(config.hydra.run.dir))
+    check_output_dir(out, "hydra.run.dir", RUN_FILE_NAME)
+    if (out / RUN_FILE_NAME).exists() and not checkpoint.recorded_nothing(out / RUN_FILE_NAME):
+        raise ConfigError(
+            "hydra.run.dir",
+            str(out),
+            f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it "
+            f"(resume={out} continues it, or pick a new hydra.run.dir)",
+        )
+    preflight(OmegaConf.create(task))
+
+
+def check_sweep(config: DictConfig) -> None:
+    """Every job of a multirun (see ``sweep_jobs``), before Hydra makes the sweep directory."""
+    from higbench.runner.outputs import check_output_dir
+    from higbench.runner.train import preflight
+
+    loader = GlobalHydra.instance().config_loader()
+    tasks = []
+    for job in sweep_jobs(config) or [[]]:
         try:
-            jobs = [overrides]
-            if args.multirun:
-                # The hydra node of the first job tells which sweeper runs and its params.
-                jobs, _complete = _job_overrides(overrides, None)
-                jobs = jobs or [[]]
-                first_job = jobs[0]
-                first = compose(config_name, overrides=first_job, return_hydra_config=True)
-                if "BasicSweeper" in str(OmegaConf.select(first, "hydra.sweeper._target_", default="")):
-                    params = OmegaConf.select(first, "hydra.sweeper.params", default=None)
-                    params = OmegaConf.to_container(params, resolve=False) if params is not None else {}
-                    jobs, _complete = _job_overrides(overrides, params)  # type: ignore[arg-type]
-                else:
-                    jobs = jobs[:1]
+            job_config = loader.load_sweep_config(config, job)
         except (HydraException, OmegaConfBaseException) as exc:
-            raise _composition_error(exc, first_job, config_name) from None
-        configs = []
-        for job in jobs:
-            try:
-                cfg = compose(config_name, overrides=job, return_hydra_config=True)
-            except (HydraException, OmegaConfBaseException) as exc:
-                raise _composition_error(exc, job, config_name) from None
-            with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
-                HydraConfig.instance().set_config(cfg)
-            check_hydra_references(cfg)
-            task = to_plain(cfg)
-            validate(task)
-            configs.append((job, cfg, task))
+            raise _composition_error(exc, job) from None
+        tasks.append(_checked_task(job_config))
+    sweep_dir = Path(str(config.hydra.sweep.dir))
+    check_output_dir(sweep_dir, "hydra.sweep.dir")
+    _remember_multirun_yaml(sweep_dir)
+    if any(task.get("resume") for task in tasks):
+        return  # which jobs resume is known only in their directories: checked in-job
+    seen = set()
+    for task in tasks:  # the network-sized checks once per distinct network and batch
+        sizing = {k: task.get(k) for k in ("problem", "batch_size", "dtype", "device", "init_from", "memory_limit_mb")}
+        sizing["optimizer"] = {k: v for k, v in task["optimizer"].items() if k != "lr"}
+        key = OmegaConf.to_yaml(sizing)
+        if key not in seen:
+            seen.add(key)
+            preflight(OmegaConf.create(task))
 
-        if not args.multirun:  # on a terminal, a line at once: torch and the pre-flight take seconds
-            from higbench.runner.progress import announce, start_text
 
-            task0 = configs[0][2]
-            announce(task0.get("progress", True), start_text(OmegaConf.create(task0)) + " - checking", transient=True)
-        from higbench.runner.outputs import check_output_dir
-        from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
+class Checks(Callback):
+    """Hydra calls these after composing and before creating any directory (conf/config.yaml)."""
 
-        if args.multirun:
-            sweep_dir = Path(str(OmegaConf.select(configs[0][1], "hydra.sweep.dir")))
-            check_output_dir(sweep_dir, "hydra.sweep.dir")
-            _remember_multirun_yaml(sweep_dir)
-            if any(task.get("resume") for _, _, task in configs):
-                return argv  # which jobs resume is known only in their directories: checked in-job
-            seen = set()
-            for _job, _cfg, task in configs:
-                sizing = {
-                    k: task.get(k)
-                    for k in ("problem", "optimizer", "batch_size", "dtype", "device", "init_from", "memory_limit_mb")
-                }
-                sizing["optimizer"] = {k: v for k, v in task["optimizer"].items() if k != "lr"}
-                key = OmegaConf.to_yaml(sizing)
-                if key not in seen:
-                    seen.add(key)
-                    preflight(OmegaConf.create(task))
-            return argv
+    def on_run_start(self, config: DictConfig, **kwargs) -> None:
+        try:
+            check_run(config)
+        except ConfigError as exc:
+            fail(exc)
 
-        (job, cfg, task) = configs[0]
-        run_dir = str(cfg.hydra.run.dir) if _explicit(overrides, "hydra.run.dir") is not None else None
-        if task.get("resume"):
-            from higbench.runner import checkpoint
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        try:
+            check_sweep(config)
+        except ConfigError as exc:
+            fail(exc)
 
-            run_file = checkpoint.run_file_of(task["resume"], run_dir)
-            check_output_dir(run_file.parent, "resume")
-            if checkpoint.recorded_nothing(run_file):
-                stored_yaml = _stored_config(run_file, task["resume"])  # started again in the job
-                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
-                validate(merged)
-                preflight(OmegaConf.create(merged))
-            else:
-                _status, stored_yaml = checkpoint.inspect_run(run_file, task["resume"])
-                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
-                validate(merged)
-                merged["init_from"] = None  # the weights come from the checkpoint
-                preflight(OmegaConf.create(merged))
-                state = checkpoint.load(run_file)  # readable, and of this format
-                checkpoint.check_owner(state, run_file, task["resume"])  # and of this run
-            extra = []
-            if run_dir is None:
-                extra.append(f"hydra.run.dir={run_file.parent}")
-            subdir = OmegaConf.select(cfg, "hydra.output_subdir")
-            if subdir is not None and _explicit(overrides, "hydra.output_subdir") is None:
-                extra.append(f"hydra.output_subdir={subdir}/resume-{time.strftime('%Y%m%d-%H%M%S')}")
-            return argv + extra
-        out = Path(str(cfg.hydra.run.dir))
-        check_output_dir(out, "hydra.run.dir", RUN_FILE_NAME)
-        from higbench.runner import checkpoint
+    def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
+        _restore_multirun_yaml()
 
-        if (out / RUN_FILE_NAME).exists() and not checkpoint.recorded_nothing(out / RUN_FILE_NAME):
-            raise ConfigError(
-                "hydra.run.dir",
-                str(out),
-                f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it "
-                f"(resume={out} continues it, or pick a new hydra.run.dir)",
-            )
-        preflight(OmegaConf.create(task))
-    return argv
+
+def precheck(overrides: list[str]) -> DictConfig:
+    """The checks of ``higbench <overrides>`` (one run) in this process; ConfigError if refused."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3", job_name="higbench"):
+        try:
+            config = compose("config", overrides=list(overrides), return_hydra_config=True)
+        except (HydraException, OmegaConfBaseException) as exc:
+            raise _composition_error(exc, list(overrides)) from None
+        check_run(config)
+    return config
 
 
 def _stored_config(run_file: Path, resume_value) -> str:
@@ -337,14 +342,14 @@ _MULTIRUN_YAML: tuple[Path, bytes] | None = None
 
 
 def _remember_multirun_yaml(sweep_dir: Path) -> None:
-    """A sweep run again into its directory: keep the sweep's own multirun.yaml (see main)."""
+    """A sweep run again into its directory: keep the sweep's own multirun.yaml (see Checks)."""
     global _MULTIRUN_YAML
     existing = sweep_dir / "multirun.yaml"
     _MULTIRUN_YAML = (existing, existing.read_bytes()) if existing.is_file() else None
 
 
 def _restore_multirun_yaml() -> None:
-    """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-<time>.yaml."""
+    """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-rerun-<time>.yaml."""
     if _MULTIRUN_YAML is None:
         return
     path, original = _MULTIRUN_YAML
@@ -410,26 +415,13 @@ def _run_job(cfg: DictConfig) -> float:
     if cfg.get("resume"):
         run_path = checkpoint.run_file_of(cfg.resume, output_dir)
         empty = checkpoint.recorded_nothing(run_path)
-        if multirun and not run_path.exists():
-            cfg.resume = None  # a job of a resumed sweep that never started: start it
-        elif empty:
-            stored = cfg if multirun else OmegaConf.create(_stored_config(run_path, cfg.resume))
-            merged = checkpoint.resume_config(OmegaConf.to_container(stored, resolve=True), to_plain(cfg), overrides)
-            validate(merged)
-            cfg = OmegaConf.create(merged)  # started again from the beginning, below
-        else:
-            try:
-                status, stored_yaml = checkpoint.inspect_run(run_path, cfg.resume)
-                if multirun:
-                    checkpoint.check_owner(checkpoint.load(run_path), run_path, cfg.resume)
-            except ConfigError as exc:
-                if multirun and run_path.exists():
-                    return _kept(run_path, str(exc).split(": ", 1)[-1])
-                raise
-            merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), to_plain(cfg), overrides)
-            validate(merged)
-            cfg = OmegaConf.create(merged)
-            resume = True
+        try:
+            merged, resume = resume_plan(to_plain(cfg), run_path, overrides, multirun=multirun)
+        except ConfigError as exc:
+            if multirun and run_path.exists():
+                return _kept(run_path, str(exc).split(": ", 1)[-1])
+            raise
+        cfg = OmegaConf.create(merged)
     elif os.path.lexists(run_path):
         empty = checkpoint.recorded_nothing(run_path)
         if not empty:
@@ -509,8 +501,13 @@ def _kept(run_path: Path, why: str) -> float:
     return loss if math.isfinite(loss) else math.inf
 
 
+_JOB_STARTED = False  # set once a job runs: errors after that are the job's, not the command line's
+
+
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _hydra_main(cfg: DictConfig) -> float:
+    global _JOB_STARTED
+    _JOB_STARTED = True
     hydra_cfg = HydraConfig.get()
     output_dir = Path(hydra_cfg.runtime.output_dir)
     try:
@@ -525,21 +522,26 @@ def _hydra_main(cfg: DictConfig) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry: check, then hand over to Hydra (which reads ``sys.argv``)."""
+    """Console-script entry: Hydra's app; its composition errors become one line (exit 2)."""
+    global _JOB_STARTED
     argv = list(sys.argv[1:] if argv is None else argv)
-    from hydra.core.global_hydra import GlobalHydra
-
-    try:
-        argv = precheck(argv)
-    except ConfigError as exc:
-        fail(exc)
-    finally:
-        GlobalHydra.instance().clear()
     sys.argv = [sys.argv[0], *argv]
+    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    full_error = os.environ.get("HYDRA_FULL_ERROR")
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
+    _JOB_STARTED = False
     try:
         _hydra_main()
+    except (HydraException, OmegaConfBaseException) as exc:
+        if _JOB_STARTED:
+            raise
+        fail(_composition_error(exc, overrides))
     finally:
-        _restore_multirun_yaml()
+        if full_error is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = full_error
+        GlobalHydra.instance().clear()
 
 
 if __name__ == "__main__":
