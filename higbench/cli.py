@@ -46,6 +46,7 @@ import shlex
 import signal
 import sys
 import time
+import traceback
 from importlib import resources
 from pathlib import Path
 
@@ -244,7 +245,7 @@ def check_run(config: DictConfig) -> None:
         check_output_dir(run_file.parent, "resume")
         merged, continues = resume_plan(task, run_file, list(config.hydra.overrides.task), multirun=False)
         preflight(OmegaConf.create({**merged, "init_from": None} if continues else merged))  # weights: the checkpoint's
-        with read_write(config), open_dict(config):
+        with read_write(config.hydra), open_dict(config.hydra):
             if not explicit_dir:
                 config.hydra.run.dir = str(run_file.parent)
             if _explicit(overrides, "hydra.output_subdir") is None:
@@ -290,20 +291,25 @@ def check_sweep(config: DictConfig) -> None:
             preflight(OmegaConf.create(task))
 
 
+def _checked(check, config: DictConfig) -> None:
+    """Run a check; Hydra turns a callback's exceptions into warnings and goes on, so exit here."""
+    try:
+        check(config)
+    except ConfigError as exc:
+        fail(exc)
+    except Exception:  # noqa: BLE001 - not bad input: the traceback, exit 1, before anything is written
+        traceback.print_exc()
+        sys.exit(1)
+
+
 class Checks(Callback):
     """Hydra calls these after composing and before creating any directory (conf/config.yaml)."""
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
-        try:
-            check_run(config)
-        except ConfigError as exc:
-            fail(exc)
+        _checked(check_run, config)
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
-        try:
-            check_sweep(config)
-        except ConfigError as exc:
-            fail(exc)
+        _checked(check_sweep, config)
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         _restore_multirun_yaml()
