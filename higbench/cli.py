@@ -110,7 +110,8 @@ def _composition_error(exc: Exception, overrides: list[str]) -> ConfigError:
     full_key = getattr(cause, "full_key", None)
     if full_key and isinstance(cause, OmegaConfBaseException) and "Could not override" not in text and "not in" not in str(cause):
         value = _explicit(overrides, str(full_key)) or "?"  # a bad type: Hydra's check against the schema
-        return ConfigError(str(full_key), value, " ".join(str(cause.msg if hasattr(cause, "msg") else cause).split("\n")[0].split()))
+        why = str(cause.msg if hasattr(cause, "msg") else cause).split("\n")[0]
+        return ConfigError(str(full_key), value, " ".join(why.split()))
     if full_key:
         value = _explicit(overrides, str(full_key))
         value = "<missing>" if value is None else value

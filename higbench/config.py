@@ -98,7 +98,7 @@ def validate(cfg: DictConfig | dict) -> None:
     device, threads, resume = top["device"], top["threads"], top["resume"]
     if device not in DEVICES and not re.fullmatch(r"cuda:\d+", device):
         raise ConfigError("device", device, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)")
-    if not (threads is None or threads == "auto" or (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1)):
+    if not (threads is None or threads == "auto" or (type(threads) is int and threads >= 1)):
         raise ConfigError("threads", threads, "must be auto, null or an integer >= 1")
     if not (resume is None or isinstance(resume, bool) or (isinstance(resume, str) and resume)):
         raise ConfigError("resume", resume, "must be null, true, false, or the path of a run directory or run file")
@@ -109,7 +109,8 @@ def validate(cfg: DictConfig | dict) -> None:
     for size_key in ("train_size", "epoch_size"):
         size = problem.get(size_key)
         if isinstance(size, int) and top["batch_size"] > size:
-            raise ConfigError("batch_size", top["batch_size"], f"must not exceed problem.{size_key}={size} (no full batch would fit)")
+            why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
+            raise ConfigError("batch_size", top["batch_size"], why)
     check_optimizer(data.get("optimizer"))
 
     if device.startswith("cuda"):
@@ -157,7 +158,8 @@ def constructor_args(cls: type) -> tuple[str, ...]:
     names: list[str] = []
     for klass in cls.__mro__:
         params = list(inspect.signature(klass.__init__).parameters.values())[1:]
-        names += [p.name for p in params if p.name not in ("params", *names) and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        keywords = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+        names += [p.name for p in params if p.name not in ("params", *names) and p.kind in keywords]
         if not any(p.kind is p.VAR_KEYWORD for p in params) or klass is object:
             break
     return tuple(names)

@@ -48,8 +48,7 @@ def _broken(rule: dict, v: Any) -> str | None:
         return None  # OmegaConf checked the type
     kind = "an integer" if isinstance(v, int) else "a number"
     ok = math.isfinite(v) and all(
-        (k != "ge" or v >= b) and (k != "gt" or v > b) and (k != "le" or v <= b) and (k != "lt" or v < b)
-        for k, b in rule.items()
+        (k != "ge" or v >= b) and (k != "gt" or v > b) and (k != "le" or v <= b) and (k != "lt" or v < b) for k, b in rule.items()
     )
     return None if ok else f"must be {kind}{_bounds(rule) or ' (finite)'}"
 

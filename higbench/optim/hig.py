@@ -78,7 +78,7 @@ class JacobianPower(torch.optim.Optimizer):
         if not -1.0 <= beta <= 1.0:
             raise ValueError(f"beta={beta}: must be a number in [-1, 1]")
         if not tau >= 0 or (truncation == "relative" and tau > 1):
-            raise ValueError(f"tau={tau}: must be in [0, 1] with truncation=relative (tau > 1 drops every singular value), >= 0 else")
+            raise ValueError(f"tau={tau}: must be in [0, 1] with truncation=relative (tau > 1 drops every singular value)")
         if truncation not in TRUNCATION_MODES:
             raise ValueError(f"truncation={truncation!r}: expected one of {TRUNCATION_MODES}")
         if solver not in SOLVERS:
