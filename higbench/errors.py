@@ -6,7 +6,10 @@ Kept apart from the schema (``higbench.config``) so any module can raise one che
 from __future__ import annotations
 
 import re
+import sys
 from typing import Any
+
+EXIT_BAD_INPUT = 2
 
 
 class ConfigError(ValueError):
@@ -30,3 +33,13 @@ def show(value: Any) -> str:
     if isinstance(value, dict):
         return "{" + ",".join(f"{k}:{show(v)}" for k, v in value.items()) + "}"
     return str(value)
+
+
+def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
+    """Print ``higbench: error: <one line>`` on stderr and exit (2: bad input)."""
+    from higbench.runner.progress import clear_transient
+
+    clear_transient()  # the terminal's "checking" line: the error replaces it
+    message = " ".join(str(exc).split())  # one line, whatever the cause
+    print(f"higbench: error: {message}", file=sys.stderr, flush=True)
+    sys.exit(code)
