@@ -119,7 +119,7 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 def _run_job(cfg: DictConfig) -> float:
     from higbench.runner.progress import announce, start_text
 
-    announce(cfg.get("progress", True), start_text(cfg))  # replaces precheck's transient line
+    announce(cfg.get("progress", True), start_text(cfg))  # replaces the checks' transient line
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner import checkpoint
     from higbench.runner.train import train
