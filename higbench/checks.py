@@ -115,13 +115,15 @@ def sweep_jobs(config: DictConfig) -> list[list[str]]:
     if params is not None:
         lines = [f"{k}={v}" for k, v in OmegaConf.to_container(params, resolve=False).items()] + lines
     parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
-    axes = []
+    axes: dict[str, list[str]] = {}  # per key, as Hydra's sweeper: the command line wins over params
     for o in parser.parse_overrides(lines):
         if not o.is_sweep_override():
-            axes.append([o.input_line])
+            axes[o.get_key_element()] = [o.input_line]
         elif o.is_discrete_sweep():
-            axes.append([f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()])
-    jobs = [list(job) for job in itertools.islice(itertools.product(*axes), MAX_PRECHECK_JOBS)]
+            axes[o.get_key_element()] = [f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()]
+        else:
+            axes.pop(o.get_key_element(), None)  # an interval (Optuna's): not listed
+    jobs = [list(job) for job in itertools.islice(itertools.product(*axes.values()), MAX_PRECHECK_JOBS)]
     return jobs if basic else jobs[:1]
 
 
