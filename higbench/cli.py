@@ -1,30 +1,24 @@
-"""`higbench` console script: compose the config with Hydra, validate, train, report.
+"""`higbench` console script: Hydra's app. Hydra composes the config, higbench trains, reports.
 
     higbench problem=oscillator optimizer=hig
     higbench -m problem=toy optimizer=adam,hig        # one run file per job
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
-Bad input never gets as far as Hydra's run directory. Before Hydra runs the job, ``main``
-composes the same config(s) with Hydra's compose API (every job of a basic-sweeper
-multirun) and checks them: unknown keys, types and ranges (``higbench.config``), then the
-checks that need the network (``train.preflight``: ``init_from`` weights that fit, the
-GN/HIG memory guard), an existing run file in ``hydra.run.dir``, and what ``resume=``
-points at. Any problem is one line on stderr, ``higbench: error: <key>=<value>: <why>``,
-and exit code 2, with nothing written. The job itself checks again (sweepers whose jobs
-cannot be listed in advance, e.g. Optuna); a job that fails there removes the files
-Hydra made for it and exits 2.
+Bad input never gets as far as a run directory: ``higbench.checks.Checks``, a Hydra
+callback, checks what would run before Hydra creates anything, and ``main`` turns Hydra's
+own composition errors (an unknown key or config, an override that does not parse) into
+the same one line, ``higbench: error: <key>=<value>: <why>``, exit code 2. The job checks
+again (sweepers whose jobs cannot be listed in advance, e.g. Optuna); a job refused there
+removes the files Hydra made for it and exits 2.
 
 Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
-refused (exit 2, before Hydra touches the directory), and of two runs racing for one
-directory the second fails to create the file ("w-") and exits 2. The only way to write
-into an existing run file is ``resume=`` (see ``higbench.runner.checkpoint``).
-
-Output locations are checked too (``higbench.runner.outputs``): a directory that is a
-file, read-only, too long a name, too little free space, a ``run.h5`` that is a link.
-A run dir whose run recorded nothing (``checkpoint.recorded_nothing``) is started again in
-place, its dead file moved aside. A multirun into an existing sweep directory keeps every
-job that already has a run (``resume=true`` resumes the interrupted and failed ones), and
-Hydra's files for such a job go to ``.hydra/rerun-<time>`` (``_output_subdir``).
+refused, and of two runs racing for one directory the second fails to create the file
+("w-") and exits 2. The only way to write into an existing run file is ``resume=`` (see
+``higbench.runner.checkpoint``). A run dir whose run recorded nothing
+(``checkpoint.recorded_nothing``) is started again in place, its dead file moved aside. A
+multirun into an existing sweep directory keeps every job that already has a run
+(``resume=true`` resumes the interrupted and failed ones), and Hydra's files for such a
+job go to ``.hydra/rerun-<time>`` (``_output_subdir``).
 
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
@@ -35,7 +29,6 @@ a file-system fault such as a full disk is one line, ``RunFileFault``).
 from __future__ import annotations
 
 import contextlib
-import io
 import logging
 import math
 import os
@@ -47,16 +40,20 @@ from importlib import resources
 from pathlib import Path
 
 import hydra
+from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.errors import HydraException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
-from higbench.config import ConfigError, check_hydra_references, to_plain, validate
+from higbench.checks import Checks, composition_error, precheck, resume_plan
+from higbench.config import check_hydra_references, to_plain, validate
+from higbench.errors import EXIT_BAD_INPUT, ConfigError, fail
 from higbench.runfile.reader import RUN_FILE
 
+__all__ = ["main", "config_dir", "Checks", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT", "fail"]
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
-EXIT_BAD_INPUT = 2
-MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 
 
 def config_dir() -> str:
@@ -65,15 +62,6 @@ def config_dir() -> str:
     if (checkout / "config.yaml").is_file():
         return str(checkout)
     return str(resources.files("higbench") / "conf")
-
-
-def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
-    from higbench.runner.progress import clear_transient
-
-    clear_transient()  # the terminal's "checking" line: the error replaces it
-    message = " ".join(str(exc).split())  # one line, whatever the cause
-    print(f"higbench: error: {message}", file=sys.stderr, flush=True)
-    sys.exit(code)
 
 
 def _output_subdir(*, _root_: DictConfig) -> str:
@@ -90,270 +78,6 @@ def _output_subdir(*, _root_: DictConfig) -> str:
 
 
 OmegaConf.register_new_resolver("higbench_output_subdir", _output_subdir, replace=True)
-
-
-# -- checks before Hydra creates anything ---------------------------------------------------
-
-_SKIP_FLAGS = (
-    "help",
-    "hydra_help",
-    "version",
-    "cfg",
-    "info",
-    "shell_completion",
-    "experimental_rerun",
-    "config_path",
-    "config_dir",
-)
-
-
-def _parse_args(argv: list[str]):
-    from hydra._internal.utils import get_args_parser
-
-    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            return get_args_parser().parse_args(argv)
-        except SystemExit:
-            return None  # Hydra will report the bad flag itself
-
-
-def _composition_error(exc: Exception, overrides: list[str], config_name: str) -> ConfigError:
-    """A one-line ConfigError from Hydra's composition errors (unknown key, group, syntax)."""
-    from hydra import compose
-
-    cause = exc.__cause__
-    text = str(exc)
-    full_key = getattr(cause, "full_key", None)
-    if full_key and "Could not override" in text:
-        value = next((o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0].lstrip("+~") == full_key and "=" in o), "?")
-        parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
-        others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
-        target = None
-        try:
-            base = OmegaConf.to_container(compose(config_name, overrides=others), resolve=False)
-            node = OmegaConf.select(OmegaConf.create(base), parent) if parent else base
-            valid = sorted(node.keys()) if hasattr(node, "keys") else []
-            target = node.get("_target_") if parent == "optimizer" and hasattr(node, "get") else None
-        except Exception:  # noqa: BLE001
-            valid = []
-        leaf = full_key.rsplit(".", 1)[-1]
-        if target and leaf in _constructor_args(str(target)):
-            # A constructor argument the optimizer's YAML does not list: Hydra adds it with `+`.
-            yaml_file = f"conf/optimizer/{base['optimizer'].get('name')}.yaml"
-            return ConfigError(full_key, value, f"not set in {yaml_file}; add it with +{full_key}={value}")
-        where = f" under {parent}" if parent else ""
-        return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
-    if "Could not find" in text and "Available options in" in text:
-        lines = [ln.strip() for ln in text.splitlines()]
-        group_path = text.split("Could not find '", 1)[1].split("'", 1)[0]
-        group, _, choice = group_path.rpartition("/")
-        start = next(i for i, ln in enumerate(lines) if ln.startswith("Available options"))
-        options = [ln for ln in lines[start + 1 :] if ln and not ln.startswith("Config search path")]
-        options = options[: next((i for i, ln in enumerate(options) if "provider=" in ln), len(options))]
-        return ConfigError(group or "config", choice, f"no such config; valid choices: {', '.join(options)}")
-    first = text.strip().splitlines()[0] if text.strip() else type(exc).__name__
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    for line in overrides:  # name the override that does not parse, if one does not
-        try:
-            OverridesParser.create().parse_overrides([line])
-        except Exception:  # noqa: BLE001
-            key, _, value = line.partition("=")
-            return ConfigError(key, value, f"cannot parse this override ({first})")
-    return ConfigError("overrides", " ".join(overrides), first)
-
-
-def _constructor_args(target: str) -> tuple[str, ...]:
-    from higbench.config import optimizer_args
-
-    try:
-        return optimizer_args(target)
-    except ConfigError:
-        return ()
-
-
-def _job_overrides(overrides: list[str], sweeper_params: dict | None) -> tuple[list[list[str]], bool]:
-    """Override lists of the jobs a basic-sweeper multirun launches (and whether all are listed)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    lines = [f"{k}={v}" for k, v in (sweeper_params or {}).items()] + list(overrides)
-    parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
-    parsed = parser.parse_overrides(lines)
-    complete = True
-    discrete = []
-    for o in parsed:
-        if o.is_sweep_override() and not o.is_discrete_sweep():
-            complete = False  # interval sweeps (Optuna): checked in-job
-            continue
-        discrete.append(o)
-    jobs = BasicSweeper.split_arguments(discrete, None)[0]
-    if len(jobs) > MAX_PRECHECK_JOBS:
-        jobs, complete = jobs[:MAX_PRECHECK_JOBS], False
-    return jobs, complete
-
-
-def _explicit(overrides: list[str], key: str) -> str | None:
-    for o in overrides:
-        k, sep, v = o.partition("=")
-        if sep and k.lstrip("+") == key:
-            return v
-    return None
-
-
-def precheck(argv: list[str]) -> list[str]:
-    """Check what ``argv`` would run before Hydra writes anything; return the argv to run.
-
-    Raises ConfigError. For ``resume=<run>`` the returned argv also points Hydra's run
-    directory at the run's own directory (its Hydra files go to ``.hydra/resume-<time>``).
-    """
-    args = _parse_args(argv)
-    if args is None or any(getattr(args, flag, None) for flag in _SKIP_FLAGS):
-        return argv
-    from hydra import compose, initialize_config_dir
-    from hydra.errors import HydraException
-    from omegaconf.errors import OmegaConfBaseException
-
-    overrides = list(args.overrides)
-    config_name = args.config_name or "config"
-    with initialize_config_dir(config_dir=config_dir(), version_base="1.3", job_name="higbench"):
-        first_job = overrides
-        try:
-            jobs = [overrides]
-            if args.multirun:
-                # The hydra node of the first job tells which sweeper runs and its params.
-                jobs, _complete = _job_overrides(overrides, None)
-                jobs = jobs or [[]]
-                first_job = jobs[0]
-                first = compose(config_name, overrides=first_job, return_hydra_config=True)
-                if "BasicSweeper" in str(OmegaConf.select(first, "hydra.sweeper._target_", default="")):
-                    params = OmegaConf.select(first, "hydra.sweeper.params", default=None)
-                    params = OmegaConf.to_container(params, resolve=False) if params is not None else {}
-                    jobs, _complete = _job_overrides(overrides, params)  # type: ignore[arg-type]
-                else:
-                    jobs = jobs[:1]
-        except (HydraException, OmegaConfBaseException) as exc:
-            raise _composition_error(exc, first_job, config_name) from None
-        configs = []
-        for job in jobs:
-            try:
-                cfg = compose(config_name, overrides=job, return_hydra_config=True)
-            except (HydraException, OmegaConfBaseException) as exc:
-                raise _composition_error(exc, job, config_name) from None
-            with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
-                HydraConfig.instance().set_config(cfg)
-            check_hydra_references(cfg)
-            task = to_plain(cfg)
-            validate(task)
-            configs.append((job, cfg, task))
-
-        if not args.multirun:  # on a terminal, a line at once: torch and the pre-flight take seconds
-            from higbench.runner.progress import announce, start_text
-
-            task0 = configs[0][2]
-            announce(task0.get("progress", True), start_text(OmegaConf.create(task0)) + " - checking", transient=True)
-        from higbench.runner.outputs import check_output_dir
-        from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
-
-        if args.multirun:
-            sweep_dir = Path(str(OmegaConf.select(configs[0][1], "hydra.sweep.dir")))
-            check_output_dir(sweep_dir, "hydra.sweep.dir")
-            _remember_multirun_yaml(sweep_dir)
-            if any(task.get("resume") for _, _, task in configs):
-                return argv  # which jobs resume is known only in their directories: checked in-job
-            seen = set()
-            for _job, _cfg, task in configs:
-                sizing = {
-                    k: task.get(k)
-                    for k in ("problem", "optimizer", "batch_size", "dtype", "device", "init_from", "memory_limit_mb")
-                }
-                sizing["optimizer"] = {k: v for k, v in task["optimizer"].items() if k != "lr"}
-                key = OmegaConf.to_yaml(sizing)
-                if key not in seen:
-                    seen.add(key)
-                    preflight(OmegaConf.create(task))
-            return argv
-
-        (job, cfg, task) = configs[0]
-        run_dir = str(cfg.hydra.run.dir) if _explicit(overrides, "hydra.run.dir") is not None else None
-        if task.get("resume"):
-            from higbench.runner import checkpoint
-
-            run_file = checkpoint.run_file_of(task["resume"], run_dir)
-            check_output_dir(run_file.parent, "resume")
-            if checkpoint.recorded_nothing(run_file):
-                stored_yaml = _stored_config(run_file, task["resume"])  # started again in the job
-                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
-                validate(merged)
-                preflight(OmegaConf.create(merged))
-            else:
-                _status, stored_yaml = checkpoint.inspect_run(run_file, task["resume"])
-                merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), task, overrides)
-                validate(merged)
-                merged["init_from"] = None  # the weights come from the checkpoint
-                preflight(OmegaConf.create(merged))
-                state = checkpoint.load(run_file)  # readable, and of this format
-                checkpoint.check_owner(state, run_file, task["resume"])  # and of this run
-            extra = []
-            if run_dir is None:
-                extra.append(f"hydra.run.dir={run_file.parent}")
-            subdir = OmegaConf.select(cfg, "hydra.output_subdir")
-            if subdir is not None and _explicit(overrides, "hydra.output_subdir") is None:
-                extra.append(f"hydra.output_subdir={subdir}/resume-{time.strftime('%Y%m%d-%H%M%S')}")
-            return argv + extra
-        out = Path(str(cfg.hydra.run.dir))
-        check_output_dir(out, "hydra.run.dir", RUN_FILE_NAME)
-        from higbench.runner import checkpoint
-
-        if (out / RUN_FILE_NAME).exists() and not checkpoint.recorded_nothing(out / RUN_FILE_NAME):
-            raise ConfigError(
-                "hydra.run.dir",
-                str(out),
-                f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it "
-                f"(resume={out} continues it, or pick a new hydra.run.dir)",
-            )
-        preflight(OmegaConf.create(task))
-    return argv
-
-
-def _stored_config(run_file: Path, resume_value) -> str:
-    """Config YAML of a run: from its run file, else (a file killed at creation) Hydra's copy."""
-    from higbench.runfile.reader import UnreadableRunFile, read_head
-
-    try:
-        stored = read_head(run_file).config_yaml
-        if stored:
-            return stored
-    except UnreadableRunFile:
-        pass
-    saved = run_file.parent / ".hydra" / "config.yaml"
-    if saved.is_file():
-        return saved.read_text()
-    raise ConfigError("resume", resume_value, f"{run_file} recorded nothing and its config is unknown (no .hydra/config.yaml)")
-
-
-_MULTIRUN_YAML: tuple[Path, bytes] | None = None
-
-
-def _remember_multirun_yaml(sweep_dir: Path) -> None:
-    """A sweep run again into its directory: keep the sweep's own multirun.yaml (see main)."""
-    global _MULTIRUN_YAML
-    existing = sweep_dir / "multirun.yaml"
-    _MULTIRUN_YAML = (existing, existing.read_bytes()) if existing.is_file() else None
-
-
-def _restore_multirun_yaml() -> None:
-    """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-<time>.yaml."""
-    if _MULTIRUN_YAML is None:
-        return
-    path, original = _MULTIRUN_YAML
-    with contextlib.suppress(OSError):
-        if path.is_file() and path.read_bytes() != original:
-            os.replace(path, path.with_name(f"multirun-rerun-{time.strftime('%Y%m%d-%H%M%S')}.yaml"))
-        if not path.exists():
-            path.write_bytes(original)
-
 
 # -- the job ---------------------------------------------------------------------------------
 
@@ -395,7 +119,7 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 def _run_job(cfg: DictConfig) -> float:
     from higbench.runner.progress import announce, start_text
 
-    announce(cfg.get("progress", True), start_text(cfg))  # replaces precheck's transient line
+    announce(cfg.get("progress", True), start_text(cfg))  # replaces the checks' transient line
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner import checkpoint
     from higbench.runner.train import train
@@ -410,26 +134,13 @@ def _run_job(cfg: DictConfig) -> float:
     if cfg.get("resume"):
         run_path = checkpoint.run_file_of(cfg.resume, output_dir)
         empty = checkpoint.recorded_nothing(run_path)
-        if multirun and not run_path.exists():
-            cfg.resume = None  # a job of a resumed sweep that never started: start it
-        elif empty:
-            stored = cfg if multirun else OmegaConf.create(_stored_config(run_path, cfg.resume))
-            merged = checkpoint.resume_config(OmegaConf.to_container(stored, resolve=True), to_plain(cfg), overrides)
-            validate(merged)
-            cfg = OmegaConf.create(merged)  # started again from the beginning, below
-        else:
-            try:
-                status, stored_yaml = checkpoint.inspect_run(run_path, cfg.resume)
-                if multirun:
-                    checkpoint.check_owner(checkpoint.load(run_path), run_path, cfg.resume)
-            except ConfigError as exc:
-                if multirun and run_path.exists():
-                    return _kept(run_path, str(exc).split(": ", 1)[-1])
-                raise
-            merged = checkpoint.resume_config(OmegaConf.to_container(OmegaConf.create(stored_yaml)), to_plain(cfg), overrides)
-            validate(merged)
-            cfg = OmegaConf.create(merged)
-            resume = True
+        try:
+            merged, resume = resume_plan(to_plain(cfg), run_path, overrides, multirun=multirun)
+        except ConfigError as exc:
+            if multirun and run_path.exists():
+                return _kept(run_path, str(exc).split(": ", 1)[-1])
+            raise
+        cfg = OmegaConf.create(merged)
     elif os.path.lexists(run_path):
         empty = checkpoint.recorded_nothing(run_path)
         if not empty:
@@ -509,8 +220,13 @@ def _kept(run_path: Path, why: str) -> float:
     return loss if math.isfinite(loss) else math.inf
 
 
+_JOB_STARTED = False  # set once a job runs: errors after that are the job's, not the command line's
+
+
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _hydra_main(cfg: DictConfig) -> float:
+    global _JOB_STARTED
+    _JOB_STARTED = True
     hydra_cfg = HydraConfig.get()
     output_dir = Path(hydra_cfg.runtime.output_dir)
     try:
@@ -525,21 +241,26 @@ def _hydra_main(cfg: DictConfig) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry: check, then hand over to Hydra (which reads ``sys.argv``)."""
+    """Console-script entry: Hydra's app; its composition errors become one line (exit 2)."""
+    global _JOB_STARTED
     argv = list(sys.argv[1:] if argv is None else argv)
-    from hydra.core.global_hydra import GlobalHydra
-
-    try:
-        argv = precheck(argv)
-    except ConfigError as exc:
-        fail(exc)
-    finally:
-        GlobalHydra.instance().clear()
     sys.argv = [sys.argv[0], *argv]
+    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    full_error = os.environ.get("HYDRA_FULL_ERROR")
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
+    _JOB_STARTED = False
     try:
         _hydra_main()
+    except (HydraException, OmegaConfBaseException) as exc:
+        if _JOB_STARTED:
+            raise
+        fail(composition_error(exc, overrides))
     finally:
-        _restore_multirun_yaml()
+        if full_error is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = full_error
+        GlobalHydra.instance().clear()
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ Usable without the runner, three ways (fastest first):
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -71,12 +72,14 @@ class JacobianPower(torch.optim.Optimizer):
         precision: str | torch.dtype = "float64",
         jacobian: str = "structured",
     ):
-        if not lr > 0:
-            raise ValueError(f"lr={lr}: must be > 0")
+        if not 0 < lr < math.inf:
+            raise ValueError(f"lr={lr}: must be a number > 0")
         if not -1.0 <= kappa <= 1.0:
-            raise ValueError(f"kappa={kappa}: must lie in [-1, 1]")
-        if not tau >= 0:
-            raise ValueError(f"tau={tau}: must be >= 0")
+            raise ValueError(f"kappa={kappa}: must be a number in [-1, 1]")
+        if not -1.0 <= beta <= 1.0:
+            raise ValueError(f"beta={beta}: must be a number in [-1, 1]")
+        if not tau >= 0 or (truncation == "relative" and tau > 1):
+            raise ValueError(f"tau={tau}: must be in [0, 1] with truncation=relative (tau > 1 drops every singular value)")
         if truncation not in TRUNCATION_MODES:
             raise ValueError(f"truncation={truncation!r}: expected one of {TRUNCATION_MODES}")
         if solver not in SOLVERS:

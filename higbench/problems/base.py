@@ -1,7 +1,8 @@
 """What a learning problem is: data, a network, physics y = P(x, u), a per-sample loss.
 
 The runner and the optimizers only use this interface, so adding a problem is one module
-(a ``Problem`` subclass registered with ``@register``) plus one YAML file in conf/problem/.
+(a ``Problem`` subclass with its ``Config`` schema) plus one YAML file in a ``problem``
+config group whose ``_target_`` names the class (see docs/configuration.md).
 """
 
 from __future__ import annotations
@@ -9,15 +10,36 @@ from __future__ import annotations
 import abc
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 import torch
 from torch import nn
 
-from higbench.problems.networks import initialise
+from higbench.problems.networks import INIT_SCHEMES, initialise
+from higbench.schema import value
 
 # problem.loss_reduction: how the per-sample losses of a batch become the training objective.
 LOSS_REDUCTIONS = ("mean", "sum")
+# problem.solver of the time-stepping problems: the compiled loop with its adjoint, or plain torch.
+PHYSICS_SOLVERS = ("fast", "reference")
+
+
+@dataclass
+class ProblemConfig:
+    """Keys every problem has. A problem's ``Config`` adds its own, each with its rule."""
+
+    _target_: Optional[str] = None  # noqa: UP045 - OmegaConf reads Optional; the Problem class
+    name: str = value()
+    test_size: int = value(ge=1)
+    data_seed: int = value(ge=0)
+    init: str = value("glorot", choices=INIT_SCHEMES)
+    loss_reduction: str = value("mean", choices=LOSS_REDUCTIONS)
+
+
+@dataclass
+class FixedDataConfig(ProblemConfig):
+    train_size: int = value(ge=1)
 
 
 @dataclass
@@ -38,7 +60,8 @@ class Batch:
 class Problem(abc.ABC):
     """A physics-based learning problem. ``cfg`` is the ``problem`` config node."""
 
-    name: str = "?"
+    name: str = "?"  # the problem.name its runs record (set by @register)
+    Config: type = ProblemConfig  # the schema of the problem node (higbench.schema)
 
     def __init__(self, cfg, dtype: torch.dtype, device: torch.device, seed: int):
         self.cfg = cfg
@@ -98,19 +121,11 @@ class Problem(abc.ABC):
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
         return {}
 
-    @classmethod
-    def config_rules(cls) -> dict:
-        """Schema of this problem's config keys, ``{key: higbench.config.Check}``.
-
-        Used by ``higbench.config.validate`` for a problem without a table in
-        ``higbench.config.PROBLEM_RULES``: keys outside it are refused, each value checked.
-        Empty (the default): the problem's keys are not checked.
-        """
-        return {}
-
 
 class FixedDataProblem(Problem):
     """A problem with finite train and test tensors built once from the seed."""
+
+    Config = FixedDataConfig
 
     train: Batch
     test: Batch
@@ -147,8 +162,14 @@ def registry() -> dict[str, type[Problem]]:
 
 
 def build_problem(cfg, dtype: torch.dtype, device: torch.device, seed: int) -> Problem:
-    problems = registry()
-    name = cfg.name
-    if name not in problems:
-        raise ValueError(f"problem.name={name!r}: expected one of {sorted(problems)}")
-    return problems[name](cfg, dtype=dtype, device=device, seed=seed)
+    """The problem of a ``problem`` node: its ``_target_`` class (as optimizers are built),
+    else, for configs stored before problems had one, the class registered under its name."""
+    from hydra.utils import get_class
+
+    target = cfg.get("_target_")
+    if target is None:
+        problems = registry()
+        if cfg.name not in problems:
+            raise ValueError(f"problem.name={cfg.name!r}: expected one of {sorted(problems)}")
+        return problems[cfg.name](cfg, dtype=dtype, device=device, seed=seed)
+    return get_class(target)(cfg, dtype=dtype, device=device, seed=seed)

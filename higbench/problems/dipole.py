@@ -13,14 +13,17 @@ path's solver Jacobians (``physics_jacobian``). Off the CPU the reference runs.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 from torch import nn
 
 from higbench.physics import dipole_fast
 from higbench.physics._adjoint import available
 from higbench.physics.dipole import N, eigenstate, energy_overlap_loss, fidelity_loss, simulate
-from higbench.problems.base import Batch, FixedDataProblem, register
+from higbench.problems.base import PHYSICS_SOLVERS, Batch, FixedDataConfig, FixedDataProblem, register
 from higbench.problems.networks import ACTIVATIONS, mlp
+from higbench.schema import value
 
 __all__ = ["simulate", "eigenstate", "Dipole", "DipoleCNN"]
 
@@ -49,6 +52,17 @@ class DipoleCNN(nn.Module):
 
 @register("dipole")
 class Dipole(FixedDataProblem):
+    @dataclass
+    class Config(FixedDataConfig):
+        model: str = value(choices=MODELS)
+        dt: float = value(gt=0)
+        steps: int = value(ge=1)  # Crank-Nicolson steps = network outputs
+        hidden: list[int] = value(ge=1)
+        cnn_channels: int = value(ge=1)
+        cnn_layers: int = value(ge=1, le=(N - 1) // 2)  # valid convolutions of kernel 3 leave >= 1 of the 14 points
+        activation: str = value(choices=tuple(ACTIVATIONS))
+        solver: str = value("fast", choices=PHYSICS_SOLVERS)
+
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         if cfg.model not in MODELS:

@@ -11,20 +11,33 @@ structured path's solver Jacobians (``physics_jacobian``). Off the CPU the refer
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 from torch import nn
 
 from higbench.physics import oscillator_fast
 from higbench.physics._adjoint import available
 from higbench.physics.oscillator import energy, simulate
-from higbench.problems.base import Batch, FixedDataProblem, register
-from higbench.problems.networks import mlp
+from higbench.problems.base import PHYSICS_SOLVERS, Batch, FixedDataConfig, FixedDataProblem, register
+from higbench.problems.networks import ACTIVATIONS, mlp
+from higbench.schema import value
 
 __all__ = ["simulate", "energy", "Oscillator"]
 
 
 @register("oscillator")
 class Oscillator(FixedDataProblem):
+    @dataclass
+    class Config(FixedDataConfig):
+        dt: float = value(gt=0)
+        steps: int = value(ge=1)  # RK4 steps = network outputs
+        coupling: float = value()
+        control: list[float] = value(length=2)
+        hidden: list[int] = value(ge=1)
+        activation: str = value(choices=tuple(ACTIVATIONS))
+        solver: str = value("fast", choices=PHYSICS_SOLVERS)
+
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         gen = torch.Generator().manual_seed(int(cfg.data_seed))

@@ -18,19 +18,29 @@ paper's stated 41,408, [64, 256, 64]). The reference draws its data with PhiFlow
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import torch
 from torch import nn
 
 from higbench.physics.poisson import laplace, laplace_matrix, sample_potential
-from higbench.problems.base import Batch, Problem, register
-from higbench.problems.networks import mlp
+from higbench.problems.base import Batch, Problem, ProblemConfig, register
+from higbench.problems.networks import ACTIVATIONS, mlp
+from higbench.schema import value
 
 __all__ = ["laplace", "laplace_matrix", "sample_potential", "Poisson"]
 
 
 @register("poisson")
 class Poisson(Problem):
+    @dataclass
+    class Config(ProblemConfig):
+        grid: int = value(ge=2)
+        modes: int = value(ge=1)
+        epoch_size: int = value(ge=1)  # samples per "epoch" (data are sampled on the fly)
+        hidden: list[int] = value(ge=1)
+        activation: str = value(choices=tuple(ACTIVATIONS))
+
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         self.n = int(cfg.grid)

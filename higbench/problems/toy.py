@@ -7,12 +7,15 @@ y = P(x, u) = (u1, gamma*u2), so the Jacobian sees the ill-conditioning.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 from torch import nn
 
-from higbench.problems.base import Batch, FixedDataProblem, register
+from higbench.problems.base import Batch, FixedDataConfig, FixedDataProblem, register
 from higbench.problems.networks import mlp
+from higbench.schema import value
 
 
 def target_function(x: torch.Tensor) -> torch.Tensor:
@@ -22,6 +25,12 @@ def target_function(x: torch.Tensor) -> torch.Tensor:
 
 @register("toy")
 class Toy(FixedDataProblem):
+    @dataclass
+    class Config(FixedDataConfig):
+        gamma: float = value(gt=0)  # 1: well conditioned, 0.01: ill conditioned
+        hidden: int = value(ge=1)
+        probe_x: float = value()
+
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         gen = torch.Generator().manual_seed(int(cfg.data_seed))

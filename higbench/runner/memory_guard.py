@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from higbench.config import ConfigError
+from higbench.errors import ConfigError
 from higbench.optim.routes import choose_solver
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}

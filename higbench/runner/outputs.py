@@ -1,4 +1,4 @@
-"""Checks of an output location before anything is written there (``higbench.cli.precheck``).
+"""Checks of an output location before anything is written there (``higbench.checks``).
 
 A run or sweep directory must be creatable and writable, on a file system with room for a
 run file (``MIN_FREE_BYTES``), with names the file system accepts; a ``run.h5`` that is a
@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from higbench.config import ConfigError
+from higbench.errors import ConfigError
 from higbench.runfile.writer import RESERVE_BYTES, free_bytes
 
 MIN_FREE_BYTES = 2 * RESERVE_BYTES  # Hydra's files, the run file's first rows, the reserve for closing

@@ -43,7 +43,8 @@ import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first o
 # import it up front, so that no launcher's first run pays it inside the training clock.
 from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import ConfigError, init_from_path
+from higbench.config import init_from_path
+from higbench.errors import ConfigError
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileFault, RunFileWriter

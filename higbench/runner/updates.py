@@ -110,8 +110,8 @@ class JacobianPowerUpdate:
         return UpdateResult(value.item(), dict(opt.last_timings), opt.last_finite, opt.last_reason)
 
 
-def optimizer_kwargs(opt_cfg: DictConfig) -> dict:
-    kwargs = OmegaConf.to_container(opt_cfg, resolve=True)
+def optimizer_kwargs(opt_cfg: DictConfig | dict) -> dict:
+    kwargs = dict(opt_cfg) if isinstance(opt_cfg, dict) else OmegaConf.to_container(opt_cfg, resolve=True)
     for key in _META_KEYS:
         kwargs.pop(key, None)
     for key, value in list(kwargs.items()):

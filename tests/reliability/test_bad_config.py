@@ -1,8 +1,8 @@
 """Bad input: a table of bad values, each refused with exit code 2, one line naming key and
 value, and nothing written (no run directory, no file, no change to existing files).
 
-The table runs the real entry point (``higbench.cli.main``) in-process for speed; Hydra
-itself must never be reached (that is where directories get created). A few cases run the
+The table runs the real entry point (``higbench.cli.main``: Hydra's app and its ``Checks``
+callback) in-process for speed; the job itself must never be reached. A few cases run the
 console entry as a subprocess end to end, including the in-job path (validation inside
 the Hydra job, which must remove the directory Hydra made).
 """
@@ -92,7 +92,6 @@ BAD_VALUES = [
     ("toy", "hig", "optimizer.lr", 0),
     ("toy", "hig", "optimizer.lr", float("inf")),
     ("toy", "sgd", "optimizer.lr", [1, 2]),
-    ("toy", "hig", "optimizer.lr", True),
     ("toy", "hig", "optimizer.tau", 2.0),
     ("toy", "gn", "optimizer.tau", -1),
     ("toy", "hig", "optimizer.tau", "small"),
@@ -104,9 +103,9 @@ BAD_VALUES = [
     ("toy", "hig", "optimizer.solver", "qr"),
     ("toy", "hig", "optimizer.precision", "float16"),
     ("toy", "adam", "optimizer.betas", [0.9]),
-    ("toy", "adam", "optimizer.eps", 0),
+    ("toy", "adam", "optimizer.eps", -1e-8),
     ("toy", "adam", "optimizer.weight_decay", -1),
-    ("toy", "sgd", "optimizer.momentum", 1.0),
+    ("toy", "sgd", "optimizer.momentum", -0.5),
     ("toy", "rmsprop", "optimizer.alpha", -0.1),
     ("toy", "adagrad", "optimizer.initial_accumulator_value", -1),
     ("toy", "adadelta", "optimizer.rho", 1.5),
@@ -217,10 +216,10 @@ def test_bad_input_is_refused_and_nothing_is_written(argv, key, value, inputs, t
     sweep_dir = work / "sweep"
     before = _snapshot(inputs)
 
-    def hydra_reached():
-        raise AssertionError(f"{argv}: passed the checks and reached Hydra")
+    def job_reached(cfg):
+        raise AssertionError(f"{argv}: passed the checks and reached the job")
 
-    monkeypatch.setattr(cli, "_hydra_main", hydra_reached)
+    monkeypatch.setattr(cli, "_run_job", job_reached)
     with pytest.raises(SystemExit) as exit_info:
         cli.main([*argv, f"hydra.run.dir={run_dir}", f"hydra.sweep.dir={sweep_dir}"])
     err = capsys.readouterr().err
@@ -346,33 +345,20 @@ def test_every_problem_optimizer_pair_passes():
     _validate_all([[f"problem={p}", f"optimizer={o}"] for p in _conf("problem") for o in _conf("optimizer")])
 
 
-def test_torch_free_tables_agree_with_the_code():
-    """config.py mirrors a few constants to stay torch-free; they must match the code."""
-    import inspect
+def test_optimizer_arguments_are_checked_by_their_constructor():
+    """No table of torch signatures: torch's own checks, and the argument they refuse named."""
+    from higbench.config import check_optimizer
 
-    from hydra.utils import get_class
-
-    from higbench import config
-    from higbench.optim import hig
-    from higbench.optim.inversion import TRUNCATION_MODES
-    from higbench.problems import networks, registry
-
-    assert config.SOLVERS == hig.SOLVERS and config.TRUNCATION_MODES == TRUNCATION_MODES
-    assert config.JACOBIANS == getattr(hig, "JACOBIANS", config.JACOBIANS)
-    assert set(config.ACTIVATIONS) == set(networks.ACTIVATIONS) and config.INIT_SCHEMES == networks.INIT_SCHEMES
-    for target, args in config.OPTIMIZER_ARGS.items():
-        accepted: set[str] = set()
-        for klass in get_class(target).__mro__:  # follow **kwargs up to the class that takes them
-            params = inspect.signature(klass.__init__).parameters
-            accepted |= {n for n, p in params.items() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
-            if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-                break
-        accepted -= {"self", "params"}
-        # the table must list exactly the constructor's arguments, each with a check
-        assert set(args) == accepted, (target, "missing:", accepted - set(args), "extra:", set(args) - accepted)
-        assert all(a in config.OPTIMIZER_RULES for a in args), target
-    for name, cls in registry().items():  # every problem has a schema: a table, or its own rules
-        assert name in config.PROBLEM_RULES or cls.config_rules(), name
+    base = {"name": "adam", "_target_": "torch.optim.Adam", "lr": 1e-3, "betas": [0.9, 0.999], "eps": 1e-7}
+    check_optimizer({**base, "amsgrad": True, "foreach": None})  # any argument torch takes
+    for change, message in (
+        ({"weight_decay": -1}, "optimizer.weight_decay=-1: refused by torch.optim.Adam: Invalid weight_decay value: -1"),
+        ({"betas": [0.9]}, "optimizer.betas=[0.9]: refused by torch.optim.Adam:"),
+        ({"kappa": 0.5}, "optimizer.kappa=0.5: refused by torch.optim.Adam: Adam.__init__() got an unexpected keyword"),
+    ):
+        with pytest.raises(ConfigError) as info:
+            check_optimizer({**base, **change})
+        assert str(info.value).startswith(message), str(info.value)
 
 
 def test_config_error_names_key_and_value():
@@ -386,7 +372,7 @@ def test_config_error_names_key_and_value():
 def test_cli_exit_code_and_nothing_written_subprocess(tmp_path):
     res = run_cli(["optimizer.lr=-1", f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path)
     assert res.returncode == 2, res.stderr
-    assert res.stderr.strip() == "higbench: error: optimizer.lr=-1: must be a number > 0"
+    assert res.stderr.strip() == "higbench: error: optimizer.lr=-1: refused by higbench.optim.JacobianPower: must be a number > 0"
     res = run_cli(["problem.foo=1"], cwd=tmp_path)  # default run dir: outputs/ in the cwd
     assert res.returncode == 2 and "problem.foo=1: unknown key" in res.stderr, res.stderr
     res = run_cli(["-m", "optimizer.lr=0.1,-1", "budget.seconds=1"], cwd=tmp_path)
@@ -395,10 +381,12 @@ def test_cli_exit_code_and_nothing_written_subprocess(tmp_path):
 
 
 def test_in_job_validation_removes_what_hydra_made(tmp_path):
-    """With --config-dir the pre-check is skipped: the job validates and cleans up itself."""
-    res = run_cli(["--config-dir", str(REPO / "conf"), "optimizer.kappa=7"], cwd=tmp_path)
+    """Without the Checks callback (as for jobs an Optuna sweeper samples): the job validates
+    and cleans up after itself."""
+    res = run_cli(["~hydra.callbacks.checks", "optimizer.kappa=7"], cwd=tmp_path)
     assert res.returncode == 2, res.stderr
-    assert res.stderr.strip().splitlines()[-1] == "higbench: error: optimizer.kappa=7: must be a number in [-1, 1]"
+    expected = "higbench: error: optimizer.kappa=7: refused by higbench.optim.JacobianPower: must be a number in [-1, 1]"
+    assert res.stderr.strip().splitlines()[-1] == expected
     assert files_under(tmp_path) == [], files_under(tmp_path)
 
 
@@ -409,7 +397,7 @@ def test_existing_run_dir_is_never_overwritten(tmp_path, monkeypatch, capsys):
     (run_dir / ".hydra" / "config.yaml").write_text("original: true\n")
     before = _snapshot(run_dir)
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(cli, "_hydra_main", lambda: pytest.fail("reached Hydra"))
+    monkeypatch.setattr(cli, "_run_job", lambda cfg: pytest.fail("reached the job"))
     with pytest.raises(SystemExit) as exit_info:
         cli.main([f"hydra.run.dir={run_dir}"])
     err = capsys.readouterr().err
@@ -442,15 +430,17 @@ if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))
 
 
-def test_a_new_problem_declares_its_schema_with_config_rules(monkeypatch):
-    """A problem without a table in config.py is checked by its own ``config_rules()``."""
-    from higbench import config
+def test_a_problem_schema_is_the_config_dataclass_of_its_class(monkeypatch):
+    """``problem._target_`` names the class; its ``Config`` dataclass types and bounds the keys."""
+    import dataclasses
+
     from higbench.problems import base
+    from higbench.schema import value
 
     class Heat(base.FixedDataProblem):
-        @classmethod
-        def config_rules(cls):
-            return {"alpha": config.positive(), "train_size": config.integer(1)}
+        @dataclasses.dataclass
+        class Config(base.FixedDataConfig):
+            alpha: float = value(gt=0)
 
         def make_model(self): ...
 
@@ -458,15 +448,19 @@ def test_a_new_problem_declares_its_schema_with_config_rules(monkeypatch):
 
         def loss(self, y, targets): ...
 
-    monkeypatch.setitem(base._REGISTRY, "heat", Heat)
+    monkeypatch.setattr(sys.modules[__name__], "Heat", Heat, raising=False)
     cfg = _default_config(["optimizer=adam", "batch_size=4"])
-    cfg["problem"] = {"name": "heat", "alpha": 1.0, "train_size": 8}
+    cfg["problem"] = {"_target_": f"{__name__}.Heat", "name": "heat", "alpha": 1.0, "train_size": 8, "test_size": 8}
+    cfg["problem"]["data_seed"] = 0
     validate(cfg)
     for change, message in (
         ({"alpha": -1}, "problem.alpha=-1: must be a number > 0"),
-        ({"beta": 2}, "problem.beta=2: unknown key; valid keys: alpha, name, train_size"),
+        ({"alpha": "hot"}, "problem.alpha=hot: Value 'hot' of type 'str' could not be converted to Float"),
+        ({"beta": 2}, "problem.beta=2: unknown key; valid keys: _target_, alpha, data_seed, init, loss_reduction, name, test_"),
         ({"train_size": 2}, "batch_size=4: must not exceed problem.train_size=2"),
+        ({"_target_": "nowhere.Heat"}, "problem._target_=nowhere.Heat: cannot import this problem class"),
     ):
         bad = {**cfg, "problem": {**cfg["problem"], **change}}
-        with pytest.raises(ConfigError, match=message.replace("[", r"\[")):
+        with pytest.raises(ConfigError) as info:
             validate(bad)
+        assert str(info.value).startswith(message), str(info.value)

@@ -151,7 +151,7 @@ def test_corrupt_checkpoint_is_refused_and_run_kept(tmp_path, monkeypatch, capsy
     checkpoint_path(run_file).write_bytes(b"PK\x03\x04 truncated")
     before = run_file.read_bytes()
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(cli, "_hydra_main", lambda: pytest.fail("reached Hydra"))
+    monkeypatch.setattr(cli, "_run_job", lambda cfg: pytest.fail("reached the job"))
     with pytest.raises(SystemExit) as info:
         cli.main([f"resume={run_dir}"])
     err = capsys.readouterr().err
@@ -167,7 +167,7 @@ def test_truncated_init_from_is_refused(tmp_path, monkeypatch, capsys):
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
-    monkeypatch.setattr(cli, "_hydra_main", lambda: pytest.fail("reached Hydra"))
+    monkeypatch.setattr(cli, "_run_job", lambda cfg: pytest.fail("reached the job"))
     with pytest.raises(SystemExit) as info:
         cli.main([f"init_from={tmp_path / 'cut.h5'}"])
     err = capsys.readouterr().err

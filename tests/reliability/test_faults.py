@@ -430,7 +430,7 @@ def _refused(argv, tmp_path, monkeypatch, capsys, key):
     work.mkdir(exist_ok=True)
     monkeypatch.chdir(work)
     before = files_under(tmp_path)
-    monkeypatch.setattr(cli, "_hydra_main", lambda: pytest.fail(f"{argv} reached Hydra"))
+    monkeypatch.setattr(cli, "_run_job", lambda cfg: pytest.fail(f"{argv} reached the job"))
     with pytest.raises(SystemExit) as info:
         cli.main([*argv, "budget.max_updates=5"])
     line = one_error_line(capsys.readouterr().err)

@@ -1,0 +1,86 @@
+"""A fifth problem is one module plus one YAML file, and nothing under higbench/ changes.
+
+The problem lives in tests/custom_problem/ (``heat_problem.py`` and ``conf/problem/heat.yaml``).
+The test suite registers it the way a user would: Hydra's search path for the YAML
+(``hydra.searchpath``) and the module on ``PYTHONPATH`` for its ``_target_``. It then goes
+through the real console entry point: it trains with HIG and with Adam, and a bad value of
+one of its own keys is refused like those of the built-in problems.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from higbench.results import load_run
+
+HERE = Path(__file__).resolve().parent / "custom_problem"
+ROOT = HERE.parent.parent
+TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false", "threads=1"]
+
+
+@pytest.fixture
+def heat_cli(tmp_path):
+    """``higbench problem=heat ...`` with the test-only problem registered, from a fresh tmp dir."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(HERE), str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    env.pop("HYDRA_FULL_ERROR", None)
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        flags = [a for a in args if a.startswith("-")]
+        argv = [*flags, f"hydra.searchpath=[file://{HERE / 'conf'}]", "problem=heat", *TINY]
+        argv += [a for a in args if not a.startswith("-")]
+        return subprocess.run(
+            [sys.executable, "-m", "higbench.cli", *argv], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=180
+        )
+
+    return run
+
+
+def test_it_is_two_files_outside_higbench():
+    assert sorted(str(p.relative_to(HERE)) for p in HERE.rglob("*") if p.is_file() and "__pycache__" not in p.parts) == [
+        "conf/problem/heat.yaml",
+        "heat_problem.py",
+    ]
+    import higbench
+
+    package = Path(higbench.__file__).parent
+    assert not any("heat" in p.name for p in package.rglob("*")), "the test problem leaked into higbench/"
+
+
+@pytest.mark.parametrize("optimizer", ["hig", "adam"])
+def test_the_custom_problem_trains_through_the_cli(heat_cli, tmp_path, optimizer):
+    proc = heat_cli(f"optimizer={optimizer}")
+    assert proc.returncode == 0, proc.stderr
+    (path,) = sorted((tmp_path / "outputs").rglob("run.h5"))
+    meta, curves = load_run(path)
+    assert meta["status"] == "completed" and meta["problem"] == "heat" and meta["optimizer"] == optimizer
+    assert meta["config"]["problem"]["alpha"] == 0.2 and meta["config"]["batch_size"] == 16  # from heat.yaml
+    assert list(curves["step"]) == [0, 1, 2, 3] and curves["test_loss"].notna().all()
+
+
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("problem.alpha=0.7", "problem.alpha=0.7: must be a number in (0, 0.5]"),
+        ("problem.points=two", "problem.points=two: Value 'two' of type 'str' could not be converted to Integer"),
+        ("problem.hidden=[16,0]", "problem.hidden=[16,0]: each item must be an integer >= 1"),
+        ("problem.gamma=1", "problem.gamma=1: unknown key; valid keys under problem: _target_, alpha, data_seed, hidden,"),
+        ("batch_size=512", "batch_size=512: must not exceed problem.train_size=256"),
+    ],
+)
+def test_its_keys_are_validated_like_the_built_in_ones(heat_cli, tmp_path, override, message):
+    proc = heat_cli("optimizer=adam", override)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"higbench: error: {message}"), proc.stderr
+    assert sorted(tmp_path.rglob("*")) == [], "a refused config wrote something"
+
+
+def test_a_multirun_checks_its_jobs_before_the_sweep_starts(heat_cli, tmp_path):
+    proc = heat_cli("-m", "optimizer=adam", "problem.alpha=0.1,0.9")
+    assert proc.returncode == 2 and "problem.alpha=0.9: must be a number in (0, 0.5]" in proc.stderr, proc.stderr
+    assert sorted(tmp_path.rglob("*")) == []
