@@ -37,7 +37,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from higbench.config import ConfigError, show
+from higbench.errors import ConfigError, show
 from higbench.runfile.reader import RUN_FILE, RunFileLocked, UnreadableRunFile, read_head, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 
 import pytest
 from conftest import REPO
 from hydra import compose, initialize_config_dir
-from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf
 
@@ -59,9 +59,12 @@ def test_experiment_composes_and_its_grid_validates(name, hydra_compose):
     if "Optuna" in cfg.hydra.sweeper._target_:
         assert cfg.hydra.sweeper.direction == "minimize"
         return
-    jobs = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()]), None)[
-        0
+    parsed = OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()])
+    axes = [
+        [f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()] if o.is_sweep_override() else [o.input_line]
+        for o in parsed
     ]
+    jobs = [list(job) for job in itertools.product(*axes)]  # as Hydra's basic sweeper crosses them
     stated = re.search(r"^# (\d+) runs:", (CONF / "experiment" / f"{name}.yaml").read_text(), re.M)
     assert stated and int(stated.group(1)) == len(jobs)
     job = jobs[-1]  # the grid's far corner is a valid config with the swept values
