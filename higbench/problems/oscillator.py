@@ -40,9 +40,7 @@ class Oscillator(FixedDataProblem):
 
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
-        gen = torch.Generator().manual_seed(int(cfg.data_seed))
-        self.train = self._sample(int(cfg.train_size), gen)
-        self.test = self._sample(int(cfg.test_size), gen)
+        self.sample_datasets()
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         # Initial states uniform in [0, 1)^4; the target is the initial state itself.

@@ -33,9 +33,7 @@ class Toy(FixedDataProblem):
 
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
-        gen = torch.Generator().manual_seed(int(cfg.data_seed))
-        self.train = self._sample(int(cfg.train_size), gen)
-        self.test = self._sample(int(cfg.test_size), gen)
+        self.sample_datasets()
         self.probe = torch.tensor([[float(cfg.probe_x)]], dtype=dtype, device=device)
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:

@@ -29,9 +29,7 @@ class Heat(FixedDataProblem):
 
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
-        gen = torch.Generator().manual_seed(int(cfg.data_seed))
-        self.train = self._sample(int(cfg.train_size), gen)
-        self.test = self._sample(int(cfg.test_size), gen)
+        self.sample_datasets()
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         x = torch.linspace(0, 1, self.cfg.points, dtype=torch.float64)
