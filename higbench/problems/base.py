@@ -69,14 +69,6 @@ class Problem(abc.ABC):
         self.device = device
         self.seed = seed
 
-    def sample_datasets(self) -> None:
-        """Set ``self.train`` and ``self.test`` from ``self._sample(n, generator)`` (a problem's own),
-        with one generator seeded by ``data_seed``, train drawn first, then test (the order every
-        run so far was made with, so data sets are unchanged)."""
-        gen = torch.Generator().manual_seed(int(self.cfg.data_seed))
-        self.train = self._sample(int(self.cfg.train_size), gen)
-        self.test = self._sample(int(self.cfg.test_size), gen)
-
     # -- model --
     @abc.abstractmethod
     def make_model(self) -> nn.Module:
@@ -137,6 +129,17 @@ class FixedDataProblem(Problem):
 
     train: Batch
     test: Batch
+
+    def _sample(self, n: int, gen: torch.Generator) -> Batch:
+        """``n`` samples drawn with ``gen``: each fixed-data problem's own."""
+        raise NotImplementedError
+
+    def sample_datasets(self) -> None:
+        """Set ``self.train`` and ``self.test`` from ``self._sample``, with one generator seeded by
+        ``data_seed``, train drawn first, then test (the order every run so far was made with)."""
+        gen = torch.Generator().manual_seed(int(self.cfg.data_seed))
+        self.train = self._sample(int(self.cfg.train_size), gen)
+        self.test = self._sample(int(self.cfg.test_size), gen)
 
     def train_size(self) -> int:
         return len(self.train)
