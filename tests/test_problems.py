@@ -125,7 +125,7 @@ def test_glorot_initialisation_is_default_and_biases_are_zero():
     assert q.build_model()[0].bias.abs().max() > 0
 
 
-@pytest.mark.parametrize("problem", ["toy", "oscillator"])
+@pytest.mark.parametrize("problem", ["toy", "oscillator", "dipole"])
 def test_train_then_test_from_one_data_seed_generator(problem):
     """sample_datasets draws train first, then test, from one generator: the order the
     published runs were made with (swapping it, or a second generator, changes the data)."""

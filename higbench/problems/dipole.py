@@ -68,9 +68,7 @@ class Dipole(FixedDataProblem):
         if cfg.model not in MODELS:
             raise ValueError(f"problem.model={cfg.model!r}: expected one of {MODELS}")
         self.psi0 = eigenstate(1, dtype=dtype, device=device)
-        gen = torch.Generator().manual_seed(int(cfg.data_seed))
-        self.train = self._sample(int(cfg.train_size), gen)
-        self.test = self._sample(int(cfg.test_size), gen)
+        self.sample_datasets()  # after psi0: _sample builds the targets from it
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         ab = torch.randn(n, 2, generator=gen, dtype=torch.float64)
