@@ -123,9 +123,9 @@ def _check_filters(args: argparse.Namespace, df: pd.DataFrame) -> str | None:
 
 
 def _time_columns(df: pd.DataFrame, most: int = 3) -> list[str]:
-    """The time_to_<t> columns some run reached, the lowest ``most`` thresholds."""
+    """The time_to_<t> columns some run reached: the lowest ``most`` thresholds, highest first."""
     reached = [c for c in df.columns if c.startswith("time_to_") and pd.to_numeric(df[c], errors="coerce").notna().any()]
-    return sorted(reached, key=lambda c: float(c[len("time_to_") :]))[:most]
+    return sorted(sorted(reached, key=lambda c: float(c[len("time_to_") :]))[:most], key=lambda c: -float(c[len("time_to_") :]))
 
 
 def _load(args: argparse.Namespace, roots: list[Path], thresholds: tuple[float, ...], curves: bool = False):
@@ -198,8 +198,8 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     horizons = times.drop_duplicates("problem").set_index("problem")["horizon_s"] if len(times) else {}
     print(
         "\ntime to target (training clock, median over seeds; '- (k/n)': fewer than half of n seeds"
-        " reached it within the shortest budget"
-        + "".join(f"; {p} {h:g} s" for p, h in dict(horizons).items() if h != float("inf"))
+        " reached it"
+        + "".join(f"; {p}: mixed budgets, only the first {h:g} s count" for p, h in dict(horizons).items() if h != float("inf"))
         + ")"
     )
     print(format_table(times, with_ratio=bool(args.profile)))

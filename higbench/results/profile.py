@@ -126,11 +126,15 @@ def _reach_times(group: pd.DataFrame, column: str, horizon: float) -> np.ndarray
 
 
 def comparison_horizon(runs: pd.DataFrame) -> float:
-    """The shortest time budget among these runs (inf if none has one): times after it do not count,
-    so settings with longer budgets get no extra time."""
-    seconds = pd.to_numeric(runs.get("budget.seconds", pd.Series(dtype=float)), errors="coerce")
-    seconds = seconds[np.isfinite(seconds)]
-    return float(seconds.min()) if len(seconds) else math.inf
+    """The training clock that every run of a problem had: inf when all share one time budget,
+    else the clock at which the shortest-budget runs stopped (a run may overshoot its budget by
+    up to one update). Targets reached after it do not count, so a longer budget buys nothing."""
+    seconds = pd.to_numeric(runs.get("budget.seconds", pd.Series(np.nan, index=runs.index)), errors="coerce")
+    if seconds.nunique(dropna=False) <= 1:
+        return math.inf
+    shortest = runs[seconds == seconds.min()]
+    clock = pd.to_numeric(shortest.get("train_time_s", pd.Series(dtype=float)), errors="coerce").dropna()
+    return float(clock.min()) if len(clock) else float(seconds.min())
 
 
 def time_to_target(runs: pd.DataFrame, targets: Mapping[str, Sequence[float]], setting: str = "setting") -> pd.DataFrame:
