@@ -19,7 +19,8 @@ def test_notebook_runs_and_hig_beats_adam():
         if cell.cell_type == "code":
             cell.outputs = []
     # raises CellExecutionError, with the cell and its traceback, if any cell fails
-    nbclient.NotebookClient(nb, timeout=240, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOK.parent)}}).execute()
+    client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOK.parent)}})
+    client.execute()
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert all(c.execution_count for c in code), "a code cell did not run"
     assert any("image/png" in o.get("data", {}) for c in code for o in c.outputs), "no plot drawn"
