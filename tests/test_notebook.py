@@ -19,7 +19,8 @@ def test_notebook_runs_and_hig_beats_adam():
         if cell.cell_type == "code":
             cell.outputs = []
     # raises CellExecutionError, with the cell and its traceback, if any cell fails
-    client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOK.parent)}})
+    where = {"metadata": {"path": str(NOTEBOOK.parent)}}
+    client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3", resources=where)
     client.execute()
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert all(c.execution_count for c in code), "a code cell did not run"

@@ -35,23 +35,21 @@ def setting_labels(runs: pd.DataFrame, keys: Sequence[str] | None = None) -> pd.
 
     keys: config columns that define a setting (e.g. ``optimizer.name,optimizer.lr``);
     default: the run's command-line overrides without seed, problem, budget and the keys
-    that do not change a result (``optimizer=adam optimizer.lr=0.001``), or the optimizer's
+    that do not change a result (``adam lr=0.001``), or the optimizer's
     name when nothing else was overridden.
     """
     if keys:
         return runs[list(keys)].astype(str).agg(" ".join, axis=1)
 
     def from_overrides(row: pd.Series) -> str:
-        kept = []
+        name, kept = str(row.get("optimizer.name")), []
         for item in str(row.get("overrides") or "").split():
-            key = item.lstrip("+~").split("=", 1)[0]
-            if key in NOT_SETTING_KEYS or key.startswith("hydra."):
-                continue
-            kept.append(item.lstrip("+"))
-        name = str(row.get("optimizer.name"))
-        if not any(k.startswith("optimizer=") for k in kept):
-            kept.insert(0, f"optimizer={name}")
-        return " ".join(kept).replace("optimizer=", "", 1)
+            key, _, value = item.lstrip("+~").partition("=")
+            if key == "optimizer":
+                name = value
+            elif key not in NOT_SETTING_KEYS and not key.startswith("hydra."):
+                kept.append(item.lstrip("+").removeprefix("optimizer."))
+        return " ".join([name, *kept])
 
     return runs.apply(from_overrides, axis=1) if len(runs) else pd.Series([], dtype=object)
 

@@ -128,5 +128,5 @@ def test_setting_labels_drop_seed_problem_and_budget():
             "optimizer.name": ["adam", "hig", "hig"],
         }
     )
-    assert setting_labels(runs).tolist() == ["adam optimizer.lr=0.01", "hig", "hig"]
+    assert setting_labels(runs).tolist() == ["adam lr=0.01", "hig", "hig"]
     assert setting_labels(runs.assign(x=[1, 2, 2]), ["optimizer.name", "x"]).tolist() == ["adam 1", "hig 2", "hig 2"]
