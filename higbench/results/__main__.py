@@ -113,8 +113,9 @@ def _known(kind: str, df: pd.DataFrame, column: str) -> set[str]:
 def _check_filters(args: argparse.Namespace, df: pd.DataFrame) -> str | None:
     """An error line for a --problem/--optimizer value no run or config knows (with a suggestion)."""
     for flag, kind, column in (("problem", "problem", "problem.name"), ("optimizer", "optimizer", "optimizer.name")):
-        known = _known(kind, df, column)
-        for value in _values(getattr(args, flag)):
+        values = _values(getattr(args, flag))
+        known = _known(kind, df, column) if values else set()
+        for value in values:
             if value not in known:
                 close = difflib.get_close_matches(value, sorted(known), n=1)
                 hint = f"did you mean {close[0]}?" if close else f"known: {', '.join(sorted(known))}"
