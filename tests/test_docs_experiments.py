@@ -5,6 +5,8 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+import higbench.config  # noqa: F401  registers the schema conf/config.yaml names (higbench_schema)
+
 ROOT = Path(__file__).resolve().parent.parent
 ROW = re.compile(r"^\| `(\w+)` \| `(\w+)` \| (\d+) \| ([^|]+) \| ([^|]*) \| (\d+) \|$", re.M)
 

@@ -4,17 +4,30 @@ higbench-results outputs                          # every run, one line each
 higbench-results outputs/sweeps --problem oscillator --status completed
 higbench-results outputs --best                   # best run per optimizer (table 2)
 higbench-results outputs --csv runs.csv           # the full table (all columns)
+higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
+higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import sys
 from pathlib import Path
 
 import pandas as pd
 
 from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
+from higbench.results.profile import (
+    all_targets,
+    budget_labels,
+    default_targets,
+    format_table,
+    parse_targets,
+    performance_profile,
+    setting_labels,
+    time_to_target,
+)
 from higbench.runfile.reader import RUN_FILE_GLOB
 
 SUMMARY_COLUMNS = [
@@ -23,6 +36,7 @@ SUMMARY_COLUMNS = [
     "problem.model",
     "optimizer.name",
     "status",
+    "budget",
     "steps",
     "train_time_s",
     "final_test_loss",
@@ -72,26 +86,73 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--jobs", type=int, default=1, help="processes reading run files (for thousands of files)")
     p.add_argument("--csv", metavar="FILE", help="also write the full filtered table (all columns) to FILE")
     p.add_argument("--width", type=int, default=60, help="truncate the overrides column to this many characters (0: never)")
+    p.add_argument("--plot", metavar="FILE", help="draw test loss against training clock: median and band over seeds per setting")
+    p.add_argument("--profile", metavar="FILE", help="print time to target per setting and draw the performance profile")
+    p.add_argument(
+        "--targets",
+        nargs="+",
+        metavar="PROBLEM=LOSS,...",
+        help="target test losses per problem for --plot/--profile (default: decades that separate the settings)",
+    )
+    p.add_argument(
+        "--setting",
+        help="config columns that make an optimizer setting, comma-separated (default: the overrides without seed,"
+        " problem and budget)",
+    )
     return p.parse_args(argv)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    roots = [Path(r) for r in args.roots]
-    thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
-    try:
-        df = load_runs(roots, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs, figure_runs=args.figure_runs)
-    except FileNotFoundError as exc:
-        print(f"higbench-results: error: {exc}", file=sys.stderr)
-        return 2
-    total = len(df)
-    if total:
-        df = df.assign(
-            **{
-                "problem.name": _column(df, "problem.name", "problem"),
-                "optimizer.name": _column(df, "optimizer.name", "optimizer"),
-            }
-        )
+def _known(kind: str, df: pd.DataFrame, column: str) -> set[str]:
+    """Names a filter value may take: those in the runs and the shipped configs of that group."""
+    from higbench.cli import config_dir
+
+    shipped = {p.stem for p in (Path(config_dir()) / kind).glob("*.yaml")}
+    return shipped | (set(df[column].dropna().astype(str)) if column in df else set())
+
+
+def _check_filters(args: argparse.Namespace, df: pd.DataFrame) -> str | None:
+    """An error line for a --problem/--optimizer value no run or config knows (with a suggestion)."""
+    for flag, kind, column in (("problem", "problem", "problem.name"), ("optimizer", "optimizer", "optimizer.name")):
+        values = _values(getattr(args, flag))
+        known = _known(kind, df, column) if values else set()
+        for value in values:
+            if value not in known:
+                close = difflib.get_close_matches(value, sorted(known), n=1)
+                hint = f"did you mean {close[0]}?" if close else f"known: {', '.join(sorted(known))}"
+                return f"--{flag} {value}: no such {kind}; {hint}"
+    return None
+
+
+def _time_columns(df: pd.DataFrame, most: int = 3) -> list[str]:
+    """The time_to_<t> columns some run reached: the lowest ``most`` thresholds, highest first."""
+    reached = [c for c in df.columns if c.startswith("time_to_") and pd.to_numeric(df[c], errors="coerce").notna().any()]
+    return sorted(sorted(reached, key=lambda c: float(c[len("time_to_") :]))[:most], key=lambda c: -float(c[len("time_to_") :]))
+
+
+def _load(args: argparse.Namespace, roots: list[Path], thresholds: tuple[float, ...], curves: bool = False):
+    return load_runs(
+        roots, curves=curves, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs, figure_runs=args.figure_runs
+    )
+
+
+def _with_names(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
+    """problem.name/optimizer.name filled from the root attributes, plus ``budget`` and ``setting``."""
+    if not len(df):
+        return df.assign(budget=pd.Series(dtype=object), setting=pd.Series(dtype=object))
+    df = df.assign(
+        **{
+            "problem.name": _column(df, "problem.name", "problem"),
+            "optimizer.name": _column(df, "optimizer.name", "optimizer"),
+        }
+    )
+    keys = [k for k in (args.setting or "").split(",") if k]
+    missing = [k for k in keys if k not in df]
+    if missing:
+        raise KeyError(f"--setting {args.setting}: no column(s) {missing} in the runs table")
+    return df.assign(budget=budget_labels(df), setting=setting_labels(df, keys or None))
+
+
+def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
     for key, wanted in (
         ("problem.name", _values(args.problem)),
         ("optimizer.name", _values(args.optimizer)),
@@ -99,22 +160,95 @@ def main(argv: list[str] | None = None) -> int:
     ):
         if wanted and key in df:
             df = df[df[key].isin(wanted)]
-    if args.best:
-        by = (
-            [k for k in args.by.split(",") if k]
-            if args.by
-            else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
-        )
-        try:
-            df = best_runs(df, by=by, metric=args.metric, per_problem=not args.by) if len(df) else df  # --by: the whole grouping
-        except KeyError as exc:
-            print(f"higbench-results: error: {exc.args[0]}", file=sys.stderr)
+    return df
+
+
+def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
+    """The best run per group, at equal budget: the budget is always one of the group keys,
+    so a 30 s run never competes with a 5 s one (a note says when budgets were mixed)."""
+    by = (
+        [k for k in args.by.split(",") if k]
+        if args.by
+        else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
+    )
+    if "budget" not in by:
+        by.append("budget")
+    if len(df) and df.groupby("problem.name")["budget"].nunique().max() > 1:
+        print("note: runs with different budgets: the best run is chosen per budget (column budget)", file=sys.stderr)
+    return best_runs(df, by=by, metric=args.metric, per_problem=not args.by) if len(df) else df  # --by: the whole grouping
+
+
+def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
+    targets = parse_targets(args.targets) if args.targets else default_targets(df)
+    unknown = sorted(set(targets) - set(df["problem.name"].dropna())) if len(df) else []
+    if unknown and args.targets:
+        print(f"note: --targets: no runs of {', '.join(unknown)} here", file=sys.stderr)
+    return targets
+
+
+def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int:
+    """--plot and --profile: the time-to-target table, then the figures."""
+    from higbench.results.plot import plot_curves, plot_profile, profile_taus
+
+    targets = _targets(args, df)
+    runs, curves = _load(args, roots, all_targets(targets) or DEFAULT_THRESHOLDS, curves=True)
+    runs = _filter(_with_names(runs, args), args)
+    if not targets:
+        print("note: no targets: no problem here has a finite test loss (give --targets)", file=sys.stderr)
+    times = time_to_target(runs, targets)
+    horizons = times.drop_duplicates("problem").set_index("problem")["horizon_s"] if len(times) else {}
+    print(
+        "\ntime to target (training clock, median over seeds; '- (k/n)': fewer than half of n seeds"
+        " reached it"
+        + "".join(f"; {p}: mixed budgets, only the first {h:g} s count" for p, h in dict(horizons).items() if h != float("inf"))
+        + ")"
+    )
+    print(format_table(times, with_ratio=bool(args.profile)))
+    if args.plot:
+        print(f"curves: {plot_curves(runs[runs['status'].isin(('completed', 'diverged'))], curves, args.plot)}")
+    if args.profile and len(times):
+        pairs = len(times[["problem", "target"]].drop_duplicates())
+        taus = profile_taus(times)
+        rho = performance_profile(times, taus)
+        for name in rho.columns:
+            at = {t: float(performance_profile(times, [t])[name].iloc[0]) for t in (1.0, 2.0, 4.0)}
+            print(f"rho {name}: " + ", ".join(f"tau={t:g}: {v:.2f}" for t, v in at.items()))
+        print(f"profile: {plot_profile(rho, args.profile, pairs)}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    roots = [Path(r) for r in args.roots]
+    thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
+    try:
+        df = _with_names(_load(args, roots, thresholds), args)
+        total = len(df)
+        error = _check_filters(args, df)
+        if error:
+            print(f"higbench-results: error: {error}", file=sys.stderr)
             return 2
-    elif args.metric in df:
-        df = df.sort_values(["problem.name", "optimizer.name", args.metric], na_position="last")
+        df = _filter(df, args)
+        if args.plot or args.profile:
+            _summary_line(df, total, roots, args)
+            return _plots(args, roots, df)
+        if args.best:
+            df = _best(df, args)
+        elif args.metric in df:
+            df = df.sort_values(["problem.name", "optimizer.name", "budget", args.metric], na_position="last")
+    except (FileNotFoundError, KeyError, ValueError) as exc:
+        print(f"higbench-results: error: {exc.args[0] if isinstance(exc, KeyError) else exc}", file=sys.stderr)
+        return 2
     if args.csv:
         df.to_csv(args.csv, index=False)
+    _summary_line(df, total, roots, args)
+    if not len(df):
+        return 0
+    _print_table(df, roots, args)
+    return 0
 
+
+def _summary_line(df: pd.DataFrame, total: int, roots: list[Path], args: argparse.Namespace) -> None:
     counts = df["status"].value_counts().to_dict() if len(df) else {}
     left_out = 0 if args.figure_runs else sum(under_figure_runs(p, roots) for p in find_run_files(roots, args.pattern))
     print(
@@ -122,13 +256,11 @@ def main(argv: list[str] | None = None) -> int:
         + (f" ({', '.join(f'{n} {s}' for s, n in counts.items())})" if counts else "")
         + (f"; {left_out} run(s) of `make figures` left out (--figure-runs)" if left_out else "")
     )
-    if not len(df):
-        return 0
-    shown = (
-        SUMMARY_COLUMNS
-        + [threshold_column(t) for t in (args.threshold or [])]
-        + [c for c in (args.columns or "").split(",") if c]
-    )
+
+
+def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) -> None:
+    times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
+    shown = SUMMARY_COLUMNS + times + [c for c in (args.columns or "").split(",") if c]
     if args.best and args.metric not in shown:
         shown.insert(shown.index("final_test_loss"), args.metric)
     missing = [c for c in shown if c not in df.columns]
@@ -147,7 +279,6 @@ def main(argv: list[str] | None = None) -> int:
     errors = df[df["error"].fillna("") != ""] if "error" in df else df.iloc[0:0]
     for _, row in errors.iterrows():
         print(f"note: {row['path']}: {row['status']}: {row['error']}", file=sys.stderr)
-    return 0
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """One HDF5 file per run, appended and flushed as the run goes.
 
-Layout (documented in the README, read by ``higbench.results``):
+Layout (documented in docs/run-file.md, read by ``higbench.results``):
 
     /                 attrs: format_version, status, status_reason, status_step, config (YAML),
                              overrides (JSON list), problem, optimizer, started, finished
