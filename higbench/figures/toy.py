@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import claim, e, final, loss_at, median, need
+from higbench.figures.claims import claim, e, final, half_way, median, need
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
 from higbench.figures.spec import Budget, By, Figure, Sweep
@@ -112,9 +112,13 @@ def _by_opt(datas, gamma: float, *needed: str) -> dict[str, list[RunData]]:
 def well_conditioned(datas):
     """Toy, gamma=1: Adam, GN and HIG all decrease the loss by about three orders of magnitude.
     Rule: every optimizer >= 2.5 decades below its initial loss (partly: >= 1.5)"""
-    orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in _by_opt(datas, 1.0).items()}
+    runs = _by_opt(datas, 1.0)
+    orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in runs.items()}
     measured = ", ".join(f"{OPTIMIZER_NAMES[o]} {v:.1f}" for o, v in orders.items()) + " decades"
-    return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values())
+    values = {f"{o}_decades": v for o, v in orders.items()}
+    if runs.get("adam"):
+        values |= {"adam_final": final(runs["adam"]), "adam_half": half_way(runs["adam"])}
+    return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values()), values
 
 
 @claim("toy-2", "fig1", "plateau ~0.2 (figure 1b)")
@@ -124,11 +128,12 @@ def stall(datas):
     runs = _by_opt(datas, 0.01, "adam", "gn")
     fa, fg = final(runs["adam"]), final(runs["gn"])
     # A stall is a plateau: the final loss no lower than 1/1.5 of the loss at half the run.
-    half = {o: median(loss_at(r, 0.5 * float(r.curves["wall_time"].iloc[-1])) for r in runs[o]) for o in runs}
+    half = {o: half_way(runs[o]) for o in runs}
     flat = all(final(runs[o]) >= half[o] / 1.5 for o in ("adam", "gn"))
     level = all(0.1 <= x <= 0.4 for x in (fa, fg))
     measured = f"final loss Adam {e(fa)} (half-way {e(half['adam'])}), GN {e(fg)} (half-way {e(half['gn'])}) (medians)"
-    return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level
+    values = {"adam_final": fa, "gn_final": fg, "adam_half": half["adam"], "gn_half": half["gn"]}
+    return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level, values
 
 
 @claim("toy-3", "fig1", "HIG lowest")
@@ -144,7 +149,8 @@ def hig_best(datas):
         f"final loss (median of seeds) HIG {e(fh)} vs Adam η=0.3 (paper) {e(fa)} ({fa / fh:.1f}x), GN {e(fg)}; "
         f"re-tuned Adam: {tuned_text or 'not run'} (HIG's advantage against the best: {fa_best / fh:.1f}x)"
     )
-    return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg)
+    values = {"hig_final": fh, "hig_half": half_way(runs["hig"]), "adam_best": fa_best, "gn_final": fg}
+    return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg), values
 
 
 @claim("toy-4", "fig1", "GN saturates, HIG not")
