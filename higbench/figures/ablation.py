@@ -118,3 +118,14 @@ def tau(datas):
     gn_part = all(map(stable, large)) and all(r.status == "diverged" or at[id(r)] > 10 * gn_best for r in small)
     hig_part = all(map(stable, hig)) and min(at[id(r)] for r in hig) < gn_best
     return measured, gn_part and hig_part, gn_part or hig_part, {"n": n}
+
+
+@claim("abl-4", "fig12", "κ=-0.5 best")
+def kappa_best(datas):
+    """Ablation (fig. 12b): κ=-0.5 is the best κ. Rule: κ=-0.5 ends lowest of the κ sweep (partly: within 2x of the
+    lowest)"""
+    runs = datas["fig12"].runs("kappa")
+    fin = {r.cfg("optimizer.kappa"): final([r]) for r in runs}
+    need(-0.5 in fin and len(fin) >= 2, what="fig12b κ=-0.5 and others")
+    k_best = min(fin, key=fin.get)
+    return f"κ=-0.5 {e(fin[-0.5])}; lowest: κ={num(k_best)} {e(fin[k_best])}", k_best == -0.5, fin[-0.5] <= 2 * fin[k_best]

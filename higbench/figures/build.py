@@ -129,6 +129,7 @@ class Builder:
             extra["error"] = traceback.format_exc(limit=6)
             self.log(f"[figures] {figure.id}: plot failed: {type(exc).__name__}: {exc}")
         extra["claims"] = self.check_claims(figure)
+        extra["made"] = provenance()
         miss = len(data.missing())
         if miss:
             result.missing[figure.id] = miss
@@ -143,6 +144,25 @@ class Builder:
 
     def close(self) -> None:
         self.composer.close()
+
+
+def provenance() -> dict:
+    """Where and when a figure's runs were judged: git revision, date, machine and load."""
+    import platform
+    import subprocess
+
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5).stdout.strip()
+    except OSError:
+        rev = ""
+    machine = f"{os.cpu_count()} CPU cores ({platform.machine()} {platform.system()})"
+    load = "load {:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else ""
+    return {
+        "revision": rev or "unknown",
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": machine,
+        "load": load,
+    }
 
 
 def build(

@@ -355,6 +355,14 @@ BUDGETS: dict[str, dict] = {
     "abl-1": {"min_seconds": 120},
     "abl-2": {"min_seconds": 30},
     "abl-3": {"min_seconds": 120},
+    "toy-5": {"min_seconds": 20, "min_seeds": 3},
+    "toy-6": {"min_seconds": 20},
+    "osc-6": {"min_seconds": 12},  # the appendix grids' short runs: divergence shows early
+    "poi-5": {"min_seconds": POISSON_HIG_HOUR},  # slopes on a log-time axis need the paper's hour of updates
+    "dip-7": {"min_seconds": 20},
+    "dip-8": {"min_seconds": 120},
+    "cnn-2": {"min_seconds": 20},
+    "abl-4": {"min_seconds": 120},
 }
 
 

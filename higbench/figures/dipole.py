@@ -288,3 +288,53 @@ def cnn(datas):
     vs_paper = f"; Adam at the paper's η=2e-4 b=256 {e(paper[0])} ({paper[0] / fh:.2g}x)" if paper else ""
     measured = f"best HIG {e(fh)} ({h.label()}), best Adam of the grid {e(fa)} ({a.label()}; HIG's advantage {fa / fh:.2g}x)"
     return measured + vs_paper, fh <= 0.5 * fa, fh < fa, {"hig": fh, "adam": fa, "hig_half": half_way([h])}
+
+
+def oscillation(run: RunData) -> float:
+    """Median |change of log10 loss| between consecutive evaluations over the run's last half."""
+    y = np.log10(run.curves["test_loss"].to_numpy(dtype=float))
+    y = y[len(y) // 2 :]
+    return float(np.median(np.abs(np.diff(y)))) if len(y) > 2 else float("nan")
+
+
+@claim("dip-7", "fig8", "Adam: slow convergence or oscillation")
+def adam_trade_off(datas):
+    """Dipole (fig. 8): Adam trades slow convergence against oscillation. Rule: at every b the largest-η Adam run is
+    the lowest at 10% of the budget and oscillates most over the last half, the smallest-η run the reverse (partly:
+    at some b)"""
+    need(runs := datas["fig8"].runs("adam"), what="fig8")
+    per_b, text = [], []
+    for b in sorted({r.cfg("batch_size") for r in runs}):
+        rs = sorted((r for r in runs if r.cfg("batch_size") == b), key=lambda r: r.cfg("optimizer.lr"))
+        if len(rs) < 2:
+            continue
+        t10 = 0.1 * min(end_time(r) for r in rs)
+        early, wobble = [loss_at(r, t10) for r in rs], [oscillation(r) for r in rs]
+        per_b.append(early[-1] == min(early) and wobble[-1] == max(wobble) and wobble[0] == min(wobble))
+        lo, hi = (num(r.cfg("optimizer.lr")) for r in (rs[0], rs[-1]))
+        text.append(f"b={b}: oscillation η={lo} {wobble[0]:.2g}, η={hi} {wobble[-1]:.2g}")
+    need(per_b, what="fig8 (two η at one b)")
+    return "; ".join(text), all(per_b), any(per_b)
+
+
+@claim("dip-8", "fig9", "τ above ~1e-6")
+def tau_floor(datas):
+    """Dipole (fig. 9): τ must be above about 1e-6. Rule: at η=0.5, b=16 the τ=1e-6 run ends >= 2x above the best of
+    τ in 1e-5..1e-3 (partly: above it)"""
+    need(runs := datas["fig9"].runs("hig"), what="fig9")
+    per_tau = {r.cfg("optimizer.tau"): final([r]) for r in runs if (r.cfg("optimizer.lr"), r.cfg("batch_size")) == (0.5, 16)}
+    mid = [per_tau[t] for t in (1e-5, 1e-4, 1e-3) if t in per_tau]
+    need(mid and 1e-6 in per_tau, what="fig9 τ=1e-6 and 1e-5..1e-3 at η=0.5 b=16")
+    low = per_tau[1e-6]
+    values = {"tau6": low, "best_mid": min(mid)}
+    return f"τ=1e-6 {e(low)} vs best of 1e-5..1e-3 {e(min(mid))}", low >= 2 * min(mid), low > min(mid), values
+
+
+@claim("cnn-2", "fig11", "stable for τ 1e-5..1e-3")
+def cnn_tau(datas):
+    """Dipole CNN (fig. 11): HIG trains stably for τ from 1e-5 to 1e-3. Rule: every HIG CNN run with τ in 1e-5..1e-3
+    completes and ends below its initial loss (partly: all but one)"""
+    runs = [r for r in datas["fig11"].runs("hig") if 1e-5 <= r.cfg("optimizer.tau") <= 1e-3]
+    need(runs, what="fig11 τ in 1e-5..1e-3")
+    bad = [r.label() for r in runs if not (r.status == "completed" and r.final_loss < r.initial_loss)]
+    return f"{len(runs) - len(bad)}/{len(runs)} stable" + (f"; unstable: {', '.join(bad)}" if bad else ""), not bad, len(bad) <= 1

@@ -7,6 +7,8 @@ and fig6_adam.yaml.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from higbench.figures.claims import (
@@ -315,3 +317,25 @@ def _per_update(d: FigureData, ends: dict, fin: dict) -> dict:
         side = "lo" if b == lo else "hi"
         values[f"{o}_{side}"], values[f"{o}_{side}_eq"] = fin[(o, b)], median(at_update(r, n_eq) for r in rs)
     return values | {"n_eq": n_eq}
+
+
+@claim("osc-6", "fig5 fig6", "GD family alike over b, unstable at large η")
+def gd_family(datas):
+    """Oscillators (figs 5-6): the gradient-descent family behaves alike over batch sizes and becomes unstable at large
+    η. Rule: for every optimizer its largest η ends worst (diverged or highest final loss) at every b, and at its best η
+    the final losses over b lie within 10x (partly: one of the two)"""
+    unstable, alike, text = [], [], []
+    for fid, opts in (("fig5", FIG5_LRS), ("fig6", {"adam": FIG6_LRS})):
+        for opt in opts:
+            need(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
+            fin = {(r.cfg("optimizer.lr"), r.cfg("batch_size")): final([r]) for r in runs}
+            lrs, bs = sorted({k[0] for k in fin}), sorted({k[1] for k in fin})
+            unstable.append(all(fin.get((lrs[-1], b), 0) >= max(v for k, v in fin.items() if k[1] == b) for b in bs))
+            best_lr = min(lrs, key=lambda lr: median(fin.get((lr, b), math.inf) for b in bs))
+            at = [fin[(best_lr, b)] for b in bs if (best_lr, b) in fin]
+            alike.append(bool(at) and min(at) > 0 and max(at) / min(at) <= 10)
+            spread = max(at) / min(at) if at and min(at) > 0 else math.inf
+            text.append(
+                f"{OPTIMIZER_NAMES[opt]}: largest η worst {unstable[-1]}, spread over b at η={num(best_lr)} {spread:.1f}x"
+            )
+    return "; ".join(text), all(unstable) and all(alike), all(unstable) or all(alike)

@@ -18,7 +18,7 @@ import numpy as np
 
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData, kv
 
-TIME = "wall-clock time [s]"
+TIME = "training time [s] (training clock, evaluations excluded)"
 PALETTE = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple")
 
 

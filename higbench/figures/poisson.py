@@ -201,3 +201,26 @@ def per_update(datas):
     la, lh = at_update(a, n), at_update(h, n)
     values = {"n": n, "hig": lh, "adam": la}
     return f"after {n} updates: HIG {e(lh)} vs Adam {e(la)} (best runs)", lh <= 0.5 * la, lh < la, values
+
+
+def log_time_slope(run, start: float = 0.5) -> float:
+    """d log10(loss) / d log10(t) over the run's last half (least squares on its evaluations)."""
+    c = run.curves[(run.curves["wall_time"] >= start * end_time(run)) & (run.curves["wall_time"] > 0)]
+    if len(c) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log10(c["wall_time"]), np.log10(c["test_loss"]), 1)[0])
+
+
+@claim("poi-5", "fig3b", "smallest-η Adam best; HIG steeper on log time")
+def adam_lr_and_slope(datas):
+    """Poisson (fig. 3b): the smallest-η Adam run is the best Adam per unit time, and on a log-time axis HIG's slope
+    stays steeper. Rule: the smallest-η Adam run ends lowest of the Adam grid, and the best HIG run's log-log slope
+    over the last half is steeper than the best Adam run's (partly: one of the two)"""
+    adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
+    need(adam, hig, what="fig3b")
+    small = min(adam, key=lambda r: r.cfg("optimizer.lr"))
+    best_adam, best_hig = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
+    sa, sh = log_time_slope(best_adam), log_time_slope(best_hig)
+    measured = f"best Adam: {best_adam.label()}; log-time slope over the last half: HIG {sh:.2f}, Adam {sa:.2f}"
+    values = {"adam_slope": sa, "hig_slope": sh}
+    return measured, small is best_adam and sh < sa, small is best_adam or sh < sa, values

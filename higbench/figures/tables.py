@@ -259,3 +259,18 @@ def memory(datas):
 
 ratio("spd-3", "table4", 64, 64, "13.8 s vs 0.011 s", "Poisson: a HIG update costs about 1250 Adam updates (b=64)")
 ratio("spd-4", "table5", 16, 256, "0.60 s vs 0.40 s", "Dipole: a HIG update (b=16) costs about 1.5 Adam updates (b=256)")
+
+
+@claim("spd-5", "table3", "O(|θ| b² |y|²); Jacobian ~ a backward pass")
+def cost_scaling(datas):
+    """Oscillators (§2.3, tables 3-5): a HIG update costs O(|θ| b² |y|²) and its Jacobian about a backward pass. Rule:
+    HIG's update time grows at most quadratically from b=32 to 128 (<= 16x) and its Jacobian at b=128 takes at most
+    10x Adam's whole update at b=512 (partly: one of the two)"""
+    df = timing_frame(datas["table3"])
+    t32, t128 = _row(df, "HIG", 32, "Update duration (s)"), _row(df, "HIG", 128, "Update duration (s)")
+    jac, adam = _row(df, "HIG", 128, "Jacobian duration (s)"), _row(df, "Adam", 512, "Update duration (s)")
+    if any(math.isnan(x) for x in (t32, t128, jac, adam)) or min(t32, adam) <= 0:
+        raise Missing("table3 HIG b=32/128 update and Jacobian times, Adam b=512")
+    growth, jac_ratio = t128 / t32, jac / adam
+    measured = f"HIG update b=128 / b=32 {growth:.1f}x; Jacobian (b=128) / Adam update (b=512) {jac_ratio:.1f}x"
+    return measured, growth <= 16 and jac_ratio <= 10, growth <= 16 or jac_ratio <= 10, {"growth": growth, "jac": jac_ratio}

@@ -52,7 +52,7 @@ def _trajectories(d: FigureData, ax, gamma: float, tag: str) -> None:
             d.record(f"trajectory {tag}", name, runs[0], "y1", y[:, 0], "y2", y[:, 1])
             if (target := runs[0].logs.get("probe_target")) is not None and opt == OPTIMIZERS[-1]:
                 ax.plot(target[-1, 0], target[-1, 1], "k*", ms=10, label="target ŷ")
-    ax.set(xlabel="y¹", ylabel="y² (= γ·f²)")
+    ax.set(xlabel=r"$y_1$", ylabel=r"$y_2 = \gamma\, f_2$")  # subscripts: y¹, y² read as powers
     ax.set_title(f"{tag}: trajectory of x=probe in y-space", fontsize=9)
     legend(ax)
 
@@ -161,3 +161,38 @@ def saturation(datas):
     sg, sh = median(saturated(r) for r in runs["gn"]), median(saturated(r) for r in runs["hig"])
     sa = median(saturated(r) for r in runs["adam"]) if runs["adam"] else float("nan")
     return f"saturated neurons (of 7, median over seeds): GN {sg:g}, HIG {sh:g}, Adam {sa:g}", sg >= 1 and sh == 0, sg > sh
+
+
+@claim("toy-5", "fig1", "all neurons active at γ=1")
+def all_active(datas):
+    """Toy, gamma=1: with a well-conditioned problem all neurons process information. Rule: no saturated neuron for any
+    optimizer at γ=1 (median over seeds; partly: none for GN and HIG)"""
+    runs = _by_opt(datas, 1.0)
+    sat = {o: median(saturated(r) for r in rs) for o, rs in runs.items()}
+    measured = "saturated neurons at γ=1: " + ", ".join(f"{OPTIMIZER_NAMES[o]} {v:g}" for o, v in sat.items())
+    return measured, all(v == 0 for v in sat.values()), sat["gn"] == 0 and sat["hig"] == 0, sat
+
+
+def path_shares(y: np.ndarray) -> tuple[float, float]:
+    """(share of the path length along y_2, straightness |end - start| / path length) of a y-space trajectory."""
+    steps = np.diff(y[:, :2], axis=0)
+    length = float(np.sum(np.linalg.norm(steps, axis=1)))
+    if length == 0:
+        return float("nan"), float("nan")
+    return float(np.sum(np.abs(steps[:, 1])) / np.sum(np.abs(steps).sum(axis=1))), float(
+        np.linalg.norm(y[-1, :2] - y[0, :2]) / length
+    )
+
+
+@claim("toy-6", "fig1", "Adam neglects y_2, HIG moves along it, GN straight")
+def trajectories(datas):
+    """Toy, gamma=0.01 (appendix A.2): in y-space Adam neglects y_2, HIG moves along it, GN goes straight to the target.
+    Rule: on the probe's trajectory (seed 0), Adam's share of its path along y_2 below half of HIG's, and GN's path
+    straightness (|end - start| / length) >= 0.9 (partly: one of the two)"""
+    runs = _by_opt(datas, 0.01)
+    found = {o: path_shares(rs[0].logs["probe_output"]) for o, rs in runs.items() if rs and "probe_output" in rs[0].logs}
+    need(len(found) == 3, what="fig1 probe trajectories")
+    (sa, _), (sh, _), (_, straight) = found["adam"], found["hig"], found["gn"]
+    measured = f"share of the path along y_2: Adam {sa:.2f}, HIG {sh:.2f}; GN straightness {straight:.2f}"
+    values = {"adam_y2_share": sa, "hig_y2_share": sh, "gn_straightness": straight}
+    return measured, sa < sh / 2 and straight >= 0.9, sa < sh / 2 or straight >= 0.9, values
