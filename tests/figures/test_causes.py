@@ -123,3 +123,101 @@ def test_render_formats_numbers_from_the_values():
     assert cause.render({"x": 2.34e-5, "n": 300}) == ("budget", "reached 2.3e-5 after 300 updates")
     assert cause.render({"x": 1e-8, "n": 300})[0] == "open"
     assert evidence({"values": {"a": 1}, "seconds": 60, "seeds": 3})["budget"] == 60
+
+
+# -- rules on synthetic measurements -------------------------------------------------------
+
+
+class _Run:
+    """A run as the rules see it: curves, config and status."""
+
+    def __init__(self, losses, steps=None, times=None, status="completed", label="", **cfg):
+        import pandas as pd
+
+        n = len(losses)
+        self.curves = pd.DataFrame(
+            {"test_loss": losses, "step": steps or list(range(n)), "wall_time": times or [float(i) for i in range(n)]}
+        )
+        self.status, self._cfg, self._label, self.seed = status, cfg, label, 0
+        self.initial_loss, self.final_loss = float(losses[0]), float(losses[-1])
+
+    def cfg(self, key, default=None):
+        return self._cfg.get(key, default)
+
+    def label(self):
+        return self._label
+
+
+class _Fig:
+    def __init__(self, **by_sweep):
+        self.by_sweep = by_sweep
+
+    def runs(self, sweep=None, **where):
+        return self.by_sweep.get(sweep, [])
+
+
+def _measure(cid, datas):
+    return registry.claims()[cid].check(datas)
+
+
+def test_poi4_compares_per_update_and_refuses_a_time_evaluated_adam():
+    hig = _Run([300.0, 100.0, 50.0], steps=[0, 1, 2], **{"batch_size": 64})
+    adam_by_time = _Run([300.0, 150.0, 20.0], steps=[0, 500, 1000])
+    _, verdict, why, _ = _measure("poi-4", {"fig7": _Fig(adam=[adam_by_time], hig=[hig])})
+    assert verdict == "n/a" and "by updates" in why  # interpolating Adam between step 0 and 500 is not a measurement
+    adam = _Run([300.0, 280.0, 260.0, 20.0], steps=[0, 1, 2, 1000])
+    measured, verdict, _, values = _measure("poi-4", {"fig7": _Fig(adam=[adam], hig=[hig])})
+    assert values["n"] == 2 and verdict == "reproduced", measured  # 50 vs 260 after two updates each
+
+
+def test_dip2_needs_three_hig_evaluations_in_the_initial_stage():
+    import pandas as pd
+
+    def run(losses, he, le):
+        r = _Run(losses)
+        r.curves = pd.concat([r.curves, pd.DataFrame({"test_high_energy_loss": he, "test_low_energy_loss": le})], axis=1)
+        return r
+
+    adam = [run([0.9, 0.5, 0.45, 0.1], [0.8, 0.5, 0.5, 0.1], [0.1, 0.1, 0.1, 0.05])] * 3
+    hig_one = [run([0.9, 0.5, 0.01], [0.5, 0.5, 0.01], [0.5, 0.5, 0.01])] * 3
+    assert _measure("dip-2", {"fig4c": _Fig(adam=adam, hig=hig_one)})[1] == "n/a"
+    hig = [run([0.9, 0.6, 0.5, 0.45, 0.01], [0.5] * 4 + [0.01], [0.5] * 4 + [0.01])] * 3
+    measured, verdict, _, values = _measure("dip-2", {"fig4c": _Fig(adam=adam, hig=hig)})
+    assert verdict == "reproduced" and values["hig_stage_evals"] == 3, measured
+
+
+def test_dip3_uses_the_median_of_fig4cs_seeds():
+    adam = [_Run([0.9, 0.5, v]) for v in (1e-6, 2e-6, 3e-6)]
+    hig = [_Run([0.9, 0.01, v]) for v in (1e-9, 5e-6, 1e-7)]  # one lucky seed does not decide it
+    _, verdict, _, values = _measure("dip-3", {"fig4c": _Fig(adam=adam, hig=hig)})
+    assert values == {"hig": 1e-7, "adam": 2e-6} and verdict == "reproduced"
+    hig = [_Run([0.9, 0.01, v]) for v in (1e-9, 5e-6, 4e-6)]
+    assert _measure("dip-3", {"fig4c": _Fig(adam=adam, hig=hig)})[1] == "not"
+
+
+def test_new_claims_on_synthetic_runs():
+    kappa = [_Run([1.0, v], **{"optimizer.kappa": k}) for k, v in ((0.5, 1e-2), (-0.5, 1e-6), (-1.0, 3e-6))]
+    assert _measure("abl-4", {"fig12": _Fig(kappa=kappa)})[1] == "reproduced"
+    kappa[2] = _Run([1.0, 1e-7], **{"optimizer.kappa": -1.0})
+    assert _measure("abl-4", {"fig12": _Fig(kappa=kappa)})[1] == "not"
+    fig9 = [
+        _Run([1.0, v], **{"optimizer.tau": t, "optimizer.lr": 0.5, "batch_size": 16}) for t, v in ((1e-6, 4e-7), (1e-5, 5e-7))
+    ]
+    assert _measure("dip-8", {"fig9": _Fig(hig=fig9)})[1] == "not"  # the published fig9: tau=1e-6 is the best
+    cnn = [_Run([1.0, 0.1], **{"optimizer.tau": t}) for t in (1e-5, 1e-4, 1e-3)]
+    assert _measure("cnn-2", {"fig11": _Fig(hig=cnn)})[1] == "reproduced"
+    cnn.append(_Run([1.0, float("nan")], status="diverged", **{"optimizer.tau": 1e-4}))
+    cnn.append(_Run([1.0, 2.0], **{"optimizer.tau": 1e-3}))
+    assert _measure("cnn-2", {"fig11": _Fig(hig=cnn)})[1] == "not"
+
+
+def test_path_shares_of_y_space_trajectories():
+    import numpy as np
+
+    from higbench.figures.toy import path_shares
+
+    straight = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
+    share, straightness = path_shares(straight)
+    assert share == pytest.approx(0.5) and straightness == pytest.approx(1.0)
+    along_y1 = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.1]])
+    assert path_shares(along_y1)[0] < 0.1
