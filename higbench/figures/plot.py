@@ -117,7 +117,11 @@ def epochs(run: RunData, curves) -> np.ndarray:
 
 
 def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss", color=None, ls="-", x_offset=0.0, **kw):
-    """One setting: a line for one seed, median line + min-max band for several."""
+    """One setting: a line for one seed, median line + min-max band for several.
+
+    On a log x axis the points at x <= 0 (the evaluation before the first update) are left
+    out: drawn at a clipped tiny x they would pull a flat line at the first later value
+    across the visible decades (fig7a's Adam once looked flat from ~160)."""
     runs = [r for r in runs if r.ok and y in r.curves]
     series, diverged = [], []
     for r in runs:
@@ -125,7 +129,7 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
         xs = (epochs(r, c) if x == "epoch" else c[x].to_numpy(dtype=float)) + x_offset
         ys = c[y].to_numpy(dtype=float)
         d.record(panel, label, r, x, xs, y, ys)
-        ok = np.isfinite(ys) & np.isfinite(xs)
+        ok = np.isfinite(ys) & np.isfinite(xs) & ((xs > 0) | (ax.get_xscale() != "log"))
         if ok.any():
             series.append((xs[ok], ys[ok]))
             if r.status == "diverged":
@@ -178,6 +182,7 @@ def _pick(spec: Any, i: int, n: int, opt: str) -> Any:
 
 def draw_curves(d: FigureData, ax, p: Curves) -> None:
     ends: dict[str, float] = {}  # a sweep's final training time, for runs continued from it
+    ax.set_xscale(p.xscale)  # before the curves: a log axis leaves out x <= 0 (``curve``)
     for s in p.series:
         values = d.values(s.sweep, s.by) if s.by else [None]
         values = values[::-1] if s.reverse else values
