@@ -31,7 +31,7 @@ from higbench.figures.spec import Budget, By, Figure, SeedSearch, Sweep, paper_g
 
 FIG2B_OPTIMIZERS = ("adadelta", "adagrad", "adam", "gn", "hig", "rmsprop", "sgd")
 GD_FAMILY = ("adadelta", "adagrad", "adam", "rmsprop", "sgd")
-MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240})
+MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240, "long": 900})
 GRID = Budget(seconds={"paper": 3600, "quick": 12, "standard": 15})
 FIG2C_BATCHES = {"adam": [256, 512, 1024], "gn": [32, 64, 128], "hig": [32, 64, 128]}
 FIG5_LRS = {opt: paper_grid(f"fig5_{opt}", "optimizer.lr") for opt in ("adadelta", "adagrad", "sgd", "rmsprop")}

@@ -18,10 +18,10 @@ from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Series, legend, new_figure
 from higbench.figures.spec import Budget, By, Figure, Preset, Sweep
 
-MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 60})
+MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 60, "long": 3000})
 ADAM_LRS, HIG_LRS, TUNED_CONT_LRS = [1e-4, 1e-3, 1e-2], [0.005, 0.02, 0.1], [3e-4, 1e-3]  # not given in the paper
 ADAM_LR, HIG_LR = 1e-4, 0.02  # figure 3c
-HIG_BATCH = By(64, 16, 8)
+HIG_BATCH = By(64, 16, 8, long=64)
 BLUES, GREENS = ("#9ecae1", "#4292c6", "#08306b"), ("#a1d99b", "#41ab5d", "#00441b")
 
 

@@ -194,3 +194,13 @@ def test_standard_preset_budgets_let_the_sized_claims_show():
         seconds = [j.overrides.get("budget.seconds") for fid in c.figures for j in expand(figs[fid], p)]
         main = [s for s in seconds if s is not None]
         assert main and max(main) >= c.min_seconds, (cid, max(main), c.min_seconds)
+
+
+def test_long_preset_gives_the_paper_hour_claims_their_budget():
+    claims, figs, p = registry.claims(), registry.figures(), Preset("long")
+    for cid in ("osc-2", "osc-3", "poi-1", "poi-2", "poi-3", "poi-5"):
+        c = claims[cid]
+        main = [s for fid in c.figures for j in expand(figs[fid], p) if (s := j.overrides.get("budget.seconds")) and s > 60]
+        assert main and min(main) >= c.min_seconds, (cid, min(main), c.min_seconds)
+    hig = [j for j in expand(figs["fig3c"], p) if j.overrides.get("optimizer") == "hig"]
+    assert hig and all(j.overrides["batch_size"] == 64 for j in hig)  # the paper's b, no deviation
