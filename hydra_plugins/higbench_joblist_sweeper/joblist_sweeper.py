@@ -73,3 +73,10 @@ class JobListSweeper(Sweeper):
         for r in results:
             _ = r.return_value  # a failed job raises here, as with Hydra's basic sweeper
         return [results]
+
+
+def register() -> None:
+    """Make the sweeper known to Hydra where its plugin scan cannot see this package (an
+    editable install hides namespace packages from ``pkgutil``); importing this module has
+    stored its config (``hydra/sweeper=joblist``)."""
+    Plugins.instance().register(JobListSweeper)
