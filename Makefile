@@ -5,6 +5,8 @@ TORCH_VERSION ?= 2.13.0
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 PRESET ?= quick
+IDS ?= all
+OUT ?= figures
 PYTEST_ARGS ?=
 
 .PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench bench-time-to-loss figures clean
@@ -71,7 +73,7 @@ bench-time-to-loss: install
 	$(BIN)/python scripts/time_to_loss.py --budget $(TTL_BUDGET)
 
 figures: install
-	$(BIN)/python -m higbench.figures all --preset $(PRESET)
+	$(BIN)/python -m higbench.figures $(IDS) --preset $(PRESET) --out $(OUT)
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info

@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from higbench.figures import registry
+from higbench.figures.claims import judge
 from higbench.figures.data import FigureData
 from higbench.figures.runs import Composer, Job, RunIndex, expand, job_seconds, launch, resolve
-from higbench.figures.spec import UPDATES_ONLY, Figure, Preset
+from higbench.figures.spec import Figure, Preset
 
 
 @dataclass
@@ -128,6 +129,7 @@ class Builder:
             extra["error"] = traceback.format_exc(limit=6)
             self.log(f"[figures] {figure.id}: plot failed: {type(exc).__name__}: {exc}")
         extra["claims"] = self.check_claims(figure)
+        extra["made"] = provenance()
         miss = len(data.missing())
         if miss:
             result.missing[figure.id] = miss
@@ -144,65 +146,23 @@ class Builder:
         self.composer.close()
 
 
-def judge(c, datas: dict, preset: str) -> dict:
-    """A claim's row of the report: its rule's verdict on the runs, then the budget, seed and smoke limits."""
-    missing, cause = sum(len(d.missing()) for d in datas.values()), c.cause
+def provenance() -> dict:
+    """Where and when a figure's runs were judged: git revision, date, machine and load."""
+    import platform
+    import subprocess
+
     try:
-        measured, verdict, why = c.check(datas)
-    except Exception as exc:  # noqa: BLE001 - one broken claim does not stop the others
-        measured, verdict, why = "-", "n/a", f"could not be evaluated: {type(exc).__name__}: {exc}"
-    if missing and verdict != "n/a":
-        why += f" ({missing} run(s) missing)"
-    seconds, seeds = claim_budget(datas), claim_seeds(datas)
-    if c.min_seconds and verdict != "n/a" and seconds is not None and seconds < c.min_seconds:
-        why = f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; {would(verdict)}{why}"
-        verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
-    elif verdict == "reproduced" and seeds < c.min_seeds:
-        why = f"only {seeds} seed(s) per setting (a comparison needs the median of {c.min_seeds}): at most partly. {why}"
-        verdict, cause = "partly", ("seeds", f"{seeds} seed(s) per setting at this preset")
-    if preset in UPDATES_ONLY and verdict != "n/a" and any(d.jobs for d in datas.values()):
-        why = f"smoke preset ({preset}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
-        verdict = "n/a"
-    if verdict in ("not", "partly") and not cause:
-        cause = ("open", "no targeted run has examined this verdict yet")
-    budgets = "; ".join(sorted({b for d in datas.values() for b in d.budgets.values()}))
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5).stdout.strip()
+    except OSError:
+        rev = ""
+    machine = f"{os.cpu_count()} CPU cores ({platform.machine()} {platform.system()})"
+    load = "load {:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else ""
     return {
-        "id": c.id,
-        "figures": list(c.figures),
-        "statement": c.statement,
-        "paper": c.paper,
-        "measured": measured,
-        "budget": budgets,
-        "verdict": verdict,
-        "why": why,
-        "cause": list(cause) if cause and verdict not in ("reproduced", "n/a") else None,
-        "seeds": seeds,
-        "preset": preset,
+        "revision": rev or "unknown",
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": machine,
+        "load": load,
     }
-
-
-def would(verdict: str) -> str:
-    return f"the rule would say '{verdict}'. "
-
-
-def _main_jobs(datas: dict) -> list:
-    return [j for d in datas.values() for j in d.jobs if not j.sweep.endswith("/search")]
-
-
-def claim_budget(datas: dict) -> float | None:
-    """The smallest training budget in seconds of the claim's runs (None: budgets in updates)."""
-    secs = [float(s) for j in _main_jobs(datas) if (s := j.overrides.get("budget.seconds")) is not None]
-    return min(secs) if secs else None
-
-
-def claim_seeds(datas: dict) -> int:
-    """The fewest seeds of any setting (sweep and overrides but the seed) behind the claim;
-    a setting whose seed came from a seed search counts as settled (the paper's fixed seed)."""
-    groups: dict[tuple, set] = {}
-    for j in (j for j in _main_jobs(datas) if not j.search):
-        key = (j.figure, j.sweep, tuple(sorted((k, str(v)) for k, v in j.overrides.items() if k != "seed")))
-        groups.setdefault(key, set()).add(j.seed)
-    return min(len(s) for s in groups.values()) if groups else 99
 
 
 def build(

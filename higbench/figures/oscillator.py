@@ -7,16 +7,31 @@ and fig6_adam.yaml.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from higbench.figures.checks import budget_of, claim, crossing_time, e, end_time, final, loss_at, median, need
+from higbench.figures.claims import (
+    at_update,
+    budget_of,
+    claim,
+    crossing_time,
+    e,
+    end_time,
+    final,
+    half_way,
+    loss_at,
+    median,
+    need,
+    updates_of,
+)
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, By, Figure, SeedSearch, Sweep, paper_grid
 
 FIG2B_OPTIMIZERS = ("adadelta", "adagrad", "adam", "gn", "hig", "rmsprop", "sgd")
 GD_FAMILY = ("adadelta", "adagrad", "adam", "rmsprop", "sgd")
-MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240})
+MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240, "long": 900})
 GRID = Budget(seconds={"paper": 3600, "quick": 12, "standard": 15})
 FIG2C_BATCHES = {"adam": [256, 512, 1024], "gn": [32, 64, 128], "hig": [32, 64, 128]}
 FIG5_LRS = {opt: paper_grid(f"fig5_{opt}", "optimizer.lr") for opt in ("adadelta", "adagrad", "sgd", "rmsprop")}
@@ -203,10 +218,12 @@ def adam_best(datas):
     need("adam" in gd, what="fig2b Adam")
     best = min(gd, key=gd.get)
     level = 1e-5 <= gd["adam"] <= 1e-3
+    half = half_way(datas["fig2b"].runs("best", optimizer__name="adam"))
     return (
         f"Adam {e(gd['adam'])}; best of the GD family: {OPTIMIZER_NAMES[best]} ({e(gd[best])})",
         best == "adam" and level,
         best == "adam" or level,
+        {"adam": gd["adam"], "adam_half": half},
     )
 
 
@@ -218,7 +235,8 @@ def gn_level(datas):
     need("gn" in f and "adam" in f, what="fig2b GN/Adam")
     search = gn_search_summary(datas["fig2b"], "best/search")
     measured = f"GN {e(f['gn'])} ({runs[0].status}, seed {runs[0].seed}); Adam {e(f['adam'])}; seed search: {search}"
-    return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"]
+    values = {"gn": f["gn"], "gn_updates": updates_of(runs[0])}
+    return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"], values
 
 
 @claim("osc-3", "fig2b", "HIG ~1e-7")
@@ -235,10 +253,13 @@ def hig_best(datas):
     adv = f"HIG's advantage: {f['adam'] / f['hig']:.1f}x over Adam (paper setting)" if "adam" in f else ""
     if ft < float("inf"):
         adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {e(ft)})"
+    hig = d.runs("best", optimizer__name="hig")
+    values = {"hig": f["hig"], "hig_half": half_way(hig), "hig_updates": min(map(updates_of, hig))}
     return (
         f"HIG {e(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({e(f[best])}); {adv}",
         level and best == "hig",
         level or best == "hig",
+        values,
     )
 
 
@@ -258,7 +279,13 @@ def crossing(datas):
     tuned_text = f"; against re-tuned Adam ({len(tuned)} settings): HIG " + ", ".join(parts) if tuned else ""
     if (t := crossing_time(hig[0], adam[0])) is None:
         return "HIG does not pass Adam within the budget" + tuned_text, False, False
-    return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True
+    h, a = hig[0], adam[0]
+    values = {
+        "t_cross": t,
+        "hig_updates_at_cross": int(np.interp(t, h.curves["wall_time"], h.curves["step"])),
+        "hig_adam_here": (end_time(h) / updates_of(h)) / (end_time(a) / updates_of(a)),
+    }
+    return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True, values
 
 
 @claim("osc-5", "fig2c", "Adam ~b-independent; HIG/GN better at larger b")
@@ -275,4 +302,40 @@ def batch_sizes(datas):
     measured = f"Adam max/min over b: {spread:.1f}x; " + ", ".join(
         f"{OPTIMIZER_NAMES[o]} b={lo}->{hi}: {e(fin[(o, lo)])}->{e(fin[(o, hi)])}" for o, (lo, hi) in ends.items()
     )
-    return measured, spread < 3 and all(improves.values()) and len(improves) == 2, spread < 3 or any(improves.values())
+    full = spread < 3 and all(improves.values()) and len(improves) == 2
+    return measured, full, spread < 3 or any(improves.values()), _per_update(d, ends, fin)
+
+
+def _per_update(d: FigureData, ends: dict, fin: dict) -> dict:
+    """HIG's and GN's final losses at the smallest and largest b, and at an equal update count."""
+    if set(ends) != {"hig", "gn"} or ends["hig"] != ends["gn"]:
+        return {}
+    (lo, hi), values = ends["hig"], {"b_lo": ends["hig"][0], "b_hi": ends["hig"][1]}
+    runs = {(o, b): d.runs(o, batch_size=b) for o in ("hig", "gn") for b in (lo, hi)}
+    n_eq = min(updates_of(rs[0]) for rs in runs.values())
+    for (o, b), rs in runs.items():
+        side = "lo" if b == lo else "hi"
+        values[f"{o}_{side}"], values[f"{o}_{side}_eq"] = fin[(o, b)], median(at_update(r, n_eq) for r in rs)
+    return values | {"n_eq": n_eq}
+
+
+@claim("osc-6", "fig5 fig6", "GD family alike over b, unstable at large η")
+def gd_family(datas):
+    """Oscillators (figs 5-6): the gradient-descent family behaves alike over batch sizes and becomes unstable at large
+    η. Rule: for every optimizer its largest η ends worst (diverged or highest final loss) at every b, and at its best η
+    the final losses over b lie within 10x (partly: one of the two)"""
+    unstable, alike, text = [], [], []
+    for fid, opts in (("fig5", FIG5_LRS), ("fig6", {"adam": FIG6_LRS})):
+        for opt in opts:
+            need(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
+            fin = {(r.cfg("optimizer.lr"), r.cfg("batch_size")): final([r]) for r in runs}
+            lrs, bs = sorted({k[0] for k in fin}), sorted({k[1] for k in fin})
+            unstable.append(all(fin.get((lrs[-1], b), 0) >= max(v for k, v in fin.items() if k[1] == b) for b in bs))
+            best_lr = min(lrs, key=lambda lr: median(fin.get((lr, b), math.inf) for b in bs))
+            at = [fin[(best_lr, b)] for b in bs if (best_lr, b) in fin]
+            alike.append(bool(at) and min(at) > 0 and max(at) / min(at) <= 10)
+            spread = max(at) / min(at) if at and min(at) > 0 else math.inf
+            text.append(
+                f"{OPTIMIZER_NAMES[opt]}: largest η worst {unstable[-1]}, spread over b at η={num(best_lr)} {spread:.1f}x"
+            )
+    return "; ".join(text), all(unstable) and all(alike), all(unstable) or all(alike)

@@ -18,7 +18,7 @@ import numpy as np
 
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData, kv
 
-TIME = "wall-clock time [s]"
+TIME = "training time [s] (training clock, evaluations excluded)"
 PALETTE = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple")
 
 
@@ -117,7 +117,11 @@ def epochs(run: RunData, curves) -> np.ndarray:
 
 
 def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss", color=None, ls="-", x_offset=0.0, **kw):
-    """One setting: a line for one seed, median line + min-max band for several."""
+    """One setting: a line for one seed, median line + min-max band for several.
+
+    On a log x axis the points at x <= 0 (the evaluation before the first update) are left
+    out: drawn at a clipped tiny x they would pull a flat line at the first later value
+    across the visible decades (fig7a's Adam once looked flat from ~160)."""
     runs = [r for r in runs if r.ok and y in r.curves]
     series, diverged = [], []
     for r in runs:
@@ -125,7 +129,7 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
         xs = (epochs(r, c) if x == "epoch" else c[x].to_numpy(dtype=float)) + x_offset
         ys = c[y].to_numpy(dtype=float)
         d.record(panel, label, r, x, xs, y, ys)
-        ok = np.isfinite(ys) & np.isfinite(xs)
+        ok = np.isfinite(ys) & np.isfinite(xs) & ((xs > 0) | (ax.get_xscale() != "log"))
         if ok.any():
             series.append((xs[ok], ys[ok]))
             if r.status == "diverged":
@@ -151,8 +155,10 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
         ax.annotate(
             "diverged",
             (dx, dy),
-            xytext=(8, 8),
+            xytext=(10, -14),  # below right: inside the axes, clear of the title (markers sit near loss 1)
             textcoords="offset points",
+            ha="left",
+            va="top",
             fontsize=7,
             color=c,
             fontweight="bold",
@@ -176,6 +182,7 @@ def _pick(spec: Any, i: int, n: int, opt: str) -> Any:
 
 def draw_curves(d: FigureData, ax, p: Curves) -> None:
     ends: dict[str, float] = {}  # a sweep's final training time, for runs continued from it
+    ax.set_xscale(p.xscale)  # before the curves: a log axis leaves out x <= 0 (``curve``)
     for s in p.series:
         values = d.values(s.sweep, s.by) if s.by else [None]
         values = values[::-1] if s.reverse else values
@@ -207,6 +214,8 @@ def draw_facets(d: FigureData, f: Facets) -> None:
         for rv in d.values(sweep, f.rows) if f.rows not in (None, "sweep") else [None]:
             rows.append((sweep, rv, d.values(sweep, f.cols)))
     lines = sorted({v for s in f.sweeps for v in d.values(s, f.lines)})
+    if len(rows) == 1 and len(lines) == 1:
+        return draw_one_panel(d, f, rows[0], lines[0])
     ncols = max(len(r[2]) for r in rows)
     fig, axes = new_figure(ncols, len(rows), *f.size, sharey=True)
     for r, (sweep, rv, cols) in enumerate(rows):
@@ -222,6 +231,24 @@ def draw_facets(d: FigureData, f: Facets) -> None:
             style(ax, " ".join(title.split()), TIME if r == len(rows) - 1 else "", "test loss" if c == 0 else "", fontsize=8)
         for c in range(len(cols), ncols):
             axes[r, c].axis("off")
+    # One time axis for all panels: a panel whose runs all diverged at once would otherwise
+    # zoom into its first milliseconds (overlapping tick labels).
+    right = max(ax.get_xlim()[1] for ax in axes.ravel() if ax.lines)
+    for ax in axes.ravel():
+        ax.set_xlim(0, right)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    d.save(fig)
+
+
+def draw_one_panel(d: FigureData, f: Facets, row: tuple, lv: Any) -> None:
+    """Facets with one line per panel and one row (a reduced grid): one panel, a line per column value."""
+    (sweep, rv, cols), (fig, axes) = row, new_figure(1, 1, 6.4, 4.2)
+    head = f"{f.prefix} {kv(f.lines, lv)}" + (f" {kv(f.rows, rv)}" if rv is not None and f.rows != "sweep" else "")
+    for i, cv in enumerate(cols):
+        where = {f.cols: cv, f.lines: lv, **({f.rows: rv} if rv is not None else {})}
+        if runs := d.runs(sweep, **{k.replace(".", "__"): w for k, w in where.items()}):
+            curve(d, axes[0, 0], runs, kv(f.cols, cv), panel=head, color=PALETTE[i % len(PALETTE)])
+    style(axes[0, 0], " ".join(head.split()))
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     d.save(fig)
 

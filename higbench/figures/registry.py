@@ -1,5 +1,5 @@
 """The one registry of the paper's figures, tables and headline claims: each family module
-(toy, oscillator, poisson, dipole, ablation, tables) declares ``FIGURES`` and its claims (``checks.claim``)."""
+(toy, oscillator, poisson, dipole, ablation, tables) declares ``FIGURES`` and its claims (``claims.claim``)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import importlib
 import re
 from functools import cache
 
-from higbench.figures import checks
-from higbench.figures.checks import CAUSES, Claim  # noqa: F401 - the registry's vocabulary
+from higbench.figures import claims as claim_table
+from higbench.figures.claims import CAUSES, Claim  # noqa: F401 - the registry's vocabulary
 from higbench.figures.spec import Figure
 
 FAMILIES = ("toy", "oscillator", "poisson", "dipole", "ablation", "tables")
@@ -41,12 +41,10 @@ def figures() -> dict[str, Figure]:
 
 @cache
 def _claims() -> dict[str, Claim]:
-    from higbench.figures.fidelity import apply
-
     _families()
     order = {f"higbench.figures.{name}": i for i, name in enumerate(FAMILIES)}
-    claims = _unique(sorted(checks.CLAIMS, key=lambda c: order[c.measure.__module__]), "claim")
-    apply(claims)  # minimum budgets, seeds and root causes (one table, with its evidence)
+    claims = _unique(sorted(claim_table.CLAIMS, key=lambda c: order[c.measure.__module__]), "claim")
+    claim_table.apply(claims)  # minimum budgets, seeds and root causes (templates filled from the runs)
     return claims
 
 

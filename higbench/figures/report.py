@@ -24,10 +24,13 @@ an explicit rule (stated in the last column). Budgets are training-clock seconds
 (evaluations excluded) or a number of updates; the paper's runs took up to an hour each
 on a GPU, so `quick` and `smoke` results are not expected to reach the paper's levels.
 A claim whose runs are shorter than the budget it needs to show reads `n/a (budget)`
-(its minimum is in the rule column); a comparison resting on fewer seeds per setting
-than it needs (the median of 3) is at most `partly`. Every `not` and `partly` names a
-root cause: budget (too short, with the trend), deviation (forced by cost), unspecified
-(a setting the paper does not give), disagreement (with the paper), bug, or seeds.
+unless its rule has already passed or failed decisively; a comparison resting on fewer
+seeds per setting than it needs (the median of 3) is at most `partly`. Every `not` and
+`partly` names a root cause: budget (too short, with the trend), deviation (forced by cost),
+unspecified (a setting the paper does not give), disagreement (with the paper), hardware
+(the paper's GPU or implementation against ours), bug, or seeds. A cause's numbers are read
+from the claim's runs; a cause its runs contradict, or whose values they lack, reads `open`.
+Rules, gates and causes are listed under the table.
 """
 
 
@@ -120,18 +123,29 @@ def _claim_row(r: dict) -> list[str]:
         _cell(r["measured"]),
         f"{_cell(r['budget'])} ({r['preset']}{seeds_text})",
         f"**{r['verdict']}**",
-        _cell(f"{cause[0]}: {cause[1]}" if cause else "-"),
-        _cell(r["why"]),
+        _cell(cause[0] if cause else "-"),
     ]
+
+
+def _evidence(r: dict) -> str:
+    """A claim's rule, gate and cause under the table (the table stays scannable)."""
+    cause = f" Cause ({r['cause'][0]}): {r['cause'][1]}." if r.get("cause") else ""
+    return f"- **{r['id']}** ({r['verdict']}): {r['why']}.{cause}".replace("..", ".")
+
+
+def _provenance(info: dict) -> str:
+    made = info.get("made", {})
+    parts = [made.get("revision"), made.get("date") or info.get("generated"), made.get("machine"), made.get("load")]
+    return "; ".join(str(p) for p in parts if p)
 
 
 def _figure_row(fid: str, info: dict | None) -> list[str]:
     if info is None:
-        return [fid, "-", "-", "not drawn", ""]
+        return [fid, "-", "-", "not drawn", "", ""]
     done = sum(r["status"] in ("completed", "diverged") for r in info["runs"])
     budgets = "; ".join(f"{k}: {v}" for k, v in info.get("budgets", {}).items())
     notes = " ".join(info.get("notes", [])) + (" plot failed: see the sidecar" if "error" in info else "")
-    return [fid, info["preset"], _cell(budgets), f"{done} / {len(info['runs'])}", _cell(notes)]
+    return [fid, info["preset"], _cell(budgets), f"{done} / {len(info['runs'])}", _cell(_provenance(info)), _cell(notes)]
 
 
 def write_report(out_dir: Path) -> Path:
@@ -141,11 +155,12 @@ def write_report(out_dir: Path) -> Path:
     verdicts = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     lines = [HEADER, f"Presets of the runs used: {', '.join(presets) or '-'}. Verdicts: {verdicts}."]
     lines.append(f"Generated {time.strftime('%Y-%m-%d %H:%M:%S')}.\n")
-    header = ["claim", "figure", "paper", "measured here", "budget", "verdict", "root cause", "rule / explanation"]
-    lines += md_table(header, map(_claim_row, rows)) + reference_section(out_dir)
+    header = ["claim", "figure", "paper", "measured here", "budget", "verdict", "root cause"]
+    lines += md_table(header, map(_claim_row, rows))
+    lines += ["", "## Rules and causes", "", *map(_evidence, rows)] + reference_section(out_dir)
     lines += ["", "## Figures and tables in this directory", ""]
     drawn = sidecars(out_dir)
-    header = ["id", "preset", "budget per run", "runs done / needed", "notes"]
+    header = ["id", "preset", "budget per run", "runs done / needed", "made (revision; date; machine; load)", "notes"]
     lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in registry.figures()])
     path = Path(out_dir) / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")

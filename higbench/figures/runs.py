@@ -11,13 +11,14 @@ config by its rule (``one_per_config``: the newest done run, else the newest of 
 status), done meaning ``DONE_STATUSES`` (completed or diverged: a diverged run is a
 result). Missing, failed, interrupted and still-running (or killed) runs are (re)run.
 
-Running. The missing jobs of a figure are grouped into exact cartesian products
-("boxes"); each box is one ``higbench -m`` multirun (``python -m higbench.cli -m``: the
-same Hydra machinery and checks as the CLI) on a Hydra launcher: joblib with ``--jobs``
-workers locally (the basic launcher for a box of one run or of a few seconds of training),
-or any other Hydra launcher (``--launcher slurm``, ``submitit_local``, ...) with extra
-``hydra.*`` overrides. Multiruns run one after the other; the parallelism is the launcher's.
-Run files go to ``<runs root>/figures-runs/<figure>/<time>/<job number>/run.h5``.
+Running. All jobs that can run now (of every figure: a continued run waits for its
+parent's round) form one ``higbench -m`` multirun (``python -m higbench.cli -m``: the same
+Hydra machinery as the CLI) through the job-list sweeper (``hydra/sweeper=joblist``,
+``hydra_plugins/higbench_joblist_sweeper``), longest first, on a Hydra launcher: joblib
+with ``--jobs`` workers locally (the basic launcher for one run or a few seconds of
+training), or any other Hydra launcher (``--launcher slurm``, ``submitit_local``, ...) with
+extra ``hydra.*`` overrides. So no core idles while one figure's slowest run finishes.
+Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
 
 Interface used by ``build.py``/``data.py``: ``Job``, ``expand``, ``Composer``,
 ``RunIndex`` (``scan``/``add``/``find``), ``resolve``, ``launch``, ``job_seconds``.
@@ -44,10 +45,12 @@ from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
 
 __all__ = [
-    "COSMETIC_KEYS", "DONE_STATUSES", "Composer", "Job", "Launcher", "RunIndex", "boxes", "expand", "fmt",
+    "COSMETIC_KEYS", "DONE_STATUSES", "Composer", "Job", "Launcher", "RunIndex", "expand", "fmt",
     "identity_of", "job_seconds", "launch", "pick_seed", "resolve",
 ]  # fmt: skip
 
+# Overrides of every figure run that do not change its result. Seam: once the schema marks
+# such keys (a field's metadata), derive this list from it instead of typing it here.
 LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
 PARALLEL_SECONDS = 30  # a box with less training than this runs on Hydra's basic launcher (no worker start-up)
 PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # the checkout (or site-packages) holding higbench
@@ -336,54 +339,11 @@ def resolve(jobs: Iterable[Job], composer: Composer, index: RunIndex) -> None:
 # -- grouping missing jobs into Hydra multiruns ---------------------------------------------
 
 
-def boxes(jobs: list[Job]) -> list[tuple[list[Job], dict[str, list]]]:
-    """Exact cover of the jobs by cartesian products of override values.
-
-    Jobs with the same override keys are merged greedily: two boxes that agree on every
-    key but one become one box with the union of that key's values. Returns
-    (jobs, {key: [values]}) per box; every job is in exactly one box and no box holds a
-    combination that is not a job.
-    """
-    groups: dict[tuple, list[Job]] = {}
-    for job in jobs:
-        groups.setdefault(tuple(_job_items(job)), []).append(job)
-    out = []
-    for keys, members in groups.items():
-        cells = [({k: [v] for k, v in _job_items(j).items()}, [j]) for j in members]
-        merged = True
-        while merged:
-            merged = False
-            for key in keys:
-                i = 0
-                while i < len(cells):
-                    j = i + 1
-                    while j < len(cells):
-                        a, b = cells[i][0], cells[j][0]
-                        if all(_same(a[k], b[k]) for k in keys if k != key):
-                            union = a[key] + [v for v in b[key] if not any(_eq(v, w) for w in a[key])]
-                            cells[i] = ({**a, key: union}, cells[i][1] + cells[j][1])
-                            del cells[j]
-                            merged = True
-                        else:
-                            j += 1
-                    i += 1
-        out.extend((js, box) for box, js in cells)
-    return out
-
-
 def _job_items(job: Job) -> dict[str, Any]:
     items = dict(job.overrides)
     if job.parent is not None:
         items["init_from"] = str(job.parent.path)
     return items
-
-
-def _eq(a, b) -> bool:
-    return type(a) is type(b) and a == b
-
-
-def _same(xs: list, ys: list) -> bool:
-    return len(xs) == len(ys) and all(any(_eq(x, y) for y in ys) for x in xs)
 
 
 @dataclass(frozen=True)
@@ -416,10 +376,14 @@ class Launcher:
         return [f"hydra/launcher={name}", *self.overrides]
 
 
-def multirun_command(box: dict[str, list], sweep_dir: Path, launcher_args: Sequence[str]) -> list[str]:
-    """``higbench -m`` over the box's product, into ``sweep_dir`` (one numbered dir per run)."""
-    args = [sys.executable, "-m", "higbench.cli", "-m"]
-    args += [f"{key}={','.join(fmt(v) for v in values)}" for key, values in box.items()]
+def job_overrides(job: Job) -> list[str]:
+    """The job's overrides as ``key=value`` strings (``init_from`` from its parent's run file)."""
+    return [f"{k}={fmt(v)}" for k, v in _job_items(job).items()]
+
+
+def multirun_command(jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[str]) -> list[str]:
+    """``higbench -m`` over the jobs of ``jobs_file`` (job-list sweeper), into ``sweep_dir``."""
+    args = [sys.executable, "-m", "higbench.cli", "-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={fmt(str(jobs_file))}"]
     args += [*LAUNCH_OVERRIDES, f"hydra.sweep.dir={fmt(str(sweep_dir))}", "hydra.sweep.subdir=${hydra.job.num}"]
     return args + list(launcher_args)
 
@@ -440,36 +404,31 @@ def launch(
     launcher: str | Launcher = "joblib",
     log=print,
 ) -> list[Path]:
-    """Run the jobs: one ``higbench -m`` multirun per box, one box after the other, each on
-    the Hydra launcher (``Launcher``, or the name of one without extra overrides); returns
-    the run files written. With joblib at most ``n_jobs`` training processes at once."""
+    """Run the jobs as one ``higbench -m`` multirun over their list, longest first, on the
+    Hydra launcher (``Launcher``, or the name of one); returns the run files written. With
+    joblib at most ``n_jobs`` training processes at once."""
     if not isinstance(launcher, Launcher):
         launcher = Launcher(launcher)
-    by_figure: dict[str, list[Job]] = {}
-    for job in jobs:
-        by_figure.setdefault(job.figure, []).append(job)
-    written: list[Path] = []
-    number = 0
-    for figure_id, fjobs in by_figure.items():
-        for members, box in boxes(fjobs):
-            stamp = time.strftime("%Y-%m-%d_%H-%M-%S") + f"-{os.getpid()}-{number}"
-            number += 1
-            sweep_dir = (runs_root / FIGURE_RUNS_DIR / figure_id / stamp).resolve()
-            sweep_dir.mkdir(parents=True, exist_ok=False)
-            secs = sum(map(job_seconds, members))
-            extra = launcher.args(len(members), n_jobs, secs)
-            cmd = multirun_command(box, sweep_dir, extra)
-            how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
-            log(f"[figures] {figure_id}: running {len(members)} run(s) ({how}, ~{secs:.0f} s of training) -> {sweep_dir}")
-            env = dict(os.environ)
-            env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
-            t0 = time.perf_counter()
-            with open(sweep_dir / "launch.log", "w") as out:
-                out.write(" ".join(cmd) + "\n\n")
-                out.flush()
-                proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
-            new = sorted(sweep_dir.rglob(RUN_FILE))
-            status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
-            log(f"[figures] {figure_id}: {len(new)}/{len(members)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
-            written.extend(new)
-    return written
+    jobs = sorted(jobs, key=job_seconds, reverse=True)  # the longest start first: no idle core at the end
+    stamp = time.strftime("%Y-%m-%d_%H-%M-%S") + f"-{os.getpid()}"
+    sweep_dir = (runs_root / FIGURE_RUNS_DIR / stamp).resolve()
+    sweep_dir.mkdir(parents=True, exist_ok=False)
+    jobs_file = sweep_dir / "jobs.json"
+    jobs_file.write_text(json.dumps([job_overrides(j) for j in jobs], indent=1) + "\n")
+    secs = sum(map(job_seconds, jobs))
+    extra = launcher.args(len(jobs), n_jobs, secs)
+    how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
+    figures = ", ".join(sorted({j.figure for j in jobs}))
+    log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}, ~{secs:.0f} s of training) -> {sweep_dir}")
+    env = dict(os.environ)  # the checkout on the path: higbench and its hydra_plugins (the job-list sweeper)
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
+    t0 = time.perf_counter()
+    with open(sweep_dir / "launch.log", "w") as out:
+        cmd = multirun_command(jobs_file, sweep_dir, extra)
+        out.write(" ".join(cmd) + "\n\n")
+        out.flush()
+        proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+    new = sorted(sweep_dir.rglob(RUN_FILE))
+    status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
+    log(f"[figures] {len(new)}/{len(jobs)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
+    return new

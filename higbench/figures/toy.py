@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.checks import claim, e, final, loss_at, median, need
+from higbench.figures.claims import claim, e, final, half_way, median, need
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
 from higbench.figures.spec import Budget, By, Figure, Sweep
@@ -52,7 +52,7 @@ def _trajectories(d: FigureData, ax, gamma: float, tag: str) -> None:
             d.record(f"trajectory {tag}", name, runs[0], "y1", y[:, 0], "y2", y[:, 1])
             if (target := runs[0].logs.get("probe_target")) is not None and opt == OPTIMIZERS[-1]:
                 ax.plot(target[-1, 0], target[-1, 1], "k*", ms=10, label="target ŷ")
-    ax.set(xlabel="y¹", ylabel="y² (= γ·f²)")
+    ax.set(xlabel=r"$y_1$", ylabel=r"$y_2 = \gamma\, f_2$")  # subscripts: y¹, y² read as powers
     ax.set_title(f"{tag}: trajectory of x=probe in y-space", fontsize=9)
     legend(ax)
 
@@ -112,9 +112,13 @@ def _by_opt(datas, gamma: float, *needed: str) -> dict[str, list[RunData]]:
 def well_conditioned(datas):
     """Toy, gamma=1: Adam, GN and HIG all decrease the loss by about three orders of magnitude.
     Rule: every optimizer >= 2.5 decades below its initial loss (partly: >= 1.5)"""
-    orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in _by_opt(datas, 1.0).items()}
+    runs = _by_opt(datas, 1.0)
+    orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in runs.items()}
     measured = ", ".join(f"{OPTIMIZER_NAMES[o]} {v:.1f}" for o, v in orders.items()) + " decades"
-    return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values())
+    values = {f"{o}_decades": v for o, v in orders.items()}
+    if runs.get("adam"):
+        values |= {"adam_final": final(runs["adam"]), "adam_half": half_way(runs["adam"])}
+    return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values()), values
 
 
 @claim("toy-2", "fig1", "plateau ~0.2 (figure 1b)")
@@ -124,11 +128,12 @@ def stall(datas):
     runs = _by_opt(datas, 0.01, "adam", "gn")
     fa, fg = final(runs["adam"]), final(runs["gn"])
     # A stall is a plateau: the final loss no lower than 1/1.5 of the loss at half the run.
-    half = {o: median(loss_at(r, 0.5 * float(r.curves["wall_time"].iloc[-1])) for r in runs[o]) for o in runs}
+    half = {o: half_way(runs[o]) for o in runs}
     flat = all(final(runs[o]) >= half[o] / 1.5 for o in ("adam", "gn"))
     level = all(0.1 <= x <= 0.4 for x in (fa, fg))
     measured = f"final loss Adam {e(fa)} (half-way {e(half['adam'])}), GN {e(fg)} (half-way {e(half['gn'])}) (medians)"
-    return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level
+    values = {"adam_final": fa, "gn_final": fg, "adam_half": half["adam"], "gn_half": half["gn"]}
+    return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level, values
 
 
 @claim("toy-3", "fig1", "HIG lowest")
@@ -144,7 +149,8 @@ def hig_best(datas):
         f"final loss (median of seeds) HIG {e(fh)} vs Adam η=0.3 (paper) {e(fa)} ({fa / fh:.1f}x), GN {e(fg)}; "
         f"re-tuned Adam: {tuned_text or 'not run'} (HIG's advantage against the best: {fa_best / fh:.1f}x)"
     )
-    return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg)
+    values = {"hig_final": fh, "hig_half": half_way(runs["hig"]), "adam_best": fa_best, "gn_final": fg}
+    return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg), values
 
 
 @claim("toy-4", "fig1", "GN saturates, HIG not")
@@ -155,3 +161,38 @@ def saturation(datas):
     sg, sh = median(saturated(r) for r in runs["gn"]), median(saturated(r) for r in runs["hig"])
     sa = median(saturated(r) for r in runs["adam"]) if runs["adam"] else float("nan")
     return f"saturated neurons (of 7, median over seeds): GN {sg:g}, HIG {sh:g}, Adam {sa:g}", sg >= 1 and sh == 0, sg > sh
+
+
+@claim("toy-5", "fig1", "all neurons active at γ=1")
+def all_active(datas):
+    """Toy, gamma=1: with a well-conditioned problem all neurons process information. Rule: no saturated neuron for any
+    optimizer at γ=1 (median over seeds; partly: none for GN and HIG)"""
+    runs = _by_opt(datas, 1.0)
+    sat = {o: median(saturated(r) for r in rs) for o, rs in runs.items()}
+    measured = "saturated neurons at γ=1: " + ", ".join(f"{OPTIMIZER_NAMES[o]} {v:g}" for o, v in sat.items())
+    return measured, all(v == 0 for v in sat.values()), sat["gn"] == 0 and sat["hig"] == 0, sat
+
+
+def path_shares(y: np.ndarray) -> tuple[float, float]:
+    """(share of the path length along y_2, straightness |end - start| / path length) of a y-space trajectory."""
+    steps = np.diff(y[:, :2], axis=0)
+    length = float(np.sum(np.linalg.norm(steps, axis=1)))
+    if length == 0:
+        return float("nan"), float("nan")
+    return float(np.sum(np.abs(steps[:, 1])) / np.sum(np.abs(steps).sum(axis=1))), float(
+        np.linalg.norm(y[-1, :2] - y[0, :2]) / length
+    )
+
+
+@claim("toy-6", "fig1", "Adam neglects y_2, HIG moves along it, GN straight")
+def trajectories(datas):
+    """Toy, gamma=0.01 (appendix A.2): in y-space Adam neglects y_2, HIG moves along it, GN goes straight to the target.
+    Rule: on the probe's trajectory (seed 0), Adam's share of its path along y_2 below half of HIG's, and GN's path
+    straightness (|end - start| / length) >= 0.9 (partly: one of the two)"""
+    runs = _by_opt(datas, 0.01)
+    found = {o: path_shares(rs[0].logs["probe_output"]) for o, rs in runs.items() if rs and "probe_output" in rs[0].logs}
+    need(len(found) == 3, what="fig1 probe trajectories")
+    (sa, _), (sh, _), (_, straight) = found["adam"], found["hig"], found["gn"]
+    measured = f"share of the path along y_2: Adam {sa:.2f}, HIG {sh:.2f}; GN straightness {straight:.2f}"
+    values = {"adam_y2_share": sa, "hig_y2_share": sh, "gn_straightness": straight}
+    return measured, sa < sh / 2 and straight >= 0.9, sa < sh / 2 or straight >= 0.9, values

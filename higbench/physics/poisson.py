@@ -2,7 +2,9 @@
 
 ``laplace`` is the 5-point stencil with zero Dirichlet values beyond the grid;
 ``laplace_matrix`` is the same operator as a dense matrix on row-major flattened grids;
-``sample_potential`` draws the smooth random potentials of the data set (rho = laplace(phi)).
+``sample_potential`` draws the smooth random potentials of the data set (rho = laplace(phi)):
+band-limited Fourier fields (``fourier``, higbench's default) or the power-law noise of the
+authors' Poisson script (``phiflow_noise``, ``sample_noise_potential``).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import torch.nn.functional as F
 
 N = 8
 MODES = 3
+DATA = ("fourier", "phiflow_noise")  # problem.data
 
 
 def laplace(phi: torch.Tensor) -> torch.Tensor:
@@ -47,6 +50,22 @@ def sample_potential(
     n: int = N,
     modes: int = MODES,
     dtype: torch.dtype = torch.float32,
+    data: str = "fourier",
+) -> torch.Tensor:
+    """Potentials phi (batch, n, n) of the chosen data distribution (``DATA``)."""
+    if data == "phiflow_noise":
+        return sample_noise_potential(batch, generator, n=n, dtype=dtype)
+    if data != "fourier":
+        raise ValueError(f"data={data}: must be one of {', '.join(DATA)}")
+    return sample_fourier_potential(batch, generator, n=n, modes=modes, dtype=dtype)
+
+
+def sample_fourier_potential(
+    batch: int,
+    generator: torch.Generator | None = None,
+    n: int = N,
+    modes: int = MODES,
+    dtype: torch.dtype = torch.float32,
 ) -> torch.Tensor:
     """Smooth random potentials phi, (batch, n, n), zero mean over each grid.
 
@@ -73,5 +92,35 @@ def sample_potential(
     j = torch.arange(n, dtype=torch.float64)
     basis = torch.exp(1j * (2 * math.pi / n) * j[:, None] * k[None, :])  # (n, 2*modes+1)
     phi = (basis @ coeff @ basis.T).real
+    phi = phi - phi.mean(dim=(-2, -1), keepdim=True)
+    return phi.to(dtype)
+
+
+def sample_noise_potential(
+    batch: int,
+    generator: torch.Generator | None = None,
+    n: int = N,
+    smoothness: float = 1.0,
+    scale: float = 10.0,
+    dtype: torch.dtype = torch.float32,
+) -> torch.Tensor:
+    """Power-law noise potentials, (batch, n, n): the distribution of PhiFlow's ``Noise()``
+    sampled on an n x n ``CenteredGrid`` of spacing 1 (the authors' Poisson data).
+
+    Every DFT coefficient c_k (all n x n frequencies, Nyquist included) is (a_k + i b_k) / |k|^(2 s)
+    with a_k, b_k ~ N(0, 1), k = scale * fftfreq(n) per axis and s = ``smoothness``; |k|^2 <= 0.1
+    (only k = 0 here) is dropped. phi = Re(inverse DFT), then divided by its grid standard
+    deviation and shifted to zero grid mean: every sample has mean 0 and std 1. ``scale``
+    enters only through that cut-off (a common factor of 1/|k|^2 is normalised away): any
+    scale > sqrt(0.1) n keeps every k != 0, so PhiFlow's default 10 on an 8x8 grid does.
+    Draws in float64 on the CPU and casts, so a seed gives the same fields in every dtype.
+    """
+    f = torch.fft.fftfreq(n, dtype=torch.float64) * scale
+    k2 = f[:, None] ** 2 + f[None, :] ** 2
+    amp = torch.where(k2 > 0.1, 1.0 / k2.clamp_min(1e-300), torch.zeros_like(k2)) ** smoothness
+    re = torch.randn((batch, n, n), generator=generator, dtype=torch.float64)
+    im = torch.randn((batch, n, n), generator=generator, dtype=torch.float64)
+    phi = torch.fft.ifft2(torch.complex(re, im) * amp).real
+    phi = phi / phi.std(dim=(-2, -1), correction=0, keepdim=True)
     phi = phi - phi.mean(dim=(-2, -1), keepdim=True)
     return phi.to(dtype)

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import itertools
-import random
+import json
 import re
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 
 from higbench.figures import registry
-from higbench.figures.runs import COSMETIC_KEYS, Job, Launcher, boxes, expand, fmt, identity_of, multirun_command
+from higbench.figures.runs import COSMETIC_KEYS, Job, Launcher, expand, fmt, identity_of, multirun_command
 from higbench.figures.spec import PRESETS, Preset
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
@@ -97,44 +96,12 @@ def _jobs(rows: list[dict]) -> list[Job]:
     return [Job("f", "s", dict(r), seed=0) for r in rows]
 
 
-def _product(box: dict) -> set:
-    keys = list(box)
-    return {tuple(zip(keys, combo)) for combo in itertools.product(*(box[k] for k in keys))}
-
-
-@pytest.mark.parametrize("trial", range(20))
-def test_boxes_cover_the_jobs_exactly(trial):
-    rng = random.Random(trial)
-    space = {"optimizer": ["adam", "hig", "gn"], "optimizer.lr": [0.1, 1.0, 3e-4], "batch_size": [16, 64], "seed": [0, 1]}
-    full = [dict(zip(space, combo)) for combo in itertools.product(*space.values())]
-    rows = rng.sample(full, rng.randint(1, len(full)))
-    jobs = _jobs(rows)
-    got = boxes(jobs)
-    assert sum(len(m) for m, _ in got) == len(jobs)
-    covered = set()
-    for members, box in got:
-        combos = _product(box)
-        assert combos == {tuple((k, j.overrides[k]) for k in box) for j in members}  # the box runs exactly its jobs
-        assert not (combos & covered)
-        covered |= combos
-    assert covered == {tuple(r.items()) for r in rows}
-    if len(rows) == len(full):
-        assert len(got) == 1
-
-
-def test_boxes_merge_a_grid_into_one_multirun():
-    rows = [{"problem": "oscillator", "optimizer": o, "batch_size": b} for o in ("adam", "sgd") for b in (256, 1024)]
-    [(members, box)] = boxes(_jobs(rows))
-    assert box == {"problem": ["oscillator"], "optimizer": ["adam", "sgd"], "batch_size": [256, 1024]}
-    assert len(members) == 4
-
-
-def test_a_box_is_one_higbench_multirun_on_a_hydra_launcher(tmp_path):
-    box = {"optimizer": ["adam", "sgd"], "seed": [0, 1], "budget.seconds": [60.0]}
+def test_a_round_is_one_job_list_multirun_on_a_hydra_launcher(tmp_path):
+    jobs = tmp_path / "jobs.json"
     joblib = Launcher("joblib").args(n_runs=4, n_jobs=2, seconds=240)
     assert joblib == ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
-    cmd = multirun_command(box, tmp_path / "s", joblib)
-    assert cmd[1:4] == ["-m", "higbench.cli", "-m"] and "optimizer=adam,sgd" in cmd and "seed=0,1" in cmd
+    cmd = multirun_command(jobs, tmp_path / "s", joblib)
+    assert cmd[1:6] == ["-m", "higbench.cli", "-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}"]
     assert f"hydra.sweep.dir={tmp_path / 's'}" in cmd and cmd[-2:] == joblib
     assert Launcher("joblib").args(n_runs=1, n_jobs=2, seconds=240) == []  # one run: Hydra's basic launcher
     assert Launcher("auto").args(n_runs=4, n_jobs=2, seconds=4) == []  # a few seconds: no worker start-up
@@ -144,15 +111,16 @@ def test_a_box_is_one_higbench_multirun_on_a_hydra_launcher(tmp_path):
         Launcher("slurm", ("optimizer.lr=1",))  # would change the runs, not where they run
 
 
-def test_launch_runs_one_multirun_per_box_one_after_another(tmp_path, monkeypatch):
+def test_launch_sends_every_job_in_one_multirun_longest_first(tmp_path, monkeypatch):
     from higbench.figures import runs
 
     calls = []
 
     def fake_run(cmd, **kwargs):
         calls.append(cmd)
+        jobs = json.loads(Path(next(a for a in cmd if "jobs_file=" in a).split("=", 1)[1]).read_text())
         sweep = Path(next(a for a in cmd if a.startswith("hydra.sweep.dir=")).split("=", 1)[1])
-        for i in range(len([a for a in cmd if a.startswith("seed=")][0].split(","))):  # one run file per seed
+        for i in range(len(jobs)):
             (sweep / str(i)).mkdir()
             (sweep / str(i) / "run.h5").write_bytes(b"")
 
@@ -162,13 +130,30 @@ def test_launch_runs_one_multirun_per_box_one_after_another(tmp_path, monkeypatc
         return Done()
 
     monkeypatch.setattr(runs.subprocess, "run", fake_run)
-    grid = [{"optimizer": o, "seed": s, "budget.seconds": 60.0} for o in ("adam", "sgd") for s in (0, 1)]
-    alone = [{"optimizer": "hig", "seed": 0, "batch_size": 128, "budget.seconds": 60.0}]
-    written = runs.launch(_jobs(grid + alone), tmp_path, n_jobs=3, launcher="joblib", log=lambda *a: None)
-    assert len(calls) == 2 and len(written) == 2 + 1  # fake: one file per seed value of each multirun
-    assert calls[0][-2:] == ["hydra/launcher=joblib", "hydra.launcher.n_jobs=3"] and "optimizer=adam,sgd" in calls[0]
-    assert not any(a.startswith("hydra/launcher") for a in calls[1])  # one run: Hydra's basic launcher
-    assert all(Path(w).is_relative_to(tmp_path / "figures-runs" / "f") for w in written)
+    short = [{"optimizer": o, "seed": s, "budget.seconds": 15.0} for o in ("adam", "sgd") for s in (0, 1)]
+    long = [{"optimizer": "hig", "seed": 0, "batch_size": 128, "budget.seconds": 240.0}]
+    written = runs.launch(_jobs(short + long), tmp_path, n_jobs=3, launcher="joblib", log=lambda *a: None)
+    assert len(calls) == 1 and len(written) == 5
+    assert calls[0][-2:] == ["hydra/launcher=joblib", "hydra.launcher.n_jobs=3"]
+    jobs = json.loads((Path(written[0]).parents[1] / "jobs.json").read_text())
+    assert jobs[0][:2] == ["optimizer=hig", "seed=0"] and len(jobs) == 5  # the longest run starts first
+
+
+def test_joblist_sweeper_runs_a_job_list(tmp_path):
+    """The plugin through Hydra: two jobs that are no cartesian product, in one multirun."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    jobs = tmp_path / "jobs.json"
+    jobs.write_text(json.dumps([["optimizer=hig", "budget.max_updates=2"], ["optimizer=adam", "seed=1", "budget.max_updates=3"]]))
+    cmd = [sys.executable, "-m", "higbench.cli", "-m", "problem=toy", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}"]
+    cmd += ["budget.seconds=5", "eval_unit=updates", "eval_every=1", "progress=false", f"hydra.sweep.dir={tmp_path / 's'}"]
+    env = {**__import__("os").environ, "PYTHONPATH": str(root)}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    made = sorted(p.parent.name for p in (tmp_path / "s").rglob("run.h5"))
+    assert len(made) == 2 and "optimizer=adam" in made[1] and "seed=1" in made[1]
 
 
 def test_figures_runs_has_no_scheduler_of_its_own():
@@ -256,7 +241,7 @@ def _fake_run(t, loss, **cols):
 
 
 def test_claim_helpers_crossing_time_and_plateau():
-    from higbench.figures.checks import crossing_time, final, loss_at
+    from higbench.figures.claims import crossing_time, final, loss_at
     from higbench.figures.dipole import energy_ratio, plateau_seconds
 
     adam = _fake_run([0, 100, 200, 300], [1.0, 1e-3, 1e-4, 1e-4])

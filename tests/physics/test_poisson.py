@@ -96,3 +96,58 @@ def test_sample_potential_spectrum():
     ratio = power[inside] / (64 * amp2[inside])
     assert (ratio - 1.0).abs().max() < 0.15  # 4096 samples: a few % sampling error
     assert 1.0 < phi.std().item() < 2.0  # pointwise std ~ 1.4, as documented
+
+
+# --- the authors' data: PhiFlow's Noise (phiflow is a dev dependency, imported here only) ---
+
+
+def phiflow_noise(batch: int, seed: int) -> np.ndarray:
+    """The reference script's potentials: CenteredGrid(Noise(batch), ZERO, x=8, y=8)."""
+    from phi import flow
+
+    flow.math.seed(seed)
+    grid = flow.CenteredGrid(flow.Noise(flow.batch(batch=batch)), flow.extrapolation.ZERO, x=8, y=8)
+    return grid.values.numpy("batch,x,y").astype(np.float64)
+
+
+def mean_power(phi: np.ndarray) -> np.ndarray:
+    return (np.abs(np.fft.fft2(phi)) ** 2).mean(axis=0)
+
+
+def test_noise_potentials_have_phiflows_spectrum_and_moments():
+    ours = sample_potential(8192, torch.Generator().manual_seed(0), dtype=F64, data="phiflow_noise").numpy()
+    theirs = phiflow_noise(8192, seed=0)
+    for phi in (ours, theirs):  # normalised per sample
+        np.testing.assert_allclose(phi.mean(axis=(1, 2)), 0, atol=1e-6)
+        np.testing.assert_allclose(phi.std(axis=(1, 2)), 1, atol=1e-6)
+    p_ours, p_theirs = mean_power(ours), mean_power(theirs)
+    assert p_ours[0, 0] < 1e-9 and p_theirs[0, 0] < 1e-9
+    nonzero = np.ones((8, 8), bool)
+    nonzero[0, 0] = False
+    np.testing.assert_allclose(p_ours[nonzero], p_theirs[nonzero], rtol=0.1)
+    # pointwise moments: variance 1 everywhere (periodic noise), same kurtosis
+    np.testing.assert_allclose(ours.var(axis=0), theirs.var(axis=0), rtol=0.1)
+    kurt = [float(((p**4).mean(axis=0) / (p**2).mean(axis=0) ** 2).mean()) for p in (ours, theirs)]
+    assert abs(kurt[0] - kurt[1]) < 0.1
+
+
+def test_fourier_potentials_differ_from_phiflows_noise():
+    """The test above can fail: higbench's default data have another spectrum."""
+    fourier = sample_potential(8192, torch.Generator().manual_seed(0), dtype=F64, data="fourier").numpy()
+    fourier = fourier / fourier.std(axis=(1, 2), keepdims=True)
+    ratio = mean_power(fourier)[1:, 1:] / mean_power(phiflow_noise(8192, seed=1))[1:, 1:]
+    assert ratio.max() / ratio.min() > 3
+
+
+def test_laplace_matches_phiflows_zero_extrapolation_laplace():
+    from phi import flow
+
+    phi = phiflow_noise(4, seed=2)
+    grid = flow.CenteredGrid(flow.math.tensor(phi, flow.batch("batch"), flow.spatial("x,y")), flow.extrapolation.ZERO)
+    expected = flow.field.laplace(grid).values.numpy("batch,x,y")
+    np.testing.assert_allclose(laplace(torch.tensor(phi)).numpy(), expected, atol=1e-5)
+
+
+def test_unknown_data_choice_names_the_key():
+    with pytest.raises(ValueError, match="data=bogus"):
+        sample_potential(2, data="bogus")

@@ -1,0 +1,82 @@
+"""``hydra/sweeper=joblist``: one multirun over an explicit list of jobs, in the given order.
+
+Hydra's basic sweeper runs the cartesian product of its overrides; a set of runs that is not
+a product (the missing runs of several figures) would need one multirun per product, each
+waiting for the slowest of its runs while cores idle. This sweeper takes the jobs as a JSON
+file, a list of override lists, and hands them to the configured launcher as one batch:
+
+    higbench -m hydra/sweeper=joblist hydra.sweeper.jobs_file=jobs.json hydra/launcher=joblib
+
+Overrides on the command line apply to every job (a job's own value wins). The launcher
+starts jobs in list order, so a list sorted longest first keeps the workers busy to the end.
+"""
+# No "from __future__ import annotations": Hydra imports plugins outside sys.modules, where a
+# dataclass with string annotations cannot be built.
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.plugins import Plugins
+from hydra.plugins.sweeper import Sweeper
+from omegaconf import OmegaConf
+
+
+@dataclass
+class JobListSweeperConf:
+    _target_: str = "hydra_plugins.higbench_joblist_sweeper.joblist_sweeper.JobListSweeper"
+    jobs_file: str = "???"  # JSON: [["key=value", ...], ...], one list of overrides per job
+
+
+ConfigStore.instance().store(group="hydra/sweeper", name="joblist", node=JobListSweeperConf, provider="higbench")
+
+
+def read_jobs(path: str | Path) -> list[list[str]]:
+    """The job list of a jobs file, checked to be a list of lists of ``key=value`` strings."""
+    jobs = json.loads(Path(path).read_text())
+    if not isinstance(jobs, list) or not all(isinstance(j, list) and all(isinstance(o, str) for o in j) for j in jobs):
+        raise ValueError(f"hydra.sweeper.jobs_file={path}: must hold a JSON list of lists of override strings")
+    return jobs
+
+
+def merge(common: list[str], job: list[str]) -> list[str]:
+    """The common overrides, each replaced by the job's own value of the same key, then the job's."""
+    own = {o.split("=", 1)[0] for o in job}
+    return [o for o in common if o.split("=", 1)[0] not in own] + list(job)
+
+
+class JobListSweeper(Sweeper):
+    def __init__(self, jobs_file: str):
+        self.jobs_file = jobs_file
+        self.config = self.launcher = self.hydra_context = None
+
+    def setup(self, *, hydra_context, task_function, config) -> None:
+        self.hydra_context, self.config = hydra_context, config
+        self.launcher = Plugins.instance().instantiate_launcher(
+            hydra_context=hydra_context, task_function=task_function, config=config
+        )
+
+    def sweep(self, arguments: list[str]) -> Any:
+        parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
+        swept = [o.input_line for o in parser.parse_overrides(arguments) if o.is_sweep_override()]
+        if swept:
+            raise ValueError(f"{swept[0]}: the joblist sweeper takes no sweep overrides (list the jobs in jobs_file)")
+        batch = [merge(arguments, job) for job in read_jobs(self.jobs_file)]
+        sweep_dir = Path(self.config.hydra.sweep.dir)
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        OmegaConf.save(self.config, sweep_dir / "multirun.yaml")
+        self.validate_batch_is_legal(batch)
+        results = self.launcher.launch(batch, initial_job_idx=0)
+        for r in results:
+            _ = r.return_value  # a failed job raises here, as with Hydra's basic sweeper
+        return [results]
+
+
+def register() -> None:
+    """Make the sweeper known to Hydra where its plugin scan cannot see this package (an
+    editable install hides namespace packages from ``pkgutil``); importing this module has
+    stored its config (``hydra/sweeper=joblist``)."""
+    Plugins.instance().register(JobListSweeper)

@@ -1,0 +1,223 @@
+"""Causes are stated from evidence: templates filled from measured values, never contradicting them.
+
+Runs on the committed results (docs/results/claims.json: each claim's measured values) and on
+synthetic measurements where the values are flipped. No training.
+"""
+
+import json
+import re
+import string
+from pathlib import Path
+
+import pytest
+
+from higbench.figures import registry
+from higbench.figures.claims import CAUSE, CAUSES, PAPER, Cause, contradictions, evidence, finish
+
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
+
+
+def _fields(template: str) -> set[str]:
+    return {name for _, name, _, _ in string.Formatter().parse(template) if name}
+
+
+def published_rows() -> list[dict]:
+    rows = []
+    for path in sorted(RESULTS.glob("*.json")):
+        rows += json.loads(path.read_text()).get("claims", [])
+    return rows
+
+
+@pytest.mark.parametrize("cid", sorted(CAUSE))
+def test_cause_texts_have_no_typed_numbers(cid):
+    cause = CAUSE[cid]
+    assert cause.category in CAUSES and cause.category != "open"
+    prose = re.sub(r"\{[^}]*\}|\b[a-z]{3}-\d+\b", "", cause.text)  # fields and claim ids (poi-2)
+    assert not re.search(r"(?<![A-Za-z_\d])\d", prose), f"{cid}: a number typed into the cause text: {prose!r}"
+    assert cause.facts, f"{cid}: a cause states no fact a measurement could contradict"
+
+
+def test_published_causes_do_not_contradict_their_rows():
+    rows = published_rows()
+    assert rows, "docs/results holds no claim data"
+    claims = registry.claims()
+    assert {r["id"] for r in rows} == set(claims)
+    for row in rows:
+        c = claims[row["id"]]
+        assert not contradictions(c, row), (row["id"], contradictions(c, row), row["values"])
+        again = finish(c, {**row, "why": row["why"].split(" (")[0]})
+        assert again["verdict"] == row["verdict"], row["id"]  # the committed verdict is the rules' on these values
+
+
+def _row(cid, verdict, values, seconds=1e9, seeds=3):
+    return {"id": cid, "rule_verdict": verdict, "why": "rule", "values": values, "seconds": seconds, "seeds": seeds}
+
+
+# (claim, values the cause's facts hold for, the same with one value flipped)
+SYNTHETIC = [
+    # osc-5: equal time favours the small b, equal updates the large one
+    (
+        "osc-5",
+        dict(
+            b_lo=32,
+            b_hi=128,
+            hig_lo=2e-6,
+            hig_hi=3e-6,
+            gn_lo=8e-7,
+            gn_hi=2.6e-6,
+            n_eq=2000,
+            hig_lo_eq=1.2e-4,
+            hig_hi_eq=3.2e-5,
+            gn_lo_eq=8.5e-5,
+            gn_hi_eq=1.5e-5,
+        ),  # fmt: skip
+        dict(gn_hi_eq=9e-5),  # GN b=128 no longer lower per update
+    ),
+    ("dip-4", dict(low=2.3e-8), dict(low=3e-6)),  # "below the float32 floor" with a run at 3e-6
+    ("osc-3", dict(hig=2.9e-6, hig_half=1e-5, hig_updates=11638), dict(hig_updates=54719)),  # more than the paper's hour
+    ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9), dict(hig_b=64)),
+    ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=1.0)),
+    ("abl-1", dict(spread=36.7, spread_half=300.0), dict(spread_half=10.0)),
+    ("toy-2", dict(adam_final=4.4e-3, adam_half=3.7e-3, gn_final=5.7e-2, gn_half=5.7e-2), dict(gn_final=0.25)),
+    ("spd-2", dict(ratio=1.2, b_lo=32, b_hi=128), dict(ratio=15.6)),
+]
+
+
+@pytest.mark.parametrize("cid,values,flip", SYNTHETIC, ids=[s[0] for s in SYNTHETIC])
+def test_a_cause_is_contradicted_when_its_values_flip(cid, values, flip):
+    c = registry.claims()[cid]
+    ok = finish(c, _row(cid, "not", values))
+    assert ok["cause"][0] == c.cause.category, ok["cause"]
+    assert all(f"{v:g}" in ok["cause"][1] or str(v) in ok["cause"][1] for v in values.values() if isinstance(v, int))
+    flipped = finish(c, _row(cid, "not", {**values, **flip}))
+    assert flipped["cause"][0] == "open" and "contradicted" in flipped["cause"][1], flipped["cause"]
+    assert contradictions(c, flipped)
+
+
+def test_missing_evidence_is_open_not_invented():
+    c = registry.claims()["osc-5"]
+    row = finish(c, _row("osc-5", "partly", {"hig_lo": 1.0}))
+    assert row["cause"] == ["open", row["cause"][1]] and "needs" in row["cause"][1]
+
+
+def test_fields_come_from_paper_or_measurements():
+    """Every field a cause quotes is a paper number, budget/seeds, or a value some measurement returns."""
+    for cid, cause in CAUSE.items():
+        unknown = {f for f in _fields(cause.text) if f not in PAPER and f not in ("budget", "seeds")}
+        for f in unknown:
+            assert re.fullmatch(r"[a-z_0-9]+", f), (cid, f)
+
+
+def test_budget_gate_keeps_a_passing_or_decisive_rule():
+    claims = registry.claims()
+    osc2 = finish(claims["osc-2"], _row("osc-2", "reproduced", {"gn": 2.6e-6}, seconds=240))
+    assert osc2["verdict"] == "reproduced"  # 2.6e-6 is inside [1e-7, 1e-5] at 240 s: evidence
+    poi2 = _row("poi-2", "not", {"start": 2.3, "hig_final": 5.0, "adam_final": 1.0, "hig_b": 16, "data": "fourier"}, 60)
+    assert finish(claims["poi-2"], poi2)["verdict"] == "n/a (budget)"
+    poi2["values"]["decisive"] = True  # a rising curve does not fall with more budget
+    assert finish(claims["poi-2"], poi2)["verdict"] == "not"
+
+
+def test_render_formats_numbers_from_the_values():
+    cause = Cause("budget", "reached {x:e} after {n} updates", {"x above y": lambda v: v["x"] > 1e-6})
+    assert cause.render({"x": 2.34e-5, "n": 300}) == ("budget", "reached 2.3e-5 after 300 updates")
+    assert cause.render({"x": 1e-8, "n": 300})[0] == "open"
+    assert evidence({"values": {"a": 1}, "seconds": 60, "seeds": 3})["budget"] == 60
+
+
+# -- rules on synthetic measurements -------------------------------------------------------
+
+
+class _Run:
+    """A run as the rules see it: curves, config and status."""
+
+    def __init__(self, losses, steps=None, times=None, status="completed", label="", **cfg):
+        import pandas as pd
+
+        n = len(losses)
+        self.curves = pd.DataFrame(
+            {"test_loss": losses, "step": steps or list(range(n)), "wall_time": times or [float(i) for i in range(n)]}
+        )
+        self.status, self._cfg, self._label, self.seed = status, cfg, label, 0
+        self.initial_loss, self.final_loss = float(losses[0]), float(losses[-1])
+
+    def cfg(self, key, default=None):
+        return self._cfg.get(key, default)
+
+    def label(self):
+        return self._label
+
+
+class _Fig:
+    def __init__(self, **by_sweep):
+        self.by_sweep = by_sweep
+
+    def runs(self, sweep=None, **where):
+        return self.by_sweep.get(sweep, [])
+
+
+def _measure(cid, datas):
+    return registry.claims()[cid].check(datas)
+
+
+def test_poi4_compares_per_update_and_refuses_a_time_evaluated_adam():
+    hig = _Run([300.0, 100.0, 50.0], steps=[0, 1, 2], **{"batch_size": 64})
+    adam_by_time = _Run([300.0, 150.0, 20.0], steps=[0, 500, 1000])
+    _, verdict, why, _ = _measure("poi-4", {"fig7": _Fig(adam=[adam_by_time], hig=[hig])})
+    assert verdict == "n/a" and "by updates" in why  # interpolating Adam between step 0 and 500 is not a measurement
+    adam = _Run([300.0, 280.0, 260.0, 20.0], steps=[0, 1, 2, 1000])
+    measured, verdict, _, values = _measure("poi-4", {"fig7": _Fig(adam=[adam], hig=[hig])})
+    assert values["n"] == 2 and verdict == "reproduced", measured  # 50 vs 260 after two updates each
+
+
+def test_dip2_needs_three_hig_evaluations_in_the_initial_stage():
+    import pandas as pd
+
+    def run(losses, he, le):
+        r = _Run(losses)
+        r.curves = pd.concat([r.curves, pd.DataFrame({"test_high_energy_loss": he, "test_low_energy_loss": le})], axis=1)
+        return r
+
+    adam = [run([0.9, 0.5, 0.45, 0.1], [0.8, 0.5, 0.5, 0.1], [0.1, 0.1, 0.1, 0.05])] * 3
+    hig_one = [run([0.9, 0.5, 0.01], [0.5, 0.5, 0.01], [0.5, 0.5, 0.01])] * 3
+    assert _measure("dip-2", {"fig4c": _Fig(adam=adam, hig=hig_one)})[1] == "n/a"
+    hig = [run([0.9, 0.6, 0.5, 0.45, 0.01], [0.5] * 4 + [0.01], [0.5] * 4 + [0.01])] * 3
+    measured, verdict, _, values = _measure("dip-2", {"fig4c": _Fig(adam=adam, hig=hig)})
+    assert verdict == "reproduced" and values["hig_stage_evals"] == 3, measured
+
+
+def test_dip3_uses_the_median_of_fig4cs_seeds():
+    adam = [_Run([0.9, 0.5, v]) for v in (1e-6, 2e-6, 3e-6)]
+    hig = [_Run([0.9, 0.01, v]) for v in (1e-9, 5e-6, 1e-7)]  # one lucky seed does not decide it
+    _, verdict, _, values = _measure("dip-3", {"fig4c": _Fig(adam=adam, hig=hig)})
+    assert values == {"hig": 1e-7, "adam": 2e-6} and verdict == "reproduced"
+    hig = [_Run([0.9, 0.01, v]) for v in (1e-9, 5e-6, 4e-6)]
+    assert _measure("dip-3", {"fig4c": _Fig(adam=adam, hig=hig)})[1] == "not"
+
+
+def test_new_claims_on_synthetic_runs():
+    kappa = [_Run([1.0, v], **{"optimizer.kappa": k}) for k, v in ((0.5, 1e-2), (-0.5, 1e-6), (-1.0, 3e-6))]
+    assert _measure("abl-4", {"fig12": _Fig(kappa=kappa)})[1] == "reproduced"
+    kappa[2] = _Run([1.0, 1e-7], **{"optimizer.kappa": -1.0})
+    assert _measure("abl-4", {"fig12": _Fig(kappa=kappa)})[1] == "not"
+    fig9 = [
+        _Run([1.0, v], **{"optimizer.tau": t, "optimizer.lr": 0.5, "batch_size": 16}) for t, v in ((1e-6, 4e-7), (1e-5, 5e-7))
+    ]
+    assert _measure("dip-8", {"fig9": _Fig(hig=fig9)})[1] == "not"  # the published fig9: tau=1e-6 is the best
+    cnn = [_Run([1.0, 0.1], **{"optimizer.tau": t}) for t in (1e-5, 1e-4, 1e-3)]
+    assert _measure("cnn-2", {"fig11": _Fig(hig=cnn)})[1] == "reproduced"
+    cnn.append(_Run([1.0, float("nan")], status="diverged", **{"optimizer.tau": 1e-4}))
+    cnn.append(_Run([1.0, 2.0], **{"optimizer.tau": 1e-3}))
+    assert _measure("cnn-2", {"fig11": _Fig(hig=cnn)})[1] == "not"
+
+
+def test_path_shares_of_y_space_trajectories():
+    import numpy as np
+
+    from higbench.figures.toy import path_shares
+
+    straight = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
+    share, straightness = path_shares(straight)
+    assert share == pytest.approx(0.5) and straightness == pytest.approx(1.0)
+    along_y1 = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.1]])
+    assert path_shares(along_y1)[0] < 0.1
