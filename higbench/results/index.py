@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
     RunFileLocked,
@@ -54,9 +55,6 @@ DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # failed, corrupt) is not a result: the figures run it again.
 DONE_STATUSES = ("completed", "diverged")
 RUN_STATUSES_DONE = ("completed",)  # the statuses ``best_runs`` selects from
-# Config keys that do not change a run's result: two runs that differ only in these have the
-# same ``config_id`` (progress bar, torch threads, checkpoint interval, resume, memory cap).
-COSMETIC_KEYS = ("progress", "threads", "checkpoint_every", "resume", "memory_limit_mb")
 
 # Columns the index computes; a config key of the same name is stored as "config.<key>".
 _OWN_COLUMNS = {

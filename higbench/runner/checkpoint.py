@@ -44,7 +44,7 @@ from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 SUFFIX = ".ckpt"
 FORMAT = 1
-RESUMABLE_KEYS = ("budget", "eval_every", "checkpoint_every", "progress", "threads", "device", "memory_limit_mb", "resume")
+from higbench.config import RESUMABLE_KEYS  # noqa: E402 - the schema marks them (resumable=True)
 RESUMABLE_STATUSES = ("running", "interrupted", "failed")
 
 
