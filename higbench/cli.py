@@ -32,7 +32,6 @@ any job failed says how many).
 from __future__ import annotations
 
 import contextlib
-import errno
 import fcntl
 import logging
 import math
@@ -376,11 +375,9 @@ def _sweep_failed(exc: BaseException) -> None:
     """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
     failed, jobs = _SWEEP["failed"], _SWEEP["jobs"]
     count = f"{failed} of {jobs} sweep jobs failed" if failed else "a sweep job failed"
-    print(
-        f"higbench: error: {count} (the first: {' '.join(str(exc).split())}); resume=true with the same hydra.sweep.dir runs them again",
-        file=sys.stderr,
-        flush=True,
-    )
+    first = " ".join(str(exc).split())
+    again = "resume=true with the same hydra.sweep.dir runs them again"
+    print(f"higbench: error: {count} (the first: {first}); {again}", file=sys.stderr, flush=True)
     sys.exit(1)
 
 

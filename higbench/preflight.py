@@ -371,7 +371,8 @@ def check_run(config: DictConfig) -> RunPlan:
 
         with read_write(config.hydra), open_dict(config.hydra):
             config.hydra.run.dir = str(checkpoint.run_file_of(task["resume"], None).parent)
-    plan = plan_run(task, Path(str(config.hydra.run.dir)), list(config.hydra.overrides.task), multirun=False)
+    output_dir = Path(os.path.abspath(str(config.hydra.run.dir)))  # as Hydra's runtime.output_dir
+    plan = plan_run(task, output_dir, list(config.hydra.overrides.task), multirun=False)
     # on a terminal, a line at once: torch and the pre-flight take seconds
     announce(task.get("progress", True), start_text(plan.start_config()) + " - checking", transient=True)
     from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass

@@ -13,13 +13,12 @@ from dataclasses import dataclass, field
 
 import torch
 from hydra.utils import get_class
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from torch import nn
 
+from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
 from higbench.optim.hig import JacobianPower
 from higbench.problems.base import Batch, Problem
-
-from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
 
 
 @dataclass
