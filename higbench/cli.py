@@ -53,7 +53,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
 from higbench.errors import EXIT_BAD_INPUT, ConfigError
-from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, precheck, refuse, take_plan
+from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
@@ -337,27 +337,21 @@ def _hydra_main(cfg: DictConfig) -> float:
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry: Hydra's app; its composition errors become one line (exit 2)."""
-    global _JOB_STARTED
     argv = list(sys.argv[1:] if argv is None else argv)
     early = _refuse_early(argv)
     if early is not None:
         refuse(early)
-    sys.argv = [sys.argv[0], *argv]
-    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    if {"-m", "--multirun"} & set(argv) and {"-c", "--cfg"} & set(argv):
+        return _print_sweep_configs(argv)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
-    _JOB_STARTED = False
     _SWEEP.update(jobs=0, failed=0)
     try:
-        with _quiet_broken_pipe():
-            _hydra_main()
-    except (HydraException, OmegaConfBaseException, ValueError) as exc:
-        if _JOB_STARTED:
-            _sweep_failed(exc)
-            raise
-        refuse(composition_error(exc, overrides))
+        while argv is not None:
+            argv = _run_app(argv)
     except RecursionError:
-        refuse(ConfigError("hydra.run.dir", "...", "a path nested too deep to handle"))
+        value = given_value(argv, "hydra.run.dir") or "?"
+        refuse(ConfigError("hydra.run.dir", value, "nested too deep (Python's recursion limit)"))
     except JobFailed as exc:
         _sweep_failed(exc)
     except KeyboardInterrupt:  # between a sweep's jobs, or before a run installed its handler
@@ -371,6 +365,27 @@ def main(argv: list[str] | None = None) -> None:
         GlobalHydra.instance().clear()
 
 
+def _run_app(argv: list[str]) -> list[str] | None:
+    """Hydra's app on ``argv``; None when done, or the command line to run it again with."""
+    global _JOB_STARTED
+    _JOB_STARTED = False
+    sys.argv = [sys.argv[0], *argv]
+    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    try:
+        with _quiet_broken_pipe():
+            _hydra_main()
+    except (HydraException, OmegaConfBaseException, ValueError) as exc:
+        if _JOB_STARTED:
+            _sweep_failed(exc)
+            raise
+        error = composition_error(exc, overrides)
+        if not getattr(error, "addable", False):
+            refuse(error)
+        GlobalHydra.instance().clear()  # a problem's own key its YAML does not list: add it
+        return [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
+    return None
+
+
 def _sweep_failed(exc: BaseException) -> None:
     """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
     failed, jobs = _SWEEP["failed"], _SWEEP["jobs"]
@@ -379,6 +394,24 @@ def _sweep_failed(exc: BaseException) -> None:
     again = "resume=true with the same hydra.sweep.dir runs them again"
     print(f"higbench: error: {count} (the first: {first}); {again}", file=sys.stderr, flush=True)
     sys.exit(1)
+
+
+def _print_sweep_configs(argv: list[str]) -> None:
+    """``higbench -m ... --cfg job``: print every job's config (Hydra allows one mode flag)."""
+    from higbench.preflight import sweep_configs
+
+    flag = next(i for i, a in enumerate(argv) if a in ("-c", "--cfg"))
+    part = argv[flag + 1]
+    if part not in ("job", "hydra", "all"):
+        refuse(ConfigError("--cfg", part, "must be job, hydra or all"))
+    overrides = [a for i, a in enumerate(argv) if not a.startswith("-") and i != flag + 1]
+    try:
+        shown = sweep_configs(overrides, part)
+    except (HydraException, OmegaConfBaseException) as exc:
+        refuse(composition_error(exc, overrides))
+    with _quiet_broken_pipe():
+        for num, (job, text) in enumerate(shown):
+            print(f"# job {num}: {' '.join(job)}\n{text}", flush=True)
 
 
 def _refuse_early(argv: list[str]) -> ConfigError | None:

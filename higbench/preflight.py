@@ -76,7 +76,7 @@ def composition_error(exc: Exception, overrides: list[str]) -> ConfigError:
     cause = exc.__cause__ if exc.__cause__ is not None else exc
     full_key = getattr(cause, "full_key", None)
     if full_key and isinstance(cause, ValidationError):  # a bad type: Hydra's check against the schema
-        value = _explicit(overrides, str(full_key)) or "?"
+        value = given_value(overrides, str(full_key)) or "?"
         return ConfigError(str(full_key), value, _first_line(cause.msg if hasattr(cause, "msg") else cause))
     if full_key:
         return _unknown_key(str(full_key), overrides)
@@ -90,7 +90,7 @@ def _first_line(exc) -> str:
 
 def _unknown_key(full_key: str, overrides: list[str]) -> ConfigError:
     """``problem.foo=1``: the key is not there; list the keys that are (from a composition without it)."""
-    value = _explicit(overrides, full_key)
+    value = given_value(overrides, full_key)
     value = "<missing>" if value is None else value
     parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
     others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
@@ -107,8 +107,11 @@ def _unknown_key(full_key: str, overrides: list[str]) -> ConfigError:
                 yaml_file = f"conf/optimizer/{node.get('name')}.yaml"
                 return ConfigError(full_key, value, f"not set in {yaml_file}; add it with +{full_key}={value}")
     if parent == "problem" and isinstance(node, dict) and full_key.rsplit(".", 1)[-1] in _problem_fields(node):
-        # A key of the problem's Config that its YAML does not list (a custom problem's base keys).
-        return ConfigError(full_key, value, f"not set in the problem's YAML; add it with +{full_key}={value}")
+        # A key of the problem's Config its YAML does not list (a custom problem's base keys,
+        # e.g. init): the command line may set it as if listed (``main`` adds it with ++).
+        error = ConfigError(full_key, value, f"not set in the problem's YAML; add it with +{full_key}={value}")
+        error.addable = True
+        return error
     where = f" under {parent}" if parent else ""
     return ConfigError(full_key, value, f"unknown key; valid keys{where}: {', '.join(map(str, valid))}")
 
@@ -144,8 +147,9 @@ def _compose_plain(overrides: list[str]) -> dict:
         return OmegaConf.to_container(compose("config", overrides=overrides), resolve=False)
 
 
-def _explicit(overrides: list[str], key: str) -> str | None:
-    for o in overrides:
+def given_value(overrides: list[str], key: str) -> str | None:
+    """The value ``key`` is given on the command line (the last one: it wins), or None."""
+    for o in reversed(overrides):
         k, sep, v = o.partition("=")
         if k.lstrip("+~") == key:
             return v if sep else "<missing>"
@@ -365,7 +369,7 @@ def check_run(config: DictConfig) -> RunPlan:
 
     task = _checked_task(config)
     overrides = [*config.hydra.overrides.hydra, *config.hydra.overrides.task]
-    explicit_dir = _explicit(overrides, "hydra.run.dir") is not None
+    explicit_dir = given_value(overrides, "hydra.run.dir") is not None
     if task.get("resume") and not explicit_dir:
         from higbench.runner import checkpoint
 
@@ -446,6 +450,30 @@ class Preflight(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         _restore_multirun_yaml()
+
+
+def sweep_configs(overrides: list[str], part: str = "job") -> list[tuple[list[str], str]]:
+    """``higbench -m ... --cfg job``: each job's composed config as YAML, with its overrides.
+
+    ``part``: job (the task config), hydra, or all, as Hydra's ``--cfg``.
+    """
+    from hydra import initialize_config_dir
+    from hydra.types import RunMode
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3", job_name="higbench"):
+        gh = GlobalHydra.instance()
+        config = gh.hydra.compose_config("config", overrides, run_mode=RunMode.MULTIRUN, with_log_configuration=False)
+        loader = gh.config_loader()
+        shown = []
+        for job in sweep_jobs(config) or [[]]:
+            job_config = loader.load_sweep_config(config, job)
+            with read_write(job_config), open_dict(job_config):
+                if part == "job":
+                    del job_config["hydra"]
+                elif part == "hydra":
+                    job_config = OmegaConf.create({"hydra": job_config.hydra})
+            shown.append((list(job), OmegaConf.to_yaml(job_config)))
+    return shown
 
 
 def precheck(overrides: list[str]) -> DictConfig:
