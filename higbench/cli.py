@@ -341,6 +341,7 @@ def main(argv: list[str] | None = None) -> None:
     early = _refuse_early(argv)
     if early is not None:
         refuse(early)
+    argv = _flags_first(argv)
     if {"-m", "--multirun"} & set(argv) and {"-c", "--cfg"} & set(argv):
         return _print_sweep_configs(argv)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
@@ -414,10 +415,34 @@ def _print_sweep_configs(argv: list[str]) -> None:
             print(f"# job {num}: {' '.join(job)}\n{text}", flush=True)
 
 
+# Hydra's flags (``higbench --hydra-help``): those taking a value, and those that do not.
+_VALUE_FLAGS = ("-c", "--cfg", "-p", "--package", "-cp", "--config-path", "-cn", "--config-name", "-cd", "--config-dir")
+_VALUE_FLAGS += ("--experimental-rerun",)
+_PLAIN_FLAGS = ("-h", "--help", "--hydra-help", "--version", "--resolve", "-r", "--run", "-m", "--multirun", "-sc")
+_PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
+_INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
+
+
+def _flags_first(argv: list[str]) -> list[str]:
+    """Hydra's flags (with their values) before the overrides: argparse takes the overrides
+    as one group, so ``higbench seed=0 -m lr=1`` would otherwise be its usage text."""
+    flags, overrides, i = [], [], 0
+    while i < len(argv):
+        arg = argv[i]
+        takes = arg in _VALUE_FLAGS or (arg in ("-i", "--info") and i + 1 < len(argv) and argv[i + 1] in _INFO_CHOICES)
+        (flags if arg.startswith("-") else overrides).extend(argv[i : i + 1 + takes])
+        i += 1 + takes
+    return [*flags, *overrides]
+
+
 def _refuse_early(argv: list[str]) -> ConfigError | None:
     """Command lines Hydra's argparse would answer with its usage text: one line instead."""
-    if argv and argv[-1] in ("-c", "--cfg", "-p", "--package", "-cp", "--config-path", "-cn", "--config-name"):
-        return ConfigError(argv[-1], "<missing>", "needs a value (e.g. --cfg job)")
+    for i, arg in enumerate(argv):
+        name = arg.split("=", 1)[0]
+        if arg.startswith("-") and name not in (*_VALUE_FLAGS, *_PLAIN_FLAGS):
+            return ConfigError(arg, "<unknown>", "not an option of higbench (higbench --help lists them)")
+        if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
+            return ConfigError(arg, "<missing>", "needs a value (e.g. --cfg job)")
     return None
 
 

@@ -40,6 +40,29 @@ def run_cli(args: list[str], cwd: Path, timeout: float = 180) -> subprocess.Comp
 
 
 @pytest.fixture
+def higbench(tmp_path, monkeypatch, capsys):
+    """higbench(*argv) in this process, from a fresh tmp dir -> (exit code, stdout, stderr).
+
+    The front door as a user meets it, without a new Python and torch per call; use ``cli``
+    (a subprocess) where the process itself is the point (signals, pipes, the entry point).
+    """
+    from higbench import cli as entry
+
+    monkeypatch.chdir(tmp_path)
+
+    def _run(*args: str, tiny: bool = True):
+        try:
+            entry.main([*(TINY if tiny else []), *args])  # Hydra's flags may come anywhere
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+        out = capsys.readouterr()
+        return code, out.out, out.err
+
+    return _run
+
+
+@pytest.fixture
 def cli(tmp_path):
     """cli(*overrides) -> CompletedProcess, run from a fresh tmp dir (outputs/ lands there)."""
 

@@ -101,3 +101,100 @@ def test_hydra_log_is_named_after_the_tool_and_not_empty(cli, tmp_path):
     log = run.parent / "higbench.log"
     assert log.is_file() and not (run.parent / "cli.log").exists()
     assert "completed: toy/adam" in log.read_text()  # the summary goes through logging too
+
+
+# -- the front door's one-line answers (issue 19 item 10, issue 20 items 3 and 9), in-process --
+
+
+def one_line(code, err, key: str, value: str) -> str:
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("higbench: error: "), err
+    assert f"{key}={value}" in lines[0], lines[0]
+    return lines[0]
+
+
+def test_an_integer_too_long_to_print_is_one_line(higbench, tmp_path):
+    code, _, err = higbench("optimizer.lr=1" + "0" * 5000)
+    one_line(code, err, "optimizer.lr", "1000")
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_a_run_dir_nested_too_deep_is_one_line(higbench, tmp_path):
+    code, _, err = higbench("hydra.run.dir=" + "a/" * 1900)
+    assert "nested too deep" in one_line(code, err, "hydra.run.dir", "a/a/a")
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_a_repeated_key_names_the_value_that_wins(higbench):
+    code, _, err = higbench("progress=false", "progress=maybe")
+    one_line(code, err, "progress", "maybe")
+
+
+def test_a_non_number_for_a_numeric_optimizer_argument_is_one_line(higbench):
+    code, _, err = higbench("optimizer=hig", "optimizer.kappa=abc")
+    assert "must be a number" in one_line(code, err, "optimizer.kappa", "abc")
+
+
+def test_multirun_cfg_job_prints_each_jobs_config(higbench, tmp_path):
+    code, out, err = higbench("-m", "problem=toy", "optimizer=adam,hig", "--cfg", "job", tiny=False)
+    assert code == 0, err
+    assert out.count("# job ") == 2 and "name: adam" in out and "name: hig" in out
+    code, out, err = higbench("-m", "+experiment=fig5_adagrad", "--cfg", "job", tiny=False)  # docs/sweeps.md
+    assert code == 0 and out.count("# job ") >= 2, err
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_help_into_a_closed_pipe_is_quiet(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "higbench.cli", "--help"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    proc.stdout.close()  # `higbench --help | head -0`: the reader is gone before the text comes
+    assert proc.wait(timeout=60) == 0 and b"Traceback" not in proc.stderr.read()
+
+
+def _fake_train(status: str, fail_for: str | None = None):
+    """A stand-in for the runner: a run that ends ``status`` (or a full disk for one optimizer)."""
+    from higbench.runfile.writer import DiskFull
+    from higbench.runner.train import RunSummary
+
+    def train(cfg, run_path, overrides=None, *, resume=False):
+        if cfg.optimizer.name == fail_for:
+            raise DiskFull(f"no space left on the device writing {run_path}")
+        return RunSummary(status, 1, 0.1, 0.5, run_path, "SIGINT" if status == "interrupted" else "")
+
+    return train
+
+
+def test_a_sweep_with_a_failed_job_exits_1_and_says_how_many(higbench, monkeypatch):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("completed", fail_for="adam"))
+    code, _, err = higbench("-m", "optimizer=adam,hig,sgd")
+    assert code == 1 and "1 of 3 sweep jobs failed" in err, err
+
+
+def test_ctrl_c_in_a_sweep_says_how_to_complete_the_sweep(higbench, monkeypatch, tmp_path):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("interrupted"))
+    code, _, err = higbench("-m", "optimizer=adam,hig", f"hydra.sweep.dir={tmp_path / 'sw'}")
+    assert code == 130, err
+    assert "complete the sweep with: higbench -m" in err and f"hydra.sweep.dir={tmp_path / 'sw'} resume=true" in err, err
+    assert "resume with:" not in err and "Traceback" not in err
+
+
+def test_resume_with_is_said_only_when_a_checkpoint_exists(higbench, monkeypatch, tmp_path):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("interrupted"))
+    code, _, err = higbench(f"hydra.run.dir={tmp_path / 'r'}")
+    assert code == 130 and "resume with:" not in err and "cannot be resumed" in err, err
+
+
+def test_gn_diverging_says_what_the_figures_do(higbench, monkeypatch):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("diverged"))
+    code, out, err = higbench("optimizer=gn")
+    assert code == 0 and "seed=7" in out, out
+
+
+def test_an_unknown_flag_is_one_line_not_argparse_usage(higbench, tmp_path):
+    code, _, err = higbench("seed=0", "-m", "--bogus")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--bogus" in err and "usage:" not in err, err
+    assert list(tmp_path.rglob("*")) == []
