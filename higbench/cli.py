@@ -177,11 +177,23 @@ def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: D
         raise ConfigError(key, str(output_dir), f"{exc.filename} appeared while starting; refusing to write over it") from None
 
 
+def parallel_jobs(hydra_cfg: DictConfig) -> int:
+    """How many jobs of this sweep share the machine: a joblib launcher's workers, else one."""
+    launcher = OmegaConf.select(hydra_cfg, "launcher", default=None)
+    if launcher is None or "Joblib" not in str(launcher.get("_target_", "")):
+        return 1
+    n_jobs = int(launcher.get("n_jobs", -1) or -1)
+    cores = os.cpu_count() or 1
+    workers = max(1, cores + 1 + n_jobs if n_jobs < 0 else n_jobs)  # joblib: -1 is every core
+    return min(workers, int(os.environ.get("HIGBENCH_SWEEP_JOBS", workers)))  # a sweep of 2 jobs: 2 at most
+
+
 def _train(plan: RunPlan, overrides: list[str], multirun: bool):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
-    from higbench.runfile.writer import RunFileBusy, RunFileExists, RunFileFault
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner.train import train
 
+    os.environ["HIGBENCH_PARALLEL_JOBS"] = str(parallel_jobs(HydraConfig.get()))  # the run file's env records it
     try:
         return train(OmegaConf.create(plan.task), plan.run_path, overrides=overrides, resume=plan.resume)
     except RunFileExists as exc:
@@ -189,7 +201,8 @@ def _train(plan: RunPlan, overrides: list[str], multirun: bool):
     except RunFileBusy as exc:
         raise ConfigError("resume", str(plan.run_path), str(exc)) from None
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
-        raise JobFailed(" ".join(str(exc).split()), written=os.path.lexists(plan.run_path)) from None
+        refused_at_creation = isinstance(exc, DiskFull) and not os.path.lexists(plan.run_path)
+        raise JobFailed(" ".join(str(exc).split()), written=not refused_at_creation) from None
 
 
 class JobFailed(Exception):
@@ -219,15 +232,13 @@ def _interrupted(summary, multirun: bool) -> None:
     """Say how to continue (the sweep, or the run if it left a checkpoint), exit 128+signal."""
     from higbench.runner import checkpoint
 
-    if multirun:
-        print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
-    elif checkpoint.checkpoint_path(summary.path).exists():
+    if checkpoint.checkpoint_path(summary.path).exists():
         print(f"resume with: higbench {shlex.quote(f'resume={summary.path.parent}')}", file=sys.stderr)
-    else:
-        print(
-            "no checkpoint was written (checkpoint_every=null, or stopped before the first): it cannot be resumed",
-            file=sys.stderr,
-        )
+    elif not multirun:
+        why = "checkpoint_every=null, or stopped before the first"
+        print(f"no checkpoint was written ({why}): it cannot be resumed", file=sys.stderr)
+    if multirun:  # the whole sweep stops: one command runs what is left and continues this job
+        print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
     signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
     sys.stdout.flush()
     sys.exit(128 + int(signum))

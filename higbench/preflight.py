@@ -54,6 +54,9 @@ WRITTEN_NAMES = (".hydra", *(f".hydra/{n}.yaml" for n in ("config", "hydra", "ov
 WRITTEN_NAMES += (RUN_FILE, f"{RUN_FILE}.ckpt")
 
 
+CLUSTER_LAUNCHERS = ("joblib", "submitit_local", "submitit_slurm", "slurm")  # pyproject's `cluster` extra
+
+
 def config_dir() -> str:
     """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
     checkout = Path(__file__).resolve().parent.parent / "conf"
@@ -69,7 +72,10 @@ def composition_error(exc: Exception, overrides: list[str]) -> ConfigError:
     """A one-line ConfigError from Hydra's composition errors (unknown key, config, syntax)."""
     if isinstance(exc, MissingConfigException) and exc.missing_cfg_file and exc.options is not None:
         group, _, choice = str(exc.missing_cfg_file).rpartition("/")
-        return ConfigError(group or "config", choice, f"no such config; valid choices: {', '.join(exc.options)}")
+        why = f"no such config; valid choices: {', '.join(exc.options)}"
+        if group == "hydra/launcher" and choice in CLUSTER_LAUNCHERS:
+            why += f'; {choice} comes with the cluster extra: pip install -e ".[cluster]"'
+        return ConfigError(group or "config", choice, why)
     if isinstance(exc, OverrideParseException):
         key, _, value = str(exc.override).partition("=")
         return ConfigError(key, value, f"cannot parse this override ({_first_line(exc)})")
@@ -399,6 +405,7 @@ def check_sweep(config: DictConfig) -> None:
             raise composition_error(exc, job) from None
         tasks.append(_checked_task(job_config))
         _VALIDATED.add(frozenset(job_config.hydra.overrides.task))
+    os.environ["HIGBENCH_SWEEP_JOBS"] = str(len(tasks))  # the jobs (and joblib's workers) read it
     sweep_dir = Path(str(config.hydra.sweep.dir))
     check_output_dir(sweep_dir, "hydra.sweep.dir")
     if (sweep_dir / "multirun.yaml").is_symlink():

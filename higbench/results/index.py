@@ -62,7 +62,7 @@ _OWN_COLUMNS = {
     "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
-    "config_id",
+    "config_id", "parallel_jobs",
 }  # fmt: skip
 
 
@@ -219,6 +219,9 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
     row.update(run.memory)
     for key, value in run.env.items():
         row[f"env.{key}"] = value
+    # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their
+    # wall-clock budgets bought less compute each. NaN for files that predate the record.
+    row["parallel_jobs"] = float(run.env.get("parallel_jobs", math.nan))
     return row, (curves if want_curves else None)
 
 
