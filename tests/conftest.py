@@ -10,9 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parent.parent  # higbench is installed (editable): no sys.path entry needed
 
 
 def pytest_collection_modifyitems(config, items):
@@ -33,7 +31,7 @@ TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eva
 
 
 def run_cli(args: list[str], cwd: Path, timeout: float = 180) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), OMP_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1")
     return subprocess.run(
         [sys.executable, "-m", "higbench.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
     )

@@ -219,3 +219,34 @@ def test_a_missing_launcher_names_the_extra_that_has_it(monkeypatch):
 
     exc = MissingConfigException("no joblib", "hydra/launcher/joblib", ["basic", "slurm"])
     assert 'pip install -e ".[cluster]"' in str(composition_error(exc, ["hydra/launcher=joblib"]))
+
+
+# -- one place per rule: the lists of keys come from the schema's field metadata -------------
+
+
+def test_the_key_lists_are_derived_from_the_schema():
+    import yaml
+
+    from higbench import config
+    from higbench.figures.runs import LAUNCH_OVERRIDES
+    from higbench.results import index
+    from higbench.runner import checkpoint
+
+    conf = yaml.safe_load((Path(__file__).resolve().parent.parent / "conf" / "config.yaml").read_text())
+    excluded = conf["hydra"]["job"]["config"]["override_dirname"]["exclude_keys"]
+    assert sorted(excluded) == sorted(config.JOB_DIR_EXCLUDED_KEYS), "conf/config.yaml exclude_keys differ from the schema"
+    assert index.COSMETIC_KEYS is config.COSMETIC_KEYS and checkpoint.RESUMABLE_KEYS is config.RESUMABLE_KEYS
+    assert set(config.COSMETIC_KEYS) <= set(config.RESUMABLE_KEYS)  # what changes no result may change on resume
+    assert {o.split("=")[0] for o in LAUNCH_OVERRIDES} <= set(config.COSMETIC_KEYS), "figures launch with identity keys"
+    assert "seed" not in config.COSMETIC_KEYS and "batch_size" in config.SIZING_KEYS
+
+
+def test_the_optimizer_arguments_rule_is_one_definition():
+    from higbench import config
+    from higbench.runner import updates
+
+    assert updates.optimizer_kwargs is config.optimizer_kwargs
+    assert config.optimizer_kwargs({"name": "adam", "_target_": "torch.optim.Adam", "lr": 1, "betas": [0.9, 0.99]}) == {
+        "lr": 1,
+        "betas": (0.9, 0.99),
+    }

@@ -80,6 +80,14 @@ def test_its_keys_are_validated_like_the_built_in_ones(heat_cli, tmp_path, overr
     assert sorted(tmp_path.rglob("*")) == [], "a refused config wrote something"
 
 
+def test_a_base_config_key_its_yaml_does_not_list_can_be_set(heat_cli, tmp_path):
+    """docs/configuration.md: every problem's base config holds ``init``; heat.yaml does not list it."""
+    proc = heat_cli("optimizer=adam", "problem.init=torch")
+    assert proc.returncode == 0, proc.stderr
+    (path,) = sorted((tmp_path / "outputs").rglob("run.h5"))
+    assert load_run(path)[0]["config"]["problem"]["init"] == "torch"
+
+
 def test_a_multirun_checks_its_jobs_before_the_sweep_starts(heat_cli, tmp_path):
     proc = heat_cli("-m", "optimizer=adam", "problem.alpha=0.1,0.9")
     assert proc.returncode == 2 and "problem.alpha=0.9: must be a number in (0, 0.5]" in proc.stderr, proc.stderr
