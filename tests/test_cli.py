@@ -250,3 +250,27 @@ def test_the_optimizer_arguments_rule_is_one_definition():
         "lr": 1,
         "betas": (0.9, 0.99),
     }
+
+
+def test_resume_announces_the_stored_run_not_the_config_defaults(tmp_path, monkeypatch, capsys):
+    """``higbench resume=<an oscillator run>`` used to say ``toy/hig: resuming, batch size 256``."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from higbench import cli as entry
+
+    run = tmp_path / "osc"
+    args = ["problem=oscillator", "optimizer=adam", "batch_size=8", "problem.test_size=16", "budget.seconds=60"]
+    args += ["checkpoint_every=0.05", "eval_every=0.05", "progress=false", "threads=1", f"hydra.run.dir={run}"]
+    proc = subprocess.Popen([sys.executable, "-m", "higbench.cli", *args], cwd=tmp_path, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not (run / "run.h5.ckpt").exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=60) == 128 + signal.SIGINT, proc.stderr.read()
+    monkeypatch.chdir(tmp_path)
+    entry.main([f"resume={run}", "budget.seconds=0.01", "progress=true"])
+    err = capsys.readouterr().err
+    assert "oscillator/adam: resuming, batch size 8" in err, err
