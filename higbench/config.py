@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from importlib import resources
 from pathlib import Path
 from typing import Any, Optional
 
@@ -82,6 +83,14 @@ def optimizer_kwargs(opt_cfg: Any) -> dict:
 
 
 ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
+
+
+def config_dir() -> str:
+    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
+    checkout = Path(__file__).resolve().parent.parent / "conf"
+    if (checkout / "config.yaml").is_file():
+        return str(checkout)
+    return str(resources.files("higbench") / "conf")
 
 
 def to_plain(cfg: DictConfig | dict) -> dict:

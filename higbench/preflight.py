@@ -27,7 +27,6 @@ import os
 import sys
 import time
 import traceback
-from importlib import resources
 from pathlib import Path
 
 from hydra.core.global_hydra import GlobalHydra
@@ -40,6 +39,7 @@ from omegaconf.errors import OmegaConfBaseException, ValidationError
 from higbench.config import (
     SIZING_KEYS,
     check_hydra_references,
+    config_dir,
     constructor_args,
     optimizer_class,
     to_plain,
@@ -55,14 +55,6 @@ WRITTEN_NAMES += (RUN_FILE, f"{RUN_FILE}.ckpt")
 
 
 CLUSTER_LAUNCHERS = ("joblib", "submitit_local", "submitit_slurm", "slurm")  # pyproject's `cluster` extra
-
-
-def config_dir() -> str:
-    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
-    checkout = Path(__file__).resolve().parent.parent / "conf"
-    if (checkout / "config.yaml").is_file():
-        return str(checkout)
-    return str(resources.files("higbench") / "conf")
 
 
 # -- Hydra's composition errors as one line ---------------------------------------------------
