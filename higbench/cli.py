@@ -451,7 +451,7 @@ def _refuse_early(argv: list[str]) -> ConfigError | None:
     for i, arg in enumerate(argv):
         name = arg.split("=", 1)[0]
         if arg.startswith("-") and name not in (*_VALUE_FLAGS, *_PLAIN_FLAGS):
-            return ConfigError(arg, "<unknown>", "not an option of higbench (higbench --help lists them)")
+            return ConfigError("option", arg, "not an option of higbench (higbench --help lists them)")
         if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
             return ConfigError(arg, "<missing>", "needs a value (e.g. --cfg job)")
     return None
