@@ -26,29 +26,32 @@ class ConfigError(ValueError):
 MAX_SHOWN = 80  # a value longer than this is cut in messages: one line stays one line
 
 
-def show(value: Any) -> str:
-    """A value as the user would type it on the command line (a Hydra override value)."""
+def override_value(value: Any) -> str:
+    """A value as a Hydra command-line override value, exactly (``key=<this>`` parses back to it)."""
     if value is None:
         return "null"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
         if value and re.fullmatch(r"[\w./:+-]+", value):
-            return _cut(value)
-        return "'" + _cut(value).replace("\\", "\\\\").replace("'", "\\'") + "'"
+            return value
+        # Hydra's quoted strings: only backslashes before a quote (or the closing one) are escapes
+        return "'" + re.sub(r"(\\*)('|$)", lambda m: m[1] * 2 + ("\\'" if m[2] else ""), value) + "'"
     if isinstance(value, float):
-        return _cut(repr(value))
+        return repr(value)
     if isinstance(value, (list, tuple)):
-        return "[" + ",".join(show(v) for v in value) + "]"
+        return "[" + ",".join(override_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ",".join(f"{k}:{show(v)}" for k, v in value.items()) + "}"
+        return "{" + ",".join(f"{k}:{override_value(v)}" for k, v in value.items()) + "}"
     try:
-        return _cut(str(value))
+        return str(value)
     except ValueError:  # an integer of more than 4300 digits: Python refuses to print it
         return f"<an integer of {value.bit_length()} bits>"
 
 
-def _cut(text: str) -> str:
+def show(value: Any) -> str:
+    """A value as the user would type it on the command line, cut to one short line for messages."""
+    text = override_value(value)
     return text if len(text) <= MAX_SHOWN else f"{text[: MAX_SHOWN - 20]}...({len(text)} chars)"
 
 

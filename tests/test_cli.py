@@ -274,3 +274,13 @@ def test_resume_announces_the_stored_run_not_the_config_defaults(tmp_path, monke
     entry.main([f"resume={run}", "budget.seconds=0.01", "progress=true"])
     err = capsys.readouterr().err
     assert "oscillator/adam: resuming, batch size 8" in err, err
+
+
+@pytest.mark.parametrize("value", [None, True, 0.001, 3, "cuda:0", "a b", "it's", "x\\y", "a b\\", "", [1, "a,b"], {"k": 1.5}])
+def test_override_value_parses_back_to_the_value(value):
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from higbench.errors import override_value
+
+    (parsed,) = OverridesParser.create().parse_overrides([f"key={override_value(value)}"])
+    assert parsed.value() == value
