@@ -4,31 +4,35 @@
     higbench -m problem=toy optimizer=adam,hig        # one run file per job
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
-Bad input never gets as far as a run directory: ``higbench.checks.Checks``, a Hydra
-callback, checks what would run before Hydra creates anything, and ``main`` turns Hydra's
-own composition errors (an unknown key or config, an override that does not parse) into
-the same one line, ``higbench: error: <key>=<value>: <why>``, exit code 2. The job checks
-again (sweepers whose jobs cannot be listed in advance, e.g. Optuna); a job refused there
-removes the files Hydra made for it and exits 2.
+One pass, in order: Hydra composes; ``higbench.preflight.Preflight`` (a Hydra callback,
+before Hydra creates anything) validates, decides the output/resume policy (a ``RunPlan``)
+and builds the network once for the checks that need it; the job claims its directory
+(``claim_dir``: of two runs started into one directory, the second is refused with
+nothing written), writes Hydra's files itself (``write_job_files``: never through a link,
+never over another run's) and trains. Hydra's own composition errors (an unknown key or
+config, an override that does not parse) become the same one line,
+``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written. Sweep jobs are
+planned in the job (sweepers whose jobs cannot be listed in advance, e.g. Optuna).
 
 Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
-refused, and of two runs racing for one directory the second fails to create the file
-("w-") and exits 2. The only way to write into an existing run file is ``resume=`` (see
+refused. The only way to write into an existing run file is ``resume=`` (see
 ``higbench.runner.checkpoint``). A run dir whose run recorded nothing
 (``checkpoint.recorded_nothing``) is started again in place, its dead file moved aside. A
 multirun into an existing sweep directory keeps every job that already has a run
-(``resume=true`` resumes the interrupted and failed ones), and Hydra's files for such a
-job go to ``.hydra/rerun-<time>`` (``_output_subdir``).
+(``resume=true`` resumes the interrupted and failed ones); Hydra's files for a job whose
+directory already has them go to ``.hydra/rerun-<time>`` (``.hydra/resume-<time>``).
 
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
 status ``interrupted``, resumable), 1 for anything else (the run file says ``failed``;
-a file-system fault such as a full disk is one line, ``RunFileFault``).
+a file-system fault such as a full disk is one line, ``RunFileFault``; a sweep in which
+any job failed says how many).
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import logging
 import math
 import os
@@ -36,7 +40,7 @@ import shlex
 import signal
 import sys
 import time
-from importlib import resources
+import traceback
 from pathlib import Path
 
 import hydra
@@ -47,39 +51,72 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from higbench.checks import Checks, composition_error, precheck, resume_plan
-from higbench.config import check_hydra_references, to_plain, validate
-from higbench.errors import EXIT_BAD_INPUT, ConfigError, fail
+from higbench.config import check_hydra_references
+from higbench.errors import EXIT_BAD_INPUT, ConfigError
+from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
 
-__all__ = ["main", "config_dir", "Checks", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT", "fail"]
+__all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
+log = logging.getLogger("higbench")
+
+# -- the job's directory: claimed, Hydra's files written by us, never through a link ----------
+
+_CLAIMS: list[int] = []  # directory descriptors this process holds a lock on (released at exit)
 
 
-def config_dir() -> str:
-    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
-    checkout = Path(__file__).resolve().parent.parent / "conf"
-    if (checkout / "config.yaml").is_file():
-        return str(checkout)
-    return str(resources.files("higbench") / "conf")
+def claim_dir(output_dir: Path, key: str) -> None:
+    """Lock the job's directory for this process (flock on the directory itself, no file).
 
-
-def _output_subdir(*, _root_: DictConfig) -> str:
-    """``hydra.output_subdir`` of a job: ``.hydra``, or a new subfolder where a run already is.
-
-    Hydra writes the job's config files before the job starts; for a job directory that
-    already holds a run (a sweep run again into its directory), they go to
-    ``.hydra/rerun-<time>`` so the run's own ``.hydra/`` keeps describing the run.
+    Two runs started into one directory at the same moment: the second finds it held and is
+    refused, before it writes anything. The lock lasts as long as the process.
     """
-    output_dir = OmegaConf.select(_root_, "hydra.runtime.output_dir", default=None, throw_on_missing=False)
-    if output_dir is not None and os.path.lexists(Path(str(output_dir)) / RUN_FILE_NAME):
-        return f".hydra/rerun-{time.strftime('%Y%m%d-%H%M%S')}-{time.time_ns() % 1_000_000:06d}"
-    return ".hydra"
+    fd = os.open(output_dir, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise ConfigError(key, str(output_dir), "another higbench process is running in it; refusing to overwrite it") from None
+    except OSError:  # a file system without locks: the run file's exclusive creation still decides
+        os.close(fd)
+        return
+    _CLAIMS.append(fd)
 
 
-OmegaConf.register_new_resolver("higbench_output_subdir", _output_subdir, replace=True)
+def release_dirs() -> None:
+    while _CLAIMS:
+        os.close(_CLAIMS.pop())
 
-# -- the job ---------------------------------------------------------------------------------
+
+def write_job_files(output_dir: Path, label: str, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
+    """Hydra's ``.hydra/{config,hydra,overrides}.yaml`` of this job, created exclusively.
+
+    Into ``.hydra`` when the directory has none yet, else into a new ``.hydra/<label>-<time>``
+    (a run continued or started again keeps its first description). Never through a link,
+    never over an existing file. Returns what it made (removed again if the job is refused).
+    """
+    base = output_dir / ".hydra"
+    target = base if not os.path.lexists(base) else base / f"{label}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    os.mkdir(target)  # FileExistsError on a link or a name taken meanwhile: refused by the caller
+    made = [target]
+    contents = {
+        "config.yaml": OmegaConf.to_yaml(task_cfg),
+        "hydra.yaml": OmegaConf.to_yaml({"hydra": hydra_cfg}),
+        "overrides.yaml": OmegaConf.to_yaml(list(hydra_cfg.overrides.task)),
+    }
+    for name, text in contents.items():
+        fd = os.open(target / name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        made.append(target / name)
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+    return made
+
+
+def remove_job_files(made: list[Path]) -> None:
+    """Undo ``write_job_files`` (only what it made: files first, then its directory)."""
+    for path in reversed(made):
+        with contextlib.suppress(OSError):
+            path.rmdir() if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
 def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
@@ -91,22 +128,18 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
     output_dir = Path(output_dir).resolve()
     if any(output_dir.glob("*.h5")):
         return
-    for handler_owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
-        for h in list(getattr(handler_owner, "handlers", [])):
+    for owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
+        for h in list(getattr(owner, "handlers", [])):
             filename = getattr(h, "baseFilename", None)
             if filename and Path(filename).resolve().parent == output_dir:
-                handler_owner.removeHandler(h)
+                owner.removeHandler(h)
                 h.close()
-                Path(filename).unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    if os.path.getsize(filename) == 0:
+                        os.unlink(filename)
     if output_subdir is not None:
         sub = output_dir / output_subdir
-        for name in ("config.yaml", "hydra.yaml", "overrides.yaml"):
-            (sub / name).unlink(missing_ok=True)
-        for d in (sub, *sub.parents):
-            if d == output_dir or output_dir not in d.parents:
-                break
-            with contextlib.suppress(OSError):
-                d.rmdir()
+        remove_job_files([sub, *(sub / f"{n}.yaml" for n in ("config", "hydra", "overrides"))])
     cwd = Path.cwd().resolve()
     with contextlib.suppress(OSError):
         output_dir.rmdir()
@@ -116,72 +149,109 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
             parent.rmdir()
 
 
-def _run_job(cfg: DictConfig) -> float:
-    from higbench.runner.progress import announce, start_text
+# -- the job ---------------------------------------------------------------------------------
 
-    announce(cfg.get("progress", True), start_text(cfg))  # replaces the checks' transient line
-    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
+
+def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
+    """Claim the directory, check it is still what the plan saw, write Hydra's files."""
     from higbench.runner import checkpoint
+
+    key = "resume" if plan.task.get("resume") or plan.resume else "hydra.run.dir"
+    claim_dir(output_dir, key)
+    if not plan.resume and not plan.restart and os.path.lexists(plan.run_path):  # made after the plan
+        raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
+    if plan.restart and not plan.resume:
+        aside = checkpoint.move_aside(plan.run_path, "empty")
+        print(
+            f"higbench: {plan.run_path} recorded nothing ({plan.restart}); moved to {aside.name}, starting the run again",
+            file=sys.stderr,
+        )
+    if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
+        aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
+        print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
+    if hydra_cfg.output_subdir is not None:  # the user asked Hydra to write them: it has
+        return []
+    try:
+        return write_job_files(output_dir, "resume" if plan.resume else "rerun", hydra_cfg, task_cfg)
+    except FileExistsError as exc:
+        raise ConfigError(key, str(output_dir), f"{exc.filename} appeared while starting; refusing to write over it") from None
+
+
+def parallel_jobs(hydra_cfg: DictConfig) -> int:
+    """How many jobs of this sweep share the machine: a joblib launcher's workers, else one."""
+    launcher = OmegaConf.select(hydra_cfg, "launcher", default=None)
+    if launcher is None or "Joblib" not in str(launcher.get("_target_", "")):
+        return 1
+    n_jobs = int(launcher.get("n_jobs", -1) or -1)
+    cores = os.cpu_count() or 1
+    workers = max(1, cores + 1 + n_jobs if n_jobs < 0 else n_jobs)  # joblib: -1 is every core
+    return min(workers, int(os.environ.get("HIGBENCH_SWEEP_JOBS", workers)))  # a sweep of 2 jobs: 2 at most
+
+
+def _train(plan: RunPlan, overrides: list[str], multirun: bool):
+    """Train per the plan; the run file's refusals become ConfigError, faults one line."""
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
     from higbench.runner.train import train
 
-    hydra_cfg = HydraConfig.get()
-    output_dir = Path(hydra_cfg.runtime.output_dir)
-    overrides = list(hydra_cfg.overrides.task)
-    multirun = hydra_cfg.mode == RunMode.MULTIRUN
-    resume = False
-    run_path = output_dir / RUN_FILE_NAME
-    empty = None
-    if cfg.get("resume"):
-        run_path = checkpoint.run_file_of(cfg.resume, output_dir)
-        empty = checkpoint.recorded_nothing(run_path)
-        try:
-            merged, resume = resume_plan(to_plain(cfg), run_path, overrides, multirun=multirun)
-        except ConfigError as exc:
-            if multirun and run_path.exists():
-                return _kept(run_path, str(exc).split(": ", 1)[-1])
-            raise
-        cfg = OmegaConf.create(merged)
-    elif os.path.lexists(run_path):
-        empty = checkpoint.recorded_nothing(run_path)
-        if not empty:
-            if multirun:  # a sweep run again into its directory: its runs stay as they are
-                return _kept(run_path, "already holds a run (resume=true completes interrupted and failed jobs)")
-            raise ConfigError(
-                "hydra.run.dir", str(output_dir), f"already holds a run file ({RUN_FILE_NAME}); refusing to overwrite it"
-            )
-    if empty and not resume:
-        aside = checkpoint.move_aside(run_path, "empty")
-        print(f"higbench: {run_path} recorded nothing ({empty}); moved to {aside.name}, starting the run again", file=sys.stderr)
-    if not resume and checkpoint.checkpoint_path(run_path).exists():  # never adopt another run's checkpoint
-        aside = checkpoint.move_aside(checkpoint.checkpoint_path(run_path), "stray")
-        print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
+    os.environ["HIGBENCH_PARALLEL_JOBS"] = str(parallel_jobs(HydraConfig.get()))  # the run file's env records it
     try:
-        summary = train(cfg, run_path, overrides=overrides, resume=resume)
+        return train(OmegaConf.create(plan.task), plan.run_path, overrides=overrides, resume=plan.resume)
     except RunFileExists as exc:
-        raise ConfigError("hydra.run.dir", str(output_dir), str(exc)) from None
+        raise ConfigError("hydra.run.dir", str(plan.run_path.parent), str(exc)) from None
     except RunFileBusy as exc:
-        raise ConfigError("resume", str(run_path), str(exc)) from None
+        raise ConfigError("resume", str(plan.run_path), str(exc)) from None
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
-        if isinstance(exc, DiskFull) and not os.path.lexists(run_path):  # refused before its file existed
-            remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
-        if multirun:
-            print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
-            return math.inf
-        fail(exc, code=1)
-    for line in summary_lines(summary, cfg):  # through logging: the console and <run dir>/higbench.log
+        refused_at_creation = isinstance(exc, DiskFull) and not os.path.lexists(plan.run_path)
+        raise JobFailed(" ".join(str(exc).split()), written=not refused_at_creation) from None
+
+
+class JobFailed(Exception):
+    """A job that failed for a reason already said in one line (a sweep counts them)."""
+
+    def __init__(self, message: str, written: bool = True):
+        super().__init__(message)
+        self.written = written
+
+
+def _run_job(plan: RunPlan, overrides: list[str], multirun: bool) -> float:
+    from higbench.runner.progress import announce, start_text
+
+    start = plan.start_config()
+    announce(start.get("progress", True), start_text(start))  # replaces the checks' transient line
+    summary = _train(plan, overrides, multirun)
+    for line in summary_lines(summary, start):  # through logging: the console and <run dir>/higbench.log
         log.info(line)
     if summary.status == "interrupted":
-        print(f"resume with: higbench {shlex.quote(f'resume={summary.path.parent}')}", file=sys.stderr)
-        signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
-        sys.stdout.flush()
-        sys.exit(128 + int(signum))
+        _interrupted(summary, multirun)
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
 
 
+def _interrupted(summary, multirun: bool) -> None:
+    """Say how to continue (the sweep, or the run if it left a checkpoint), exit 128+signal."""
+    from higbench.runner import checkpoint
+
+    if checkpoint.checkpoint_path(summary.path).exists():
+        print(f"resume with: higbench {shlex.quote(f'resume={summary.path.parent}')}", file=sys.stderr)
+    elif not multirun:
+        why = "checkpoint_every=null, or stopped before the first"
+        print(f"no checkpoint was written ({why}): it cannot be resumed", file=sys.stderr)
+    if multirun:  # the whole sweep stops: one command runs what is left and continues this job
+        print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
+    signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
+    sys.stdout.flush()
+    sys.exit(128 + int(signum))
+
+
+def sweep_resume_command() -> str:
+    """The command that completes this sweep: the same arguments, its directory, resume=true."""
+    sweep_dir = os.path.abspath(str(HydraConfig.get().sweep.dir))
+    args = [a for a in sys.argv[1:] if not a.startswith(("hydra.sweep.dir=", "resume="))]
+    return shlex.join(["higbench", *args, f"hydra.sweep.dir={sweep_dir}", "resume=true"])
+
+
 SUMMARY_THRESHOLDS = (1e-3, 1e-4, 1e-5)  # test-loss levels whose training-clock time the summary shows
-log = logging.getLogger("higbench")
 
 
 def summary_lines(summary, cfg: DictConfig) -> list[str]:
@@ -197,6 +267,8 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     final = row.get("final_test_loss", math.nan)
     at = f" (last evaluated at step {row['final_step']})" if "final_step" in row and row["final_step"] != summary.steps else ""
     lines = [f"{head}, final test loss {final:.4e}{at}" + (f" ({summary.reason})" if summary.reason else "")]
+    if summary.status == "diverged":
+        lines.append(f"{label}{diverged_hint(cfg)}")
     times = []
     for t in SUMMARY_THRESHOLDS:
         value = row.get(threshold_column(t), math.nan)
@@ -204,6 +276,16 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     lines.append(f"{label}time to test loss " + ", ".join(times))
     lines.append(f"{label}run file: {summary.path}")
     return lines
+
+
+def diverged_hint(cfg: DictConfig) -> str:
+    """What a researcher does next with a diverged run (the figures' own rule for GN)."""
+    if cfg.optimizer.name == "gn":
+        return (
+            "Gauss-Newton diverges for many seeds at the paper's settings; the figures search seeds "
+            "and report the stable ones (on the oscillator seed 7 is stable: seed=7), see docs/results"
+        )
+    return "a diverged run is a result (its file says where and why); a smaller optimizer.lr or another seed may train"
 
 
 def _kept(run_path: Path, why: str) -> float:
@@ -221,6 +303,7 @@ def _kept(run_path: Path, why: str) -> float:
 
 
 _JOB_STARTED = False  # set once a job runs: errors after that are the job's, not the command line's
+_SWEEP = {"jobs": 0, "failed": 0}  # this process's sweep jobs (the basic launcher runs them all here)
 
 
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
@@ -229,38 +312,160 @@ def _hydra_main(cfg: DictConfig) -> float:
     _JOB_STARTED = True
     hydra_cfg = HydraConfig.get()
     output_dir = Path(hydra_cfg.runtime.output_dir)
+    multirun = hydra_cfg.mode == RunMode.MULTIRUN
+    overrides = list(hydra_cfg.overrides.task)
+    _SWEEP["jobs"] += 1
+    made: list[Path] = []
     try:
-        validate(cfg)
-        return _run_job(cfg)
-    except ValueError as exc:  # ConfigError, or a problem/optimizer refusing its arguments
-        if not isinstance(exc, ConfigError) and any(output_dir.glob("*.h5")):
-            raise  # not bad input: the run had started (its file says failed)
-        remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
-        fail(exc)
-        raise  # unreachable: fail() exits
+        plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
+        if plan.kept:
+            return _kept(plan.run_path, plan.kept)
+        made = _prepare(plan, output_dir, hydra_cfg, cfg)
+        return _run_job(plan, overrides, multirun)
+    except ConfigError as exc:  # refused before its run file: nothing of it stays
+        remove_job_files(made)
+        remove_hydra_outputs(output_dir, None)
+        refuse(exc)
+    except JobFailed as exc:
+        if not exc.written:
+            remove_job_files(made)
+            remove_hydra_outputs(output_dir, None)
+        if not multirun:
+            refuse(exc, code=1)
+        print(f"higbench: error: {exc}", file=sys.stderr, flush=True)
+        _SWEEP["failed"] += 1
+        raise
+    except Exception:
+        if not multirun:
+            raise
+        traceback.print_exc()  # this job's traceback now; the sweep goes on and says how many failed
+        _SWEEP["failed"] += 1
+        raise
+    finally:
+        release_dirs()
+    raise AssertionError("unreachable: refuse() exits")
 
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry: Hydra's app; its composition errors become one line (exit 2)."""
-    global _JOB_STARTED
     argv = list(sys.argv[1:] if argv is None else argv)
-    sys.argv = [sys.argv[0], *argv]
-    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    early = _refuse_early(argv)
+    if early is not None:
+        refuse(early)
+    argv = _flags_first(argv)
+    if {"-m", "--multirun"} & set(argv) and {"-c", "--cfg"} & set(argv):
+        return _print_sweep_configs(argv)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
-    _JOB_STARTED = False
+    _SWEEP.update(jobs=0, failed=0)
     try:
-        _hydra_main()
-    except (HydraException, OmegaConfBaseException) as exc:
-        if _JOB_STARTED:
-            raise
-        fail(composition_error(exc, overrides))
+        while argv is not None:
+            argv = _run_app(argv)
+    except RecursionError:
+        value = given_value(argv, "hydra.run.dir") or "?"
+        refuse(ConfigError("hydra.run.dir", value, "nested too deep (Python's recursion limit)"))
+    except JobFailed as exc:
+        _sweep_failed(exc)
+    except KeyboardInterrupt:  # between a sweep's jobs, or before a run installed its handler
+        print("\nhigbench: interrupted", file=sys.stderr)
+        sys.exit(128 + int(signal.SIGINT))
     finally:
         if full_error is None:
             os.environ.pop("HYDRA_FULL_ERROR", None)
         else:
             os.environ["HYDRA_FULL_ERROR"] = full_error
         GlobalHydra.instance().clear()
+
+
+def _run_app(argv: list[str]) -> list[str] | None:
+    """Hydra's app on ``argv``; None when done, or the command line to run it again with."""
+    global _JOB_STARTED
+    _JOB_STARTED = False
+    sys.argv = [sys.argv[0], *argv]
+    overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
+    try:
+        with _quiet_broken_pipe():
+            _hydra_main()
+    except (HydraException, OmegaConfBaseException, ValueError) as exc:
+        if _JOB_STARTED:
+            _sweep_failed(exc)
+            raise
+        error = composition_error(exc, overrides)
+        if not getattr(error, "addable", False):
+            refuse(error)
+        GlobalHydra.instance().clear()  # a problem's own key its YAML does not list: add it
+        return [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
+    return None
+
+
+def _sweep_failed(exc: BaseException) -> None:
+    """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
+    failed, jobs = _SWEEP["failed"], _SWEEP["jobs"]
+    count = f"{failed} of {jobs} sweep jobs failed" if failed else "a sweep job failed"
+    first = " ".join(str(exc).split())
+    again = "resume=true with the same hydra.sweep.dir runs them again"
+    print(f"higbench: error: {count} (the first: {first}); {again}", file=sys.stderr, flush=True)
+    sys.exit(1)
+
+
+def _print_sweep_configs(argv: list[str]) -> None:
+    """``higbench -m ... --cfg job``: print every job's config (Hydra allows one mode flag)."""
+    from higbench.preflight import sweep_configs
+
+    flag = next(i for i, a in enumerate(argv) if a in ("-c", "--cfg"))
+    part = argv[flag + 1]
+    if part not in ("job", "hydra", "all"):
+        refuse(ConfigError("--cfg", part, "must be job, hydra or all"))
+    overrides = [a for i, a in enumerate(argv) if not a.startswith("-") and i != flag + 1]
+    try:
+        shown = sweep_configs(overrides, part)
+    except (HydraException, OmegaConfBaseException) as exc:
+        refuse(composition_error(exc, overrides))
+    with _quiet_broken_pipe():
+        for num, (job, text) in enumerate(shown):
+            print(f"# job {num}: {' '.join(job)}\n{text}", flush=True)
+
+
+# Hydra's flags (``higbench --hydra-help``): those taking a value, and those that do not.
+_VALUE_FLAGS = ("-c", "--cfg", "-p", "--package", "-cp", "--config-path", "-cn", "--config-name", "-cd", "--config-dir")
+_VALUE_FLAGS += ("--experimental-rerun",)
+_PLAIN_FLAGS = ("-h", "--help", "--hydra-help", "--version", "--resolve", "-r", "--run", "-m", "--multirun", "-sc")
+_PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
+_INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
+
+
+def _flags_first(argv: list[str]) -> list[str]:
+    """Hydra's flags (with their values) before the overrides: argparse takes the overrides
+    as one group, so ``higbench seed=0 -m lr=1`` would otherwise be its usage text."""
+    flags, overrides, i = [], [], 0
+    while i < len(argv):
+        arg = argv[i]
+        takes = arg in _VALUE_FLAGS or (arg in ("-i", "--info") and i + 1 < len(argv) and argv[i + 1] in _INFO_CHOICES)
+        (flags if arg.startswith("-") else overrides).extend(argv[i : i + 1 + takes])
+        i += 1 + takes
+    return [*flags, *overrides]
+
+
+def _refuse_early(argv: list[str]) -> ConfigError | None:
+    """Command lines Hydra's argparse would answer with its usage text: one line instead."""
+    for i, arg in enumerate(argv):
+        name = arg.split("=", 1)[0]
+        if arg.startswith("-") and name not in (*_VALUE_FLAGS, *_PLAIN_FLAGS):
+            return ConfigError("option", arg, "not an option of higbench (higbench --help lists them)")
+        if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
+            return ConfigError(arg, "<missing>", "needs a value (e.g. --cfg job)")
+    return None
+
+
+@contextlib.contextmanager
+def _quiet_broken_pipe():
+    """``higbench --help | head``: the reader left; stop quietly (no BrokenPipeError traceback)."""
+    try:
+        yield
+    except BrokenPipeError:
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(0)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from importlib import resources
 from pathlib import Path
 from typing import Any, Optional
 
@@ -26,43 +27,70 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from higbench.errors import ConfigError, show
-from higbench.schema import check, locate, value
+from higbench.errors import ConfigError, dotted_get, show
+from higbench.schema import check, keys_where, locate, value
 
 __all__ = ["ConfigError", "show", "validate", "RunConfig", "Budget", "to_plain", "check_hydra_references"]
 
 DEVICES = ("cpu", "cuda", "auto")  # or cuda:<index>
-OPTIMIZER_META = ("name", "_target_", "kind")  # optimizer keys that are not constructor arguments
 
 
 @dataclasses.dataclass
 class Budget:
-    seconds: Optional[float] = value(gt=0)  # noqa: UP045 - OmegaConf reads Optional, not "X | None"
-    max_updates: Optional[int] = value(ge=1)  # noqa: UP045
+    seconds: Optional[float] = value(gt=0, in_job_dir=False)  # noqa: UP045 - OmegaConf reads Optional, not "X | None"
+    max_updates: Optional[int] = value(ge=1, in_job_dir=False)  # noqa: UP045
+
+
+# Keys that change nothing of a run's result are ``identity=False``; see ``schema.value``.
+_COSMETIC = dict(identity=False, resumable=True, in_job_dir=False)
 
 
 @dataclasses.dataclass
 class RunConfig:
     """The top-level keys (defaults in conf/config.yaml; documented there and in --help)."""
 
-    problem: Any = None  # checked against its problem class's Config
-    optimizer: Any = None  # checked by its constructor
+    problem: Any = value(None, sizing=True)  # checked against its problem class's Config
+    optimizer: Any = value(None, sizing=True)  # checked by its constructor (sizing: all but lr)
     seed: int = value(ge=0, le=2**63 - 1)
-    batch_size: int = value(ge=1)
-    budget: Budget = dataclasses.field(default_factory=Budget)
-    eval_every: float = value(gt=0)
+    batch_size: int = value(ge=1, sizing=True)
+    budget: Budget = dataclasses.field(default_factory=Budget, metadata={"resumable": True})
+    eval_every: float = value(gt=0, resumable=True, in_job_dir=False)
     eval_unit: str = value("seconds", choices=("seconds", "updates"))
-    device: str = value()
-    dtype: str = value(choices=("float32", "float64"))
-    threads: Any = "auto"  # auto | null | an integer >= 1
-    init_from: Optional[str] = None  # noqa: UP045
-    progress: bool = True
-    checkpoint_every: Optional[float] = value(None, gt=0)  # noqa: UP045
-    resume: Any = None  # null | true | false | a run dir or run file
-    memory_limit_mb: Optional[float] = value(None, gt=0)  # noqa: UP045
+    device: str = value(resumable=True, sizing=True)
+    dtype: str = value(choices=("float32", "float64"), sizing=True)
+    threads: Any = value("auto", **_COSMETIC)  # auto | null | an integer >= 1
+    init_from: Optional[str] = value(None, sizing=True)  # noqa: UP045
+    progress: bool = value(True, **_COSMETIC)
+    checkpoint_every: Optional[float] = value(None, gt=0, **_COSMETIC)  # noqa: UP045
+    resume: Any = value(None, **_COSMETIC)  # null | true | false | a run dir or run file
+    memory_limit_mb: Optional[float] = value(None, gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
+
+
+# The lists each rule is read from (derived from the metadata above, never written twice):
+COSMETIC_KEYS = keys_where(RunConfig, "identity", False)  # not part of a run's identity
+RESUMABLE_KEYS = keys_where(RunConfig, "resumable")  # may change on resume=
+JOB_DIR_EXCLUDED_KEYS = keys_where(RunConfig, "in_job_dir", False, nested=True)  # conf/config.yaml exclude_keys
+SIZING_KEYS = keys_where(RunConfig, "sizing")  # what the pre-flight's network build depends on
+OPTIMIZER_META = ("name", "_target_", "kind")  # optimizer keys that are not constructor arguments
+
+
+def optimizer_kwargs(opt_cfg: Any) -> dict:
+    """The constructor arguments of an ``optimizer`` node (lists become tuples, e.g. Adam's betas)."""
+    kwargs = dict(opt_cfg) if isinstance(opt_cfg, dict) else OmegaConf.to_container(opt_cfg, resolve=True)
+    for key in OPTIMIZER_META:
+        kwargs.pop(key, None)
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
 
 
 ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
+
+
+def config_dir() -> str:
+    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
+    checkout = Path(__file__).resolve().parent.parent / "conf"
+    if (checkout / "config.yaml").is_file():
+        return str(checkout)
+    return str(resources.files("higbench") / "conf")
 
 
 def to_plain(cfg: DictConfig | dict) -> dict:
@@ -79,9 +107,7 @@ def to_plain(cfg: DictConfig | dict) -> dict:
         data = OmegaConf.to_container(cfg, resolve=True)
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None) or "?"
-        raw = OmegaConf.to_container(cfg, resolve=False)  # the value as written, unresolved
-        for part in str(key).split("."):
-            raw = raw.get(part, "?") if isinstance(raw, dict) else "?"
+        raw = dotted_get(OmegaConf.to_container(cfg, resolve=False), str(key), "?")  # the value as written
         message = " ".join(str(exc.msg if hasattr(exc, "msg") else exc).split())
         raise ConfigError(str(key), raw if key != "?" else "?", f"cannot be resolved ({message})") from None
     assert isinstance(data, dict)
@@ -166,13 +192,35 @@ def constructor_args(cls: type) -> tuple[str, ...]:
 
 
 def optimizer_class(opt: Any) -> type:
+    """The ``torch.optim.Optimizer`` subclass ``optimizer._target_`` names (never any other callable)."""
+    import torch
+
     if not isinstance(opt, dict):
         raise ConfigError("optimizer", opt, "must be a mapping (pick one with optimizer=<name>)")
     target = opt.get("_target_")
     try:
-        return locate(target)
+        cls = locate(target)
     except (ImportError, AttributeError) as exc:
         raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
+    if not (isinstance(cls, type) and issubclass(cls, torch.optim.Optimizer)):
+        raise ConfigError("optimizer._target_", target, "is not a torch.optim.Optimizer subclass")
+    return cls
+
+
+def _check_number_types(cls: type, kwargs: dict) -> None:
+    """An argument whose default is a number must be one (``kappa=abc``: one line, not a TypeError)."""
+    import inspect
+
+    defaults = {}
+    for klass in reversed(cls.__mro__):
+        if klass is not object:
+            params = inspect.signature(klass.__init__).parameters.values()
+            defaults.update({p.name: p.default for p in params if p.default is not inspect.Parameter.empty})
+    for key, given in kwargs.items():
+        default = defaults.get(key)
+        number = isinstance(default, (int, float)) and not isinstance(default, bool)
+        if number and (isinstance(given, (str, bool)) or given is None):
+            raise ConfigError(f"optimizer.{key}", given, f"must be a number (the default is {default})")
 
 
 def check_optimizer(opt: Any) -> None:
@@ -183,10 +231,9 @@ def check_optimizer(opt: Any) -> None:
     """
     import torch
 
-    from higbench.runner.updates import optimizer_kwargs
-
     cls = optimizer_class(opt)
     kwargs = optimizer_kwargs(opt)
+    _check_number_types(cls, kwargs)
 
     def refusal(args: dict) -> Exception | None:
         try:

@@ -1,6 +1,8 @@
 """``ConfigError``: a config value that cannot work, as one line ``key=value: why``.
 
-Kept apart from the schema (``higbench.config``) so any module can raise one cheaply.
+The lowest layer: any module can raise one, show a value as the user types it (``show``)
+or read a dotted key of a plain config (``dotted_get``) without importing anything else
+of higbench.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import sys
 from typing import Any
 
 EXIT_BAD_INPUT = 2
+ABSENT = KeyError  # what ``dotted_get`` returns for a key that is not there (None is a value)
 
 
 class ConfigError(ValueError):
@@ -20,26 +23,58 @@ class ConfigError(ValueError):
         super().__init__(f"{key}={show(value)}: {requirement}")
 
 
-def show(value: Any) -> str:
-    """A value as the user would type it on the command line."""
+MAX_SHOWN = 80  # a value longer than this is cut in messages: one line stays one line
+
+
+def override_value(value: Any) -> str:
+    """A value as a Hydra command-line override value, exactly (``key=<this>`` parses back to it)."""
     if value is None:
         return "null"
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return value if value and re.fullmatch(r"[\w./:+-]+", value) else repr(value)
+        if value and re.fullmatch(r"[\w./:+-]+", value):
+            return value
+        # Hydra's quoted strings: only backslashes before a quote (or the closing one) are escapes
+        return "'" + re.sub(r"(\\*)('|$)", lambda m: m[1] * 2 + ("\\'" if m[2] else ""), value) + "'"
+    if isinstance(value, float):
+        return repr(value)
     if isinstance(value, (list, tuple)):
-        return "[" + ",".join(show(v) for v in value) + "]"
+        return "[" + ",".join(override_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{" + ",".join(f"{k}:{show(v)}" for k, v in value.items()) + "}"
-    return str(value)
+        return "{" + ",".join(f"{k}:{override_value(v)}" for k, v in value.items()) + "}"
+    try:
+        return str(value)
+    except ValueError:  # an integer of more than 4300 digits: Python refuses to print it
+        return f"<an integer of {value.bit_length()} bits>"
+
+
+def show(value: Any) -> str:
+    """A value as the user would type it on the command line, cut to one short line for messages."""
+    text = override_value(value)
+    return text if len(text) <= MAX_SHOWN else f"{text[: MAX_SHOWN - 20]}...({len(text)} chars)"
+
+
+def dotted_get(data: Any, dotted: str, default: Any = ABSENT) -> Any:
+    """``data["a"]["b"]`` for ``"a.b"`` in plain nested dicts; ``default`` where a part is missing."""
+    node = data
+    for part in str(dotted).split("."):
+        if not isinstance(node, dict) or part not in node:
+            return default
+        node = node[part]
+    return node
+
+
+def dotted_set(data: dict, dotted: str, value: Any) -> None:
+    """``data["a"]["b"] = value`` for ``"a.b"``, making the missing levels."""
+    *parents, leaf = str(dotted).split(".")
+    for part in parents:
+        data = data.setdefault(part, {})
+    data[leaf] = value
 
 
 def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
     """Print ``higbench: error: <one line>`` on stderr and exit (2: bad input)."""
-    from higbench.runner.progress import clear_transient
-
-    clear_transient()  # the terminal's "checking" line: the error replaces it
     message = " ".join(str(exc).split())  # one line, whatever the cause
     print(f"higbench: error: {message}", file=sys.stderr, flush=True)
     sys.exit(code)

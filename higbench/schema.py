@@ -19,13 +19,54 @@ from typing import Any
 from omegaconf import MISSING, OmegaConf
 from omegaconf.errors import ConfigKeyError, ValidationError
 
-from higbench.errors import ConfigError
+from higbench.errors import ConfigError, dotted_get
 
 
-def value(default: Any = MISSING, *, ge=None, gt=None, le=None, lt=None, choices=None, length=None) -> Any:
-    """A dataclass field with its rule; without a default the key is required (from conf/)."""
+def value(
+    default: Any = MISSING,
+    *,
+    ge=None,
+    gt=None,
+    le=None,
+    lt=None,
+    choices=None,
+    length=None,
+    identity: bool = True,
+    resumable: bool = False,
+    in_job_dir: bool = True,
+    sizing: bool = False,
+) -> Any:
+    """A dataclass field with its rule; without a default the key is required (from conf/).
+
+    What the key means for a run, read back by ``keys_where`` (the one place for each list):
+
+    * ``identity``: it changes the run's result (False: progress bar, threads, ...; two runs
+      differing only in such keys are the same experiment, ``results.index.config_id``);
+    * ``resumable``: ``resume=`` may change it (budgets, intervals, ...);
+    * ``in_job_dir``: it names a sweep job's directory (False: a sweep run again with a new
+      budget finds its jobs' directories, Hydra's ``override_dirname.exclude_keys``);
+    * ``sizing``: it changes the network or the memory the GN/HIG step needs (the pre-flight
+      builds the network once per distinct value of these keys in a sweep).
+    """
     rule = {k: v for k, v in dict(ge=ge, gt=gt, le=le, lt=lt, choices=choices, length=length).items() if v is not None}
-    return dataclasses.field(default=default, metadata={"rule": rule})
+    meta = {"rule": rule, "identity": identity, "resumable": resumable, "in_job_dir": in_job_dir, "sizing": sizing}
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def keys_where(schema: type, flag: str, wanted: bool = True, *, nested: bool = False) -> tuple[str, ...]:
+    """Names of ``schema``'s fields whose ``value(...)`` metadata has ``flag == wanted``.
+
+    nested: descend into dataclass fields and list their keys dotted (``budget.seconds``);
+    otherwise a dataclass field counts by its own flag.
+    """
+    hints = typing.get_type_hints(schema)
+    found: list[str] = []
+    for f in dataclasses.fields(schema):
+        if nested and dataclasses.is_dataclass(hints[f.name]):
+            found += [f"{f.name}.{k}" for k in keys_where(hints[f.name], flag, wanted, nested=True)]
+        elif f.metadata.get(flag, value().metadata[flag]) == wanted:
+            found.append(f.name)
+    return tuple(found)
 
 
 def _bounds(rule: dict) -> str:
@@ -67,12 +108,6 @@ def locate(path: str) -> Any:
     raise ImportError(f"no module in {path!r}")
 
 
-def _at(values: Any, dotted: str) -> Any:
-    for part in dotted.split("."):
-        values = values.get(part) if isinstance(values, dict) else None
-    return values
-
-
 def check(schema: type, values: Any, prefix: str = "") -> dict:
     """``values`` merged into ``schema`` and checked; the plain result, or ConfigError."""
     if not isinstance(values, dict):
@@ -84,8 +119,8 @@ def check(schema: type, values: Any, prefix: str = "") -> dict:
         if isinstance(exc, ConfigKeyError):
             owner = exc.object_type if dataclasses.is_dataclass(exc.object_type) else schema
             valid = ", ".join(sorted(f.name for f in dataclasses.fields(owner)))
-            raise ConfigError(prefix + key, _at(values, key), f"unknown key; valid keys: {valid}") from None
-        raise ConfigError(prefix + key, _at(values, key), str(exc.msg).splitlines()[0]) from None
+            raise ConfigError(prefix + key, dotted_get(values, key, None), f"unknown key; valid keys: {valid}") from None
+        raise ConfigError(prefix + key, dotted_get(values, key, None), str(exc.msg).splitlines()[0]) from None
     for key in sorted(OmegaConf.missing_keys(merged)):
         raise ConfigError(prefix + key, "<missing>", "is required")
     plain = OmegaConf.to_container(merged)

@@ -10,9 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parent.parent  # higbench is installed (editable): no sys.path entry needed
 
 
 def pytest_collection_modifyitems(config, items):
@@ -33,10 +31,33 @@ TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eva
 
 
 def run_cli(args: list[str], cwd: Path, timeout: float = 180) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), OMP_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1")
     return subprocess.run(
         [sys.executable, "-m", "higbench.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
     )
+
+
+@pytest.fixture
+def higbench(tmp_path, monkeypatch, capsys):
+    """higbench(*argv) in this process, from a fresh tmp dir -> (exit code, stdout, stderr).
+
+    The front door as a user meets it, without a new Python and torch per call; use ``cli``
+    (a subprocess) where the process itself is the point (signals, pipes, the entry point).
+    """
+    from higbench import cli as entry
+
+    monkeypatch.chdir(tmp_path)
+
+    def _run(*args: str, tiny: bool = True):
+        try:
+            entry.main([*(TINY if tiny else []), *args])  # Hydra's flags may come anywhere
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+        out = capsys.readouterr()
+        return code, out.out, out.err
+
+    return _run
 
 
 @pytest.fixture

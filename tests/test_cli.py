@@ -55,17 +55,17 @@ def test_multirun_writes_one_file_per_job(cli, tmp_path):
         ("device=tpu", "device"),
     ],
 )
-def test_bad_input_is_refused_before_training(cli, tmp_path, override, key):
-    proc = cli("problem=toy", "optimizer=hig", override)
-    assert proc.returncode == 2, proc.stderr
-    lines = [line for line in proc.stderr.strip().splitlines() if line]
+def test_bad_input_is_refused_before_training(higbench, tmp_path, override, key):
+    code, _, err = higbench("problem=toy", "optimizer=hig", override)
+    assert code == 2, err
+    lines = [line for line in err.strip().splitlines() if line]
     assert len(lines) == 1 and key in lines[0] and override.split("=", 1)[1] in lines[0]
-    assert run_files(tmp_path) == []
+    assert list(tmp_path.rglob("*")) == []
 
 
-def test_diverging_run_is_recorded_not_crashed(cli, tmp_path):
-    proc = cli("problem=toy", "optimizer=sgd", "optimizer.lr=1e30", "budget.max_updates=20")
-    assert proc.returncode == 0, proc.stderr
+def test_diverging_run_is_recorded_not_crashed(higbench, tmp_path):
+    code, _, err = higbench("problem=toy", "optimizer=sgd", "optimizer.lr=1e30", "budget.max_updates=20")
+    assert code == 0, err
     (path,) = run_files(tmp_path / "outputs")
     meta, curves = load_run(path)
     assert meta["status"] == "diverged" and meta["status_reason"]
@@ -74,10 +74,10 @@ def test_diverging_run_is_recorded_not_crashed(cli, tmp_path):
 
 @pytest.mark.parametrize("problem", ["oscillator", "poisson", "dipole", "dipole_cnn"])
 @pytest.mark.parametrize("optimizer", ["adam", "hig"])
-def test_every_problem_trains_a_few_updates(cli, tmp_path, problem, optimizer):
+def test_every_problem_trains_a_few_updates(higbench, tmp_path, problem, optimizer):
     small = ["batch_size=4", "problem.test_size=16"]
-    proc = cli(f"problem={problem}", f"optimizer={optimizer}", *small, "budget.max_updates=2")
-    assert proc.returncode == 0, proc.stderr
+    code, _, err = higbench(f"problem={problem}", f"optimizer={optimizer}", *small, "budget.max_updates=2")
+    assert code == 0, err
     meta, curves = load_run(run_files(tmp_path / "outputs")[0])
     assert meta["status"] == "completed" and curves["test_loss"].notna().all()
 
@@ -101,3 +101,186 @@ def test_hydra_log_is_named_after_the_tool_and_not_empty(cli, tmp_path):
     log = run.parent / "higbench.log"
     assert log.is_file() and not (run.parent / "cli.log").exists()
     assert "completed: toy/adam" in log.read_text()  # the summary goes through logging too
+
+
+# -- the front door's one-line answers (issue 19 item 10, issue 20 items 3 and 9), in-process --
+
+
+def one_line(code, err, key: str, value: str) -> str:
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("higbench: error: "), err
+    assert f"{key}={value}" in lines[0], lines[0]
+    return lines[0]
+
+
+def test_an_integer_too_long_to_print_is_one_line(higbench, tmp_path):
+    code, _, err = higbench("optimizer.lr=1" + "0" * 5000)
+    one_line(code, err, "optimizer.lr", "1000")
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_a_run_dir_nested_too_deep_is_one_line(higbench, tmp_path):
+    code, _, err = higbench("hydra.run.dir=" + "a/" * 1900)
+    assert "nested too deep" in one_line(code, err, "hydra.run.dir", "a/a/a")
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_a_repeated_key_names_the_value_that_wins(higbench):
+    code, _, err = higbench("progress=false", "progress=maybe")
+    one_line(code, err, "progress", "maybe")
+
+
+def test_a_non_number_for_a_numeric_optimizer_argument_is_one_line(higbench):
+    code, _, err = higbench("optimizer=hig", "optimizer.kappa=abc")
+    assert "must be a number" in one_line(code, err, "optimizer.kappa", "abc")
+
+
+def test_multirun_cfg_job_prints_each_jobs_config(higbench, tmp_path):
+    code, out, err = higbench("-m", "problem=toy", "optimizer=adam,hig", "--cfg", "job", tiny=False)
+    assert code == 0, err
+    assert out.count("# job ") == 2 and "name: adam" in out and "name: hig" in out
+    code, out, err = higbench("-m", "+experiment=fig5_adagrad", "--cfg", "job", tiny=False)  # docs/sweeps.md
+    assert code == 0 and out.count("# job ") >= 2, err
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_help_into_a_closed_pipe_is_quiet(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "higbench.cli", "--help"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    proc.stdout.close()  # `higbench --help | head -0`: the reader is gone before the text comes
+    assert proc.wait(timeout=60) == 0 and b"Traceback" not in proc.stderr.read()
+
+
+def _fake_train(status: str, fail_for: str | None = None):
+    """A stand-in for the runner: a run that ends ``status`` (or a full disk for one optimizer)."""
+    from higbench.runfile.writer import DiskFull
+    from higbench.runner.train import RunSummary
+
+    def train(cfg, run_path, overrides=None, *, resume=False):
+        if cfg.optimizer.name == fail_for:
+            raise DiskFull(f"no space left on the device writing {run_path}")
+        return RunSummary(status, 1, 0.1, 0.5, run_path, "SIGINT" if status == "interrupted" else "")
+
+    return train
+
+
+def test_a_sweep_with_a_failed_job_exits_1_and_says_how_many(higbench, monkeypatch):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("completed", fail_for="adam"))
+    code, _, err = higbench("-m", "optimizer=adam,hig,sgd")
+    assert code == 1 and "1 of 3 sweep jobs failed" in err, err
+
+
+def test_ctrl_c_in_a_sweep_says_how_to_complete_the_sweep(higbench, monkeypatch, tmp_path):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("interrupted"))
+    code, _, err = higbench("-m", "optimizer=adam,hig", f"hydra.sweep.dir={tmp_path / 'sw'}")
+    assert code == 130, err
+    assert "complete the sweep with: higbench -m" in err and f"hydra.sweep.dir={tmp_path / 'sw'} resume=true" in err, err
+    assert "Traceback" not in err
+
+
+def test_resume_with_is_said_only_when_a_checkpoint_exists(higbench, monkeypatch, tmp_path):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("interrupted"))
+    code, _, err = higbench(f"hydra.run.dir={tmp_path / 'r'}")
+    assert code == 130 and "resume with:" not in err and "cannot be resumed" in err, err
+
+
+def test_gn_diverging_says_what_the_figures_do(higbench, monkeypatch):
+    monkeypatch.setattr("higbench.runner.train.train", _fake_train("diverged"))
+    code, out, err = higbench("optimizer=gn")
+    assert code == 0 and "seed=7" in out, out
+
+
+def test_an_unknown_flag_is_one_line_not_argparse_usage(higbench, tmp_path):
+    code, _, err = higbench("seed=0", "-m", "--bogus")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--bogus" in err and "usage:" not in err, err
+    assert list(tmp_path.rglob("*")) == []
+
+
+def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path):
+    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    from higbench.results import load_runs
+
+    code, _, err = higbench("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "seed=1,2,3")
+    assert code == 0, err
+    runs = load_runs(tmp_path / "outputs")
+    assert len(runs) == 3 and list(runs["parallel_jobs"]) == [2.0, 2.0, 2.0]
+    code, _, err = higbench("-m", "seed=4")  # the basic launcher: one job at a time
+    assert code == 0 and list(load_runs(tmp_path / "outputs")["parallel_jobs"]).count(1.0) == 1, err
+
+
+def test_a_missing_launcher_names_the_extra_that_has_it(monkeypatch):
+    from hydra.errors import MissingConfigException
+
+    from higbench.preflight import composition_error
+
+    exc = MissingConfigException("no joblib", "hydra/launcher/joblib", ["basic", "slurm"])
+    assert 'pip install -e ".[cluster]"' in str(composition_error(exc, ["hydra/launcher=joblib"]))
+
+
+# -- one place per rule: the lists of keys come from the schema's field metadata -------------
+
+
+def test_the_key_lists_are_derived_from_the_schema():
+    import yaml
+
+    from higbench import config
+    from higbench.figures.runs import LAUNCH_OVERRIDES
+    from higbench.results import index
+    from higbench.runner import checkpoint
+
+    conf = yaml.safe_load((Path(__file__).resolve().parent.parent / "conf" / "config.yaml").read_text())
+    excluded = conf["hydra"]["job"]["config"]["override_dirname"]["exclude_keys"]
+    assert sorted(excluded) == sorted(config.JOB_DIR_EXCLUDED_KEYS), "conf/config.yaml exclude_keys differ from the schema"
+    assert index.COSMETIC_KEYS is config.COSMETIC_KEYS and checkpoint.RESUMABLE_KEYS is config.RESUMABLE_KEYS
+    assert set(config.COSMETIC_KEYS) <= set(config.RESUMABLE_KEYS)  # what changes no result may change on resume
+    assert {o.split("=")[0] for o in LAUNCH_OVERRIDES} <= set(config.COSMETIC_KEYS), "figures launch with identity keys"
+    assert "seed" not in config.COSMETIC_KEYS and "batch_size" in config.SIZING_KEYS
+
+
+def test_the_optimizer_arguments_rule_is_one_definition():
+    from higbench import config
+    from higbench.runner import updates
+
+    assert updates.optimizer_kwargs is config.optimizer_kwargs
+    assert config.optimizer_kwargs({"name": "adam", "_target_": "torch.optim.Adam", "lr": 1, "betas": [0.9, 0.99]}) == {
+        "lr": 1,
+        "betas": (0.9, 0.99),
+    }
+
+
+def test_resume_announces_the_stored_run_not_the_config_defaults(tmp_path, monkeypatch, capsys):
+    """``higbench resume=<an oscillator run>`` used to say ``toy/hig: resuming, batch size 256``."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from higbench import cli as entry
+
+    run = tmp_path / "osc"
+    args = ["problem=oscillator", "optimizer=adam", "batch_size=8", "problem.test_size=16", "budget.seconds=60"]
+    args += ["checkpoint_every=0.05", "eval_every=0.05", "progress=false", "threads=1", f"hydra.run.dir={run}"]
+    proc = subprocess.Popen([sys.executable, "-m", "higbench.cli", *args], cwd=tmp_path, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not (run / "run.h5.ckpt").exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=60) == 128 + signal.SIGINT, proc.stderr.read()
+    monkeypatch.chdir(tmp_path)
+    entry.main([f"resume={run}", "budget.seconds=0.01", "progress=true"])
+    err = capsys.readouterr().err
+    assert "oscillator/adam: resuming, batch size 8" in err, err
+
+
+@pytest.mark.parametrize("value", [None, True, 0.001, 3, "cuda:0", "a b", "it's", "x\\y", "a b\\", "", [1, "a,b"], {"k": 1.5}])
+def test_override_value_parses_back_to_the_value(value):
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from higbench.errors import override_value
+
+    (parsed,) = OverridesParser.create().parse_overrides([f"key={override_value(value)}"])
+    assert parsed.value() == value

@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
     RunFileLocked,
@@ -54,9 +55,6 @@ DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # failed, corrupt) is not a result: the figures run it again.
 DONE_STATUSES = ("completed", "diverged")
 RUN_STATUSES_DONE = ("completed",)  # the statuses ``best_runs`` selects from
-# Config keys that do not change a run's result: two runs that differ only in these have the
-# same ``config_id`` (progress bar, torch threads, checkpoint interval, resume, memory cap).
-COSMETIC_KEYS = ("progress", "threads", "checkpoint_every", "resume", "memory_limit_mb")
 
 # Columns the index computes; a config key of the same name is stored as "config.<key>".
 _OWN_COLUMNS = {
@@ -64,7 +62,7 @@ _OWN_COLUMNS = {
     "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
-    "config_id",
+    "config_id", "parallel_jobs",
 }  # fmt: skip
 
 
@@ -221,6 +219,9 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
     row.update(run.memory)
     for key, value in run.env.items():
         row[f"env.{key}"] = value
+    # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their
+    # wall-clock budgets bought less compute each. NaN for files that predate the record.
+    row["parallel_jobs"] = float(run.env.get("parallel_jobs", math.nan))
     return row, (curves if want_curves else None)
 
 

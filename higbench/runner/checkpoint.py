@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from higbench.config import RESUMABLE_KEYS  # the schema marks them (resumable=True)
 from higbench.errors import ConfigError, show
 from higbench.runfile.reader import RUN_FILE, RunFileLocked, UnreadableRunFile, read_head, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
@@ -44,7 +45,6 @@ from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 SUFFIX = ".ckpt"
 FORMAT = 1
-RESUMABLE_KEYS = ("budget", "eval_every", "checkpoint_every", "progress", "threads", "device", "memory_limit_mb", "resume")
 RESUMABLE_STATUSES = ("running", "interrupted", "failed")
 
 

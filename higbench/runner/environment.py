@@ -57,6 +57,7 @@ def environment(device: torch.device) -> dict:
         if device.type == "cuda"
         else platform.processor() or platform.machine(),
         "slurm_job_id": os.environ.get("SLURM_JOB_ID", ""),
+        "parallel_jobs": int(os.environ.get("HIGBENCH_PARALLEL_JOBS", "1")),  # set by higbench.cli
     }
     return env
 

@@ -1,4 +1,4 @@
-"""Checks of an output location before anything is written there (``higbench.checks``).
+"""Checks of an output location before anything is written there (``higbench.preflight``).
 
 A run or sweep directory must be creatable and writable, on a file system with room for a
 run file (``MIN_FREE_BYTES``), with names the file system accepts; a ``run.h5`` that is a

@@ -13,14 +13,12 @@ from dataclasses import dataclass, field
 
 import torch
 from hydra.utils import get_class
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from torch import nn
 
+from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
 from higbench.optim.hig import JacobianPower
 from higbench.problems.base import Batch, Problem
-
-# Config keys that describe the optimizer but are not constructor arguments.
-_META_KEYS = ("name", "_target_", "kind")
 
 
 @dataclass
@@ -108,16 +106,6 @@ class JacobianPowerUpdate:
 
             value = opt.step(closure)
         return UpdateResult(value.item(), dict(opt.last_timings), opt.last_finite, opt.last_reason)
-
-
-def optimizer_kwargs(opt_cfg: DictConfig | dict) -> dict:
-    kwargs = dict(opt_cfg) if isinstance(opt_cfg, dict) else OmegaConf.to_container(opt_cfg, resolve=True)
-    for key in _META_KEYS:
-        kwargs.pop(key, None)
-    for key, value in list(kwargs.items()):
-        if isinstance(value, list):
-            kwargs[key] = tuple(value)  # e.g. Adam's betas
-    return kwargs
 
 
 def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig):

@@ -9,10 +9,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # synthetic.py
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
+REPO = Path(__file__).resolve().parents[2]  # pytest puts this folder on sys.path for its tests (synthetic.py)
 
 # Three updates of the toy problem, an evaluation after each: a job takes well under a second
 # once Python and torch are up.
@@ -22,7 +19,6 @@ GRID = {(0.01, 64), (0.01, 128), (0.1, 64), (0.1, 128)}  # conf/experiment/toy_l
 
 def cli_env(**extra: str) -> dict[str, str]:
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO), *filter(None, [env.get("PYTHONPATH")])])
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):  # let the launcher decide (joblib caps them)
         env.pop(var, None)
     env.update(extra)
