@@ -62,6 +62,7 @@ test-optuna: install-optuna
 lint: install-dev
 	$(BIN)/ruff check higbench tests scripts
 	$(BIN)/ruff format --check higbench tests scripts
+	$(BIN)/lint-imports
 
 bench: install
 	$(BIN)/python -m higbench.bench.step

@@ -4,7 +4,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from higbench.cli import config_dir
+from higbench.config import config_dir
 from higbench.optim import jacobian_power
 from higbench.optim.jacobians import full_jacobian, per_sample_jacobian
 from higbench.problems import build_problem

@@ -6,7 +6,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from higbench.cli import config_dir
+from higbench.config import config_dir
 from higbench.problems import build_problem
 from higbench.problems.networks import count_parameters
 

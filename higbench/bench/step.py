@@ -92,7 +92,7 @@ def compose(cfg: Config):
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
 
     with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
         return hydra_compose(config_name="config", overrides=cfg.hydra_overrides())
@@ -537,7 +537,7 @@ def default_batch(problem: str, optimizer: str) -> int:
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
 
     with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
         return int(hydra_compose(config_name="config", overrides=[f"problem={problem}", f"optimizer={optimizer}"]).batch_size)

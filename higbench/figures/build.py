@@ -12,7 +12,7 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from higbench.figures import registry
+from higbench.figures import plot, registry
 from higbench.figures.claims import judge
 from higbench.figures.data import FigureData
 from higbench.figures.runs import Composer, Job, RunIndex, expand, job_seconds, launch, resolve
@@ -120,7 +120,7 @@ class Builder:
         data = self.figure_data(figure)
         extra: dict = {}
         try:
-            figure.draw(data)
+            (figure.plot or plot.draw)(data)  # declared panels, or the figure's own function
             if figure.kind == "figure":
                 data.write_data()
             result.drawn.append(figure.id)

@@ -219,7 +219,7 @@ class Composer:
     """Hydra's compose API on the CLI's config dir, with a cache keyed by conf/ contents."""
 
     def __init__(self, cache_file: Path | None):
-        from higbench.cli import config_dir
+        from higbench.config import config_dir
 
         self.conf_dir = Path(config_dir())
         self.fingerprint = _conf_fingerprint(self.conf_dir)

@@ -136,7 +136,7 @@ class Sweep:
 @dataclass
 class Figure:
     """One figure or table: its sweeps (a list, or a function of the preset) and either its
-    panels (drawn by ``plot.draw``) or a plot function ``plot(data)``."""
+    panels (drawn by ``plot.draw``, which the builder calls) or a plot function ``plot(data)``."""
 
     id: str
     title: str
@@ -151,11 +151,6 @@ class Figure:
     def runs(self, preset: Preset) -> list[Sweep]:
         return at(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)
 
-    def draw(self, data) -> None:
-        from higbench.figures import plot
-
-        (self.plot or plot.draw)(data)
-
 
 # -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----
 
@@ -164,7 +159,7 @@ class Figure:
 def _conf(rel: str) -> dict:
     import yaml
 
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
 
     return yaml.safe_load((Path(config_dir()) / rel).read_text()) or {}
 

@@ -104,7 +104,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def _known(kind: str, df: pd.DataFrame, column: str) -> set[str]:
     """Names a filter value may take: those in the runs and the shipped configs of that group."""
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
 
     shipped = {p.stem for p in (Path(config_dir()) / kind).glob("*.yaml")}
     return shipped | (set(df[column].dropna().astype(str)) if column in df else set())

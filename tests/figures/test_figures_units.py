@@ -278,7 +278,7 @@ CONF_GRIDS = {
 def test_paper_preset_runs_the_experiment_configs_grids(experiment):
     import yaml
 
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
 
     params = yaml.safe_load((Path(config_dir()) / "experiment" / f"{experiment}.yaml").read_text())["hydra"]["sweeper"]["params"]
     fid, sweep = CONF_GRIDS[experiment]

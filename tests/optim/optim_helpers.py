@@ -9,7 +9,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from higbench.cli import config_dir
+from higbench.config import config_dir
 from higbench.problems import build_problem
 
 # Every problem (and the dipole CNN) with short horizons so the naive reference stays fast.

@@ -96,7 +96,7 @@ def test_second_derivative_is_refused():
 def test_problem_solver_key_selects_the_implementation(problem):
     from hydra import compose, initialize_config_dir
 
-    from higbench.cli import config_dir
+    from higbench.config import config_dir
     from higbench.problems.base import build_problem
 
     built = {}
