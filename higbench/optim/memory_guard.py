@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from higbench.errors import ConfigError
-from higbench.optim.routes import choose_solver
+from higbench.optim.solver_choice import choose_solver
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
 
@@ -60,7 +60,8 @@ def estimate_bytes(
     batch_size, output_size (|y| per sample), n_params (|theta|); dtype: network dtype (J as
     computed); precision: dtype of the inversion (J is converted to it); solver: gram, svd
     or auto, resolved with tau and truncation by the optimizer's own rule
-    (``higbench.optim.routes.choose_solver``); jacobian: naive (torch.func J in ``dtype``, then cast) or structured (computed in
+    (``higbench.optim.solver_choice.choose_solver``); jacobian: naive (torch.func J in ``dtype``,
+    then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
     """
