@@ -60,6 +60,7 @@ class RunConfig:
     checkpoint_every: Optional[float] = value(None, gt=0)  # noqa: UP045
     resume: Any = None  # null | true | false | a run dir or run file
     memory_limit_mb: Optional[float] = value(None, gt=0)  # noqa: UP045
+    tensorboard: bool = False  # also write TensorBoard event files (higbench.runner.tensorboard)
 
 
 ConfigStore.instance().store(name="higbench_schema", node=RunConfig)

@@ -232,6 +232,10 @@ def preflight(cfg: DictConfig) -> None:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
+    if cfg.get("tensorboard"):
+        from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
+
+        summary_writer_class()
     if target.type == "cpu":
         check_memory(cfg, problem, model, update)
 
