@@ -87,3 +87,18 @@ def test_runner_update_reduces_the_loss(case):
     assert all(r.finite for r in results)
     assert results[-1].loss < results[0].loss
     assert {"sv_max", "sv_min_kept", "sv_dropped"} <= set(results[-1].spectrum)
+
+
+@pytest.mark.parametrize("optimizer", ["lm", "lbfgs"])
+@pytest.mark.parametrize("case", ["toy", "oscillator", "poisson", "dipole", "dipole_cnn"])
+def test_runs_on_every_problem(case, optimizer):
+    extra = ["problem.hidden=[16]"] if case == "poisson" else []
+    if optimizer == "lbfgs":
+        extra.append("optimizer.max_iter=3")
+    cfg, p, model, batch = setup(case, 4, *extra, optimizer=optimizer)
+    update = build_update(p, model, cfg.optimizer)
+    before = flat(model)
+    results = [update(batch) for _ in range(2)]
+    assert all(r.finite for r in results), [r.reason for r in results]
+    assert not torch.equal(flat(model), before)
+    assert set(results[0].timings) == {"jacobian_s", "inversion_s", "apply_s"}
