@@ -109,6 +109,26 @@ def resolved_eigen_method(n: int, dtype: torch.dtype, device: torch.device | str
     return "tridiagonal" if ok and tridiagonal.available() else "eigh"
 
 
+def gram_eigen(K: torch.Tensor, method: str = "auto", overwrite: bool = False):
+    """(eigenvalues ascending, project v -> U^T v, expand w -> U w) of the Gram matrix K.
+
+    The tridiagonal route (``method`` as in ``gram_coefficients``) never forms U: project
+    and expand apply its Householder reflectors and the tridiagonal eigenvectors to vectors.
+    """
+    if resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal":
+        try:
+            eig = tridiagonal.TridiagonalEigen(K, overwrite=overwrite)
+            return eig.values, eig.project, eig.expand
+        except torch.linalg.LinAlgError:
+            # After the reduction the tridiagonal solver has its own fallbacks; a failed
+            # reduction with overwrite may have left K destroyed: the caller retries from J.
+            if overwrite:
+                raise
+            warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=3)
+    lam, U = eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
+    return lam, (lambda v: U.T @ v), (lambda w: U @ w)
+
+
 def gram_coefficients(
     K: torch.Tensor,
     g: torch.Tensor,
@@ -134,27 +154,7 @@ def gram_coefficients(
     if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
         raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
     g = g.to(K.dtype)
-    use_tridiagonal = resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal"
-    if use_tridiagonal:
-        try:
-            eig = tridiagonal.TridiagonalEigen(K, overwrite=overwrite)
-            lam, project, expand = eig.values, eig.project, eig.expand
-        except torch.linalg.LinAlgError:
-            # After the reduction the tridiagonal solver has its own fallbacks; a failed
-            # reduction with overwrite may have left K destroyed: the caller retries from J.
-            if overwrite:
-                raise
-            warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=2)
-            use_tridiagonal = False
-    if not use_tridiagonal:
-        lam, U = eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
-
-        def project(v):
-            return U.T @ v
-
-        def expand(v):
-            return U @ v
-
+    lam, project, expand = gram_eigen(K, method, overwrite)
     s = lam.clamp_min(0).sqrt()  # round-off can make tiny eigenvalues negative
     if truncation == "relative":
         # Eigenvalues below n*eps*max are round-off, whatever tau says.

@@ -26,7 +26,8 @@ from collections.abc import Callable
 import torch
 
 from higbench.optim.hig import JacobianPower
-from higbench.optim.lapack import eigh, svd
+from higbench.optim.inversion import gram_eigen
+from higbench.optim.lapack import svd
 from higbench.optim.structured import StructuredJacobian
 
 
@@ -52,13 +53,13 @@ class LevenbergMarquardt(JacobianPower):
     def _spectral(self, route: str, J, K, g: torch.Tensor):
         """(eigenvalues s^2 of K, p = U^T g, direction(weights)) from one decomposition."""
         if route == "gram":
-            lam, U = eigh(K)
+            lam, project, expand = gram_eigen(K, overwrite=True)  # tridiagonal for large K: U never formed
 
             def direction(w: torch.Tensor) -> torch.Tensor:
-                c = U @ w
+                c = expand(w)
                 return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
 
-            return lam.clamp_min(0), U.T @ g.to(lam.dtype), direction
+            return lam.clamp_min(0), project(g.to(lam.dtype)), direction
         J = J.matrix().to(self.group["precision"]) if isinstance(J, StructuredJacobian) else J
         U, s, Vh = svd(J)
         return s * s, U.T @ g.to(s.dtype), lambda w: Vh.T @ (s * w)

@@ -28,6 +28,7 @@ class Estimate:
     total: int
     parts: dict[str, int]
     solver: str
+    work_rows: int = 0  # size of the inversion: the Gram rows, or min(rows, params) for the SVD
 
     def describe(self) -> str:
         return ", ".join(f"{k} {mb(v)}" for k, v in self.parts.items() if v)
@@ -87,7 +88,7 @@ def estimate_bytes(
         parts["svd_input"] = rows * p * e2
         parts["svd_factors"] = (rows * k + k * p) * e2
         parts["svd_work"] = (4 * k * k + max(rows, p) * k) * e2
-    return Estimate(sum(parts.values()), parts, solver)
+    return Estimate(sum(parts.values()), parts, solver, rows if solver == "gram" else min(rows, p))
 
 
 def available_bytes(device: str = "cpu") -> tuple[int, str]:

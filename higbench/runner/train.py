@@ -53,7 +53,7 @@ from higbench.runner import checkpoint
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
-from higbench.runner.threads import resolve_threads
+from higbench.runner.threads import fit_to_work, resolve_threads
 from higbench.runner.updates import Update, build_update
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -495,7 +495,9 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     if cfg.get("init_from") and not resume:
         load_initial_weights(model, cfg.init_from, cfg.problem.name)
     update = build_update(problem, model, cfg.optimizer)
-    check_memory(cfg, problem, model, update)
+    estimate = check_memory(cfg, problem, model, update)
+    if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
+        torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
 
     clock.pause()  # creating/reopening the file is not training
     extra = _extra_sinks(cfg, run_path)

@@ -8,6 +8,7 @@ import torch
 from optim_helpers import flat, setup
 from torch import nn
 
+from higbench.optim import inversion
 from higbench.optim.lm import LevenbergMarquardt
 from higbench.optim.structured import network_jacobian, solver_jacobian
 from higbench.runner.updates import build_update
@@ -25,9 +26,11 @@ def half_squares(y, target):
     return 0.5 * ((y - target) ** 2).sum(1)
 
 
-@pytest.mark.parametrize("route", ["gram", "svd"])
-def test_direction_is_the_dense_damped_gauss_newton_step(route):
+@pytest.mark.parametrize("route,tridiagonal", [("gram", False), ("gram", True), ("svd", False)])
+def test_direction_is_the_dense_damped_gauss_newton_step(route, tridiagonal, monkeypatch):
     """d = J^T (K + lam I)^-1 g (what LM computes) = (J^T J + lam I)^-1 J^T g (push-through)."""
+    if tridiagonal:  # the route large K takes (no U formed), on a small one
+        monkeypatch.setattr(inversion, "TRIDIAGONAL_MIN_ROWS", 8)
     model, z, target = linear_problem()
     model.append(nn.Tanh()).append(nn.Linear(4, 5).double())
     opt = LevenbergMarquardt(model.parameters(), solver=route)
