@@ -1,9 +1,10 @@
 """The training loop: mini-batch updates under a budget, evaluations, the run file.
 
 Clock semantics (as in the paper, appendix B): ``wall_time`` is the training clock. It
-starts once the data set exists, before the network and optimizer are built, so framework
-warm-up and the first (slow) updates count; evaluations of the test loss, checkpoints and
-the creation of the run file are excluded. A resumed run continues the clock of its
+starts once the data set exists and the solvers are compiled (``warmup.py``: numba's compile
+or cache load, recorded apart as ``/env`` ``warmup_s``), before the network and optimizer are
+built, so framework warm-up and the first (slow) updates count; evaluations of the test
+loss, checkpoints and the creation of the run file are excluded. A resumed run continues the clock of its
 checkpoint. (Through the CLI, the pre-flight check has already built the problem and an
 optimizer on the CPU, so one-off Python imports are paid before the clock starts.)
 
@@ -41,6 +42,7 @@ import torch
 import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first optimizer (3-4 s here):
 
 # import it up front, so that no launcher's first run pays it inside the training clock.
+from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.config import init_from_path
@@ -55,6 +57,7 @@ from higbench.runner.progress import Progress
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
 from higbench.runner.threads import fit_to_work, resolve_threads
 from higbench.runner.updates import Update, build_update
+from higbench.runner.warmup import warm_up
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -72,6 +75,7 @@ class RunSummary:
     final_test_loss: float
     path: Path
     reason: str = ""
+    initial_test_loss: float = math.nan  # the test loss at step 0 (the summary's thresholds are relative to it)
 
 
 class TrainingClock:
@@ -243,7 +247,7 @@ def preflight(cfg: DictConfig) -> None:
 # -- the loop --------------------------------------------------------------------------------
 
 
-def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, device, overrides) -> RunFileWriter:
+def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dict, overrides) -> RunFileWriter:
     """A new run file, or the checkpoint's file reopened at the rows it recorded."""
     config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
     if state is None:
@@ -251,7 +255,7 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, device, 
             run_path,
             config_yaml=config_yaml,
             overrides=overrides or [],
-            env=environment(device),
+            env=env,
             meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
         )
     return RunFileWriter.reopen(
@@ -265,6 +269,10 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, device, 
         },
         config_yaml=config_yaml,
     )
+
+
+def _is_jacobian_power(opt_cfg) -> bool:
+    return hasattr(get_class(opt_cfg._target_), "step_structured")
 
 
 def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
@@ -296,11 +304,15 @@ class TrainingRun:
         self.epoch_iter = None
         self.epoch_start_rng = self.shuffle.get_state()
         self.resumed = state is not None
+        self.initial_test_loss = math.nan
         if state is not None:
             self._restore(state)
         self.last_ckpt = clock()
 
     def _restore(self, state: dict) -> None:
+        curves = self.file.writer.f["curves"]
+        if "test_loss" in curves and curves["test_loss"].shape[0]:
+            self.initial_test_loss = float(curves["test_loss"][0])
         self.model.load_state_dict(state["model"])
         self.update.optimizer.load_state_dict(state["optimizer"])
         self.step, self.epoch, self.position = state["step"], state["epoch"], state["position"]
@@ -404,7 +416,7 @@ class TrainingRun:
         """Updates until the budget, a divergence or a stop signal; (status, reason, last test loss)."""
         final_test = math.nan
         if not self.resumed:
-            final_test = self.record_evaluation()
+            final_test = self.initial_test_loss = self.record_evaluation()
             self.next_eval = self.cfg.eval_every
         status, reason = "completed", ""
         while not self.out_of_budget():
@@ -490,6 +502,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     if state is not None:
         checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
     device, problem = _setup(cfg)
+    warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     model = problem.build_model()
     if cfg.get("init_from") and not resume:
@@ -501,7 +514,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
 
     clock.pause()  # creating/reopening the file is not training
     extra = _extra_sinks(cfg, run_path)
-    file = RunFileSink(_open_run_file(cfg, run_path, state, device, overrides))
+    file = RunFileSink(_open_run_file(cfg, run_path, state, {**environment(device), "warmup_s": warmup_s}, overrides))
     step = state["step"] if state else 0
     name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     progress = Progress(
@@ -516,4 +529,4 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume
     signals.restore()
-    return RunSummary(status, run.step, clock(), final_test, run_path, reason)
+    return RunSummary(status, run.step, clock(), final_test, run_path, reason, run.initial_test_loss)
