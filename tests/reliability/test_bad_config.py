@@ -61,7 +61,7 @@ BAD_CLI = [
     (["optimizer=adam", "optimizer.tau=1e-4"], "optimizer.tau", "1e-4"),
     (["optimizer=adam", "+optimizer.kappa=-0.5"], "optimizer.kappa", "-0.5"),
     (["problem=nope"], "problem", "nope"),
-    (["optimizer=lbfgs"], "optimizer", "lbfgs"),
+    (["optimizer=bfgs"], "optimizer", "bfgs"),  # not a config (lbfgs is one)
     (["optimizer.lr=[1"], "optimizer.lr", "[1"),
     # init_from: missing file, not a run file, other problem, no weights, other network
     (["init_from={in}/missing.h5"], "init_from", "missing.h5"),
