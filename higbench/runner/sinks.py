@@ -130,6 +130,6 @@ def spectrum_columns(spectrum: dict) -> dict[str, float]:
 def spectrum_quantiles(spectrum: dict) -> np.ndarray:
     """Quantiles 0, 0.1, .., 1 of all singular values of an update (NaN when none)."""
     s = spectrum.get("singular_values")
-    if s is None or s.numel() == 0:
+    if s is None or len(s) == 0:
         return np.full(len(SPECTRUM_QUANTILES), math.nan)
-    return np.quantile(s.detach().cpu().double().numpy(), SPECTRUM_QUANTILES)
+    return np.quantile(np.asarray(s, dtype=np.float64), SPECTRUM_QUANTILES)
