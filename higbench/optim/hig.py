@@ -113,6 +113,8 @@ class JacobianPower(torch.optim.Optimizer):
         self.last_reason: str = ""
         # The spectrum of the last inversion: sv_max, sv_min_kept, sv_dropped, singular_values.
         self.last_spectrum: dict = {}
+        # b when the objective is the batch mean, 1 for the sum (Levenberg-Marquardt models the sum).
+        self.samples_averaged: int = 1
 
     # -- the pieces, so callers with their own Jacobians (the runner) can time each phase --
 
@@ -260,6 +262,8 @@ class JacobianPower(torch.optim.Optimizer):
             else:
                 A = output_jacobian(y2, u)
             J = GraphJacobian(u, self.params, A, self.group["precision"])
+        reduction = closure.reduction if isinstance(closure, LossClosure) else "mean"
+        self.samples_averaged = y.shape[0] if reduction == "mean" else 1
 
         def evaluate() -> torch.Tensor:
             with torch.no_grad():
@@ -294,6 +298,7 @@ class JacobianPower(torch.optim.Optimizer):
         t0 = time.perf_counter()
         naive = self.group["jacobian"] == "naive"
         closure = LossClosure(model, net_inputs, physics, loss, inputs, reduction)
+        self.samples_averaged = net_inputs.shape[0] if reduction == "mean" else 1
         with torch.no_grad():
             u = model(net_inputs)
             if naive:

@@ -4,7 +4,9 @@ The direction for the stacked per-sample Jacobian J and output gradient g is
 
     d = (J^T J + lambda I)^-1 J^T g = J^T (K + lambda I)^-1 g        (K = J J^T, push-through)
 
-so the Gram route of HIG/GN serves it unchanged: one eigen-decomposition K = U diag(s^2) U^T
+(g the gradient of the batch sum of per-sample losses, whose Gauss-Newton model has Hessian
+I for l_i = |r_i|^2 / 2; a mean objective is scaled by b), so the Gram route of HIG/GN serves
+it unchanged: one eigen-decomposition K = U diag(s^2) U^T
 per update, after which the direction for any lambda costs one product,
 d = J^T U diag(1 / (s^2 + lambda)) U^T g (on the SVD route, for tall J, V diag(s / (s^2 +
 lambda)) U^T g). The step theta -= lr * d is tried on the same batch through the closure
@@ -70,15 +72,18 @@ class LevenbergMarquardt(JacobianPower):
             return self._refuse("non-finite Jacobian")
         self._sync()
         t1 = time.perf_counter()
+        # The model is that of the batch *sum* of per-sample losses (for l_i = |r_i|^2 / 2 its
+        # Hessian in y is I): with a mean objective g and the loss are scaled by b.
+        scale = self.samples_averaged
         try:
-            ev, p, direction = self._spectral(route, J, K, grad_y.reshape(-1))
+            ev, p, direction = self._spectral(route, J, K, scale * grad_y.reshape(-1))
         except torch.linalg.LinAlgError as exc:
             return self._refuse(f"inversion failed: {exc}")
         floor = ev.numel() * torch.finfo(ev.dtype).eps * ev.max()
         self._record_spectrum(ev.sqrt(), ev > floor)
         self._sync()
         t2 = time.perf_counter()
-        accepted = self._trials(ev, p, direction, evaluate)
+        accepted = self._trials(ev, p, direction, lambda: scale * evaluate())
         if accepted is None:
             return self._refuse("non-finite update direction")
         self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
