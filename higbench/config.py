@@ -64,6 +64,7 @@ class RunConfig:
     checkpoint_every: Optional[float] = value(None, gt=0, **_COSMETIC)  # noqa: UP045
     resume: Any = value(None, **_COSMETIC)  # null | true | false | a run dir or run file
     memory_limit_mb: Optional[float] = value(None, gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
+    tensorboard: bool = value(False, **_COSMETIC)  # also write TensorBoard event files (higbench.runner.tensorboard)
 
 
 # The lists each rule is read from (derived from the metadata above, never written twice):

@@ -1,12 +1,17 @@
-"""Optimizers: the Jacobian-power family (HIG, Gauss-Newton) and their inversion.
+"""Optimizers: the Jacobian-power family (HIG, Gauss-Newton, Levenberg-Marquardt) and their inversion.
 
-First-order optimizers are plain ``torch.optim`` classes chosen by config; see
-``higbench.runner.updates``. Structured derivatives (solver Jacobians by batched reverse
-passes, network part from per-layer factors): ``higbench.optim.structured``.
+Every optimizer takes one update through ``optimizer.step(closure)``; ``LossClosure``
+(``higbench.optim.closure``) is a torch.optim closure that also carries the structure of
+the loss, so the Jacobian-power optimizers take their fast path. First-order optimizers
+are plain ``torch.optim`` classes chosen by config. Structured derivatives (solver
+Jacobians by batched reverse passes, network part from per-layer factors):
+``higbench.optim.structured``.
 """
 
+from higbench.optim.closure import LossClosure, reduce_loss
 from higbench.optim.hig import HIG, GaussNewton, JacobianPower
-from higbench.optim.inversion import gram_coefficients, gram_is_accurate, jacobian_power
+from higbench.optim.inversion import gram_coefficients, jacobian_power
+from higbench.optim.solver_choice import gram_is_accurate
 from higbench.optim.structured import network_jacobian, solver_jacobian
 
 __all__ = [
@@ -16,6 +21,8 @@ __all__ = [
     "JacobianPower",
     "HIG",
     "GaussNewton",
+    "LossClosure",
+    "reduce_loss",
     "solver_jacobian",
     "network_jacobian",
 ]

@@ -30,10 +30,17 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
+from higbench.optim.closure import LossClosure, reduce_loss
 from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, jacobian_power
 from higbench.optim.jacobians import per_sample_jacobian
-from higbench.optim.routes import choose_solver
-from higbench.optim.structured import GraphJacobian, StructuredJacobian, network_jacobian, solver_jacobian
+from higbench.optim.solver_choice import choose_solver
+from higbench.optim.structured import (
+    GraphJacobian,
+    StructuredJacobian,
+    network_jacobian,
+    output_jacobian,
+    solver_jacobian,
+)
 
 SOLVERS = ("auto", "gram", "svd")
 JACOBIANS = ("structured", "naive")
@@ -104,6 +111,10 @@ class JacobianPower(torch.optim.Optimizer):
         self.last_timings: dict[str, float] = {}
         self.last_finite: bool = True
         self.last_reason: str = ""
+        # The spectrum of the last inversion: sv_max, sv_min_kept, sv_dropped, singular_values.
+        self.last_spectrum: dict = {}
+        # b when the objective is the batch mean, 1 for the sum (Levenberg-Marquardt models the sum).
+        self.samples_averaged: int = 1
 
     # -- the pieces, so callers with their own Jacobians (the runner) can time each phase --
 
@@ -120,7 +131,7 @@ class JacobianPower(torch.optim.Optimizer):
         return dict(kappa=g["kappa"], beta=g["beta"], tau=g["tau"], truncation=g["truncation"])
 
     def resolved_solver(self, rows: int | None = None, n_params: int | None = None) -> str:
-        """``gram`` or ``svd`` for a J of rows x n_params (``higbench.optim.routes.choose_solver``)."""
+        """``gram`` or ``svd`` for a J of rows x n_params (``higbench.optim.solver_choice.choose_solver``)."""
         g = self.group
         return choose_solver(g["solver"], rows, n_params, g["tau"], g["precision"], g["truncation"])
 
@@ -138,13 +149,13 @@ class JacobianPower(torch.optim.Optimizer):
         g = grad_y.reshape(-1)
         if route == "gram":
             try:
-                c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True)
+                c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True, on_spectrum=self._record_spectrum)
                 return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
             except torch.linalg.LinAlgError as exc:
                 # K may be destroyed (overwrite=True); J is intact: retry on the SVD route.
                 warnings.warn(f"Gram route failed ({exc}); retrying with the SVD of J", RuntimeWarning, stacklevel=2)
                 J = J.matrix().to(self.group["precision"]) if isinstance(J, StructuredJacobian) else J
-        return jacobian_power(J, g.to(J.dtype), **self._opts())
+        return jacobian_power(J, g.to(J.dtype), **self._opts(), on_spectrum=self._record_spectrum)
 
     def direction(self, J: torch.Tensor | StructuredJacobian, grad_y: torch.Tensor) -> torch.Tensor:
         """max(s)^beta V diag(s^kappa) U^T g in ``precision``.
@@ -170,9 +181,29 @@ class JacobianPower(torch.optim.Optimizer):
 
     def _refuse(self, reason: str) -> None:
         self.last_timings, self.last_finite, self.last_reason = {}, False, reason
+        self.last_spectrum = {}
 
-    def _finish(self, J, grad_y: torch.Tensor, t0: float) -> None:
-        """The rest of one update from its derivatives: K or J, inversion, apply; timed and checked."""
+    def _record_spectrum(self, s: torch.Tensor, keep: torch.Tensor) -> None:
+        """What the last inversion saw: largest and smallest kept singular value, how many tau dropped.
+
+        In NumPy: one copy of a few hundred values, then microseconds (torch's per-op overhead
+        on such small tensors cost ~1.7% of a toy update).
+        """
+        values, kept = s.detach().cpu().numpy(), keep.detach().cpu().numpy()
+        n_kept = int(kept.sum())
+        self.last_spectrum = {
+            "sv_max": float(values.max()) if values.size else math.nan,
+            "sv_min_kept": float(values[kept].min()) if n_kept else math.nan,
+            "sv_dropped": values.size - n_kept,
+            "singular_values": values,
+        }
+
+    def _update(self, J, grad_y: torch.Tensor, t0: float, evaluate: Callable[[], torch.Tensor]) -> None:
+        """The rest of one update from its derivatives: K or J, inversion, apply; timed and checked.
+
+        evaluate: the objective at the current parameters (unused here; Levenberg-Marquardt
+        accepts or rejects its step with it).
+        """
         route, J, K = self._derivative_tail(J)
         if not torch.isfinite(K if K is not None else J).all():
             return self._refuse("non-finite Jacobian")
@@ -193,47 +224,53 @@ class JacobianPower(torch.optim.Optimizer):
 
     # -- torch.optim-style entry points for user code --
 
-    def step(self, closure: Callable[[], tuple]):  # type: ignore[override]
-        """One update. ``closure()`` returns ``(y, loss)`` or ``(u, y, loss)``.
+    def step(self, closure: Callable[[], object]) -> torch.Tensor:  # type: ignore[override]
+        """One update through ``closure``; returns the batch-mean loss before it (detached).
 
-        y: per-sample physical outputs (b, |y|) (or (b, ...), flattened per sample),
-        computed from the parameters with autograd enabled; loss: the scalar batch-mean
-        loss computed from y. With u (b, |u|), the network outputs y was computed from,
-        the solver part dy_i/du_i and the network part are differentiated apart (faster
-        when |u| or the solver is large); otherwise every row of J is one batched reverse
-        pass through network and solver. Samples must be independent. Returns the loss.
+        closure, one of:
+
+        * a ``LossClosure`` (``higbench.optim.closure``): the network, solver and per-sample
+          loss as pieces; the fast path of ``step_structured`` (what the runner uses).
+        * a callable returning ``(y, loss)``: y the per-sample physical outputs (b, ...)
+          computed from the parameters with autograd enabled, loss the per-sample losses
+          (b,) or their scalar mean. Every row of J is one batched reverse pass through
+          network and solver.
+        * a callable returning ``(u, y, loss)``: as above, with u (b, |u|) the network
+          outputs y was computed from; solver part dy_i/du_i and network part are then
+          differentiated apart (faster when |u| or the solver is large).
+
+        Samples must be independent. g is the gradient of the batch mean (a ``LossClosure``
+        may ask for the sum). A closure returning the scalar loss alone (torch.optim's
+        style) raises TypeError: the update needs the per-sample outputs y.
+        ``last_timings``, ``last_finite``, ``last_reason`` and ``last_spectrum`` say how the
+        update went (a non-finite loss, Jacobian or direction leaves the parameters as they were).
         """
+        if isinstance(closure, LossClosure) and closure.outputs_fn is None:
+            return self.step_structured(
+                closure.model, closure.net_inputs, closure.physics, closure.loss, closure.inputs, closure.reduction
+            )
         t0 = time.perf_counter()
         with torch.enable_grad():
-            out = closure()
-            if len(out) == 3:
-                u, y, loss = out
-                b = y.shape[0]
-                (grad_y,) = torch.autograd.grad(loss, y, retain_graph=True)
-                seed = torch.eye(y[0].numel(), dtype=y.dtype, device=y.device)
-                m = seed.shape[0]
-                (A,) = torch.autograd.grad(
-                    y.reshape(b, m), u, seed[:, None, :].expand(m, b, m), is_grads_batched=True, retain_graph=True
-                )
-                J = GraphJacobian(u, self.params, A.reshape(m, b, -1).transpose(0, 1), self.group["precision"])
+            u, y, objective, mean = _closure_outputs(closure)
+            (grad_y,) = torch.autograd.grad(objective, y, retain_graph=True)
+            if not torch.isfinite(mean):
+                self._refuse("non-finite loss")
+                return mean.detach()
+            y2 = y.reshape(y.shape[0], -1)
+            if u is None:  # every output is its own "network output": A_i = I
+                u, A = y2, torch.eye(y2.shape[1], dtype=y.dtype, device=y.device).expand(y2.shape[0], -1, -1)
             else:
-                y, loss = out
-                (grad_y,) = torch.autograd.grad(loss, y, retain_graph=True)
-                rows = y.numel()
-                eye = torch.eye(rows, dtype=y.dtype, device=y.device).reshape(rows, *y.shape)
-                jac = torch.autograd.grad(y, self.params, grad_outputs=eye, is_grads_batched=True, allow_unused=True)
-                J = torch.cat(
-                    [
-                        (j if j is not None else torch.zeros(rows, *p.shape, dtype=y.dtype)).reshape(rows, -1)
-                        for j, p in zip(jac, self.params)
-                    ],
-                    dim=1,
-                )
-        if not torch.isfinite(loss):
-            self._refuse("non-finite loss")
-        else:
-            self._finish(J, grad_y, t0)
-        return loss.detach()
+                A = output_jacobian(y2, u)
+            J = GraphJacobian(u, self.params, A, self.group["precision"])
+        reduction = closure.reduction if isinstance(closure, LossClosure) else "mean"
+        self.samples_averaged = y.shape[0] if reduction == "mean" else 1
+
+        def evaluate() -> torch.Tensor:
+            with torch.no_grad():
+                return _closure_outputs(closure)[2]
+
+        self._update(J, grad_y, t0, evaluate)
+        return mean.detach()
 
     def step_structured(
         self,
@@ -252,14 +289,16 @@ class JacobianPower(torch.optim.Optimizer):
         physics: ``physics(inputs, u)`` (or ``physics(u)`` when ``inputs`` is None),
             differentiable, batched, samples independent; returns y (b, ...).
         loss: ``loss(y)`` -> per-sample losses (b,) (or a scalar); g is the gradient of
-            their mean, or of their sum with ``reduction="sum"`` (a b-times larger g: the
-            convention of the reference's Poisson script).
+            their mean, or of their sum with ``reduction="sum"`` (``closure.reduce_loss``).
         With ``jacobian="naive"`` J comes from torch.func through network and solver per
-        sample (the reference). Returns the batch-mean loss before the update (detached);
-        ``last_timings``, ``last_finite`` and ``last_reason`` say how the update went.
+        sample (the reference). Returns the batch-mean loss before the update (detached),
+        whatever the reduction; ``last_timings``, ``last_finite``, ``last_reason`` and
+        ``last_spectrum`` say how the update went.
         """
         t0 = time.perf_counter()
         naive = self.group["jacobian"] == "naive"
+        closure = LossClosure(model, net_inputs, physics, loss, inputs, reduction)
+        self.samples_averaged = net_inputs.shape[0] if reduction == "mean" else 1
         with torch.no_grad():
             u = model(net_inputs)
             if naive:
@@ -267,16 +306,12 @@ class JacobianPower(torch.optim.Optimizer):
         if not naive:
             y, A = solver_jacobian(physics, inputs, u)
         with torch.enable_grad():
-            y_leaf = y.requires_grad_(True)
-            per_sample = loss(y_leaf)
-            if reduction not in ("mean", "sum"):
-                raise ValueError(f"reduction={reduction!r}: expected 'mean' or 'sum'")
-            objective = per_sample.sum() if reduction == "sum" and per_sample.ndim > 0 else per_sample.mean()
-            value = per_sample.mean()
-            (grad_y,) = torch.autograd.grad(objective, y_leaf)
+            per_sample = loss(y.requires_grad_(True))
+            (grad_y,) = torch.autograd.grad(reduce_loss(per_sample, reduction), y)
+            value = per_sample.mean().detach()
         if not torch.isfinite(value):
             self._refuse("non-finite loss")
-            return value.detach()
+            return value
         if naive:  # the reference: torch.func Jacobian through network and solver per sample, J materialised
             if inputs is None:
                 inputs, physics_xu = torch.zeros(u.shape[0], 0, dtype=u.dtype, device=u.device), lambda _x, v: physics(v)
@@ -285,11 +320,37 @@ class JacobianPower(torch.optim.Optimizer):
             J = per_sample_jacobian(model, physics_xu, inputs, net_inputs)
         elif not torch.isfinite(A).all():
             self._refuse("non-finite Jacobian")
-            return value.detach()
+            return value
         else:
             J = network_jacobian(model, self.params, net_inputs, A, self.group["precision"])
-        self._finish(J, grad_y, t0)
-        return value.detach()
+        self._update(J, grad_y, t0, closure.objective)
+        return value
+
+
+_CLOSURE_CONTRACT = (
+    "a Jacobian-power step needs the per-sample outputs: the closure must return (y, loss) or "
+    "(u, y, loss) with y (b, ...) the physical outputs and loss the per-sample losses (b,) or "
+    "their mean, or be a higbench.optim.LossClosure; got {}"
+)
+
+
+def _closure_outputs(closure) -> tuple[torch.Tensor | None, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(u or None, y, objective, batch-mean loss) from any closure ``step`` accepts."""
+    if closure is None:
+        raise TypeError(_CLOSURE_CONTRACT.format("no closure"))
+    if isinstance(closure, LossClosure):
+        y = closure.outputs()
+        per_sample = closure.loss(y)
+        return None, y, reduce_loss(per_sample, closure.reduction), per_sample.mean()
+    out = closure()
+    if not isinstance(out, (tuple, list)) or len(out) not in (2, 3):
+        got = f"a {tuple(out.shape)} tensor" if isinstance(out, torch.Tensor) else type(out).__name__
+        raise TypeError(_CLOSURE_CONTRACT.format(got))
+    *u, y, loss = out
+    if loss.ndim > 1 or (loss.ndim == 1 and loss.shape[0] != y.shape[0]):
+        raise TypeError(_CLOSURE_CONTRACT.format(f"loss of shape {tuple(loss.shape)} for y of shape {tuple(y.shape)}"))
+    mean = reduce_loss(loss, "mean")
+    return (u[0] if u else None), y, mean, mean
 
 
 class HIG(JacobianPower):

@@ -29,78 +29,14 @@ takes the SVD route (``JacobianPower``). A run is declared diverged only when ev
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import torch
 
-from higbench.optim.routes import gram_resolves
+from higbench.optim import tridiagonal
+from higbench.optim.lapack import eigh, svd
 
 TRUNCATION_MODES = ("relative", "absolute")
-
-
-def _scipy_svd(A: torch.Tensor):
-    import scipy.linalg
-
-    u, s, vh = scipy.linalg.svd(A.detach().cpu().numpy(), full_matrices=False, lapack_driver="gesvd", check_finite=False)
-    return tuple(torch.from_numpy(x).to(A.device, A.dtype) for x in (u, s, vh))
-
-
-def _svd_via_eigh(A: torch.Tensor):
-    """Thin SVD from eigh of the smaller Gram matrix (singular values below ~sqrt(eps) lost)."""
-    wide = A.shape[0] <= A.shape[1]
-    lam, W = eigh(A @ A.T if wide else A.T @ A)
-    lam, W = lam.flip(0).clamp_min(0), W.flip(1)
-    s = lam.sqrt()
-    inv = torch.where(s > 0, 1 / torch.where(s > 0, s, torch.ones_like(s)), torch.zeros_like(s))
-    if wide:
-        return W, s, (A.T @ W * inv).T
-    return A @ W * inv, s, W.T
-
-
-def svd(A: torch.Tensor):
-    """``torch.linalg.svd(A, full_matrices=False)`` with fallbacks when it does not converge."""
-    routes = [("gesdd", lambda: torch.linalg.svd(A, full_matrices=False)), ("gesvd", lambda: _scipy_svd(A)),
-              ("eigh of the Gram matrix", lambda: _svd_via_eigh(A))]  # fmt: skip
-    return first_success("SVD", routes)
-
-
-def _scipy_eigh(K: torch.Tensor, driver: str):
-    import scipy.linalg
-
-    lam, U = scipy.linalg.eigh(K.detach().cpu().numpy(), lower=True, driver=driver, check_finite=False)
-    return torch.from_numpy(lam).to(K.device, K.dtype), torch.from_numpy(U).to(K.device, K.dtype)
-
-
-def _eigh_via_svd(K: torch.Tensor):
-    """K symmetric positive semi-definite: its SVD is its eigen-decomposition (ascending here)."""
-    sym = torch.tril(K) + torch.tril(K, -1).T
-    U, s, _ = torch.linalg.svd(sym)
-    return s.flip(0), U.flip(1)
-
-
-def eigh(K: torch.Tensor):
-    """``torch.linalg.eigh(K)`` (lower triangle) with fallbacks when it does not converge."""
-    routes = [("syevd", lambda: torch.linalg.eigh(K)), ("syevr", lambda: _scipy_eigh(K, "evr")),
-              ("syev", lambda: _scipy_eigh(K, "ev")), ("SVD of K", lambda: _eigh_via_svd(K))]  # fmt: skip
-    return first_success("eigh", routes)
-
-
-def first_success(what: str, routes):
-    """The result of the first route (name, thunk) that neither raises nor returns non-finite
-    tensors; a warning names the routes that failed. LinAlgError when every route fails."""
-    errors = []
-    for name, route in routes:
-        try:
-            out = route()
-        except (torch.linalg.LinAlgError, ImportError, ValueError) as exc:  # numpy's LinAlgError is a ValueError
-            errors.append(f"{name}: {exc}")
-            continue
-        if not all(torch.isfinite(x).all() for x in out):
-            errors.append(f"{name}: non-finite result")
-            continue
-        if errors:
-            warnings.warn(f"{what} failed ({'; '.join(errors)}); used {name} instead", RuntimeWarning, stacklevel=3)
-        return out
-    raise torch.linalg.LinAlgError(f"{what} failed with every driver: {'; '.join(errors)}")
 
 
 def _keep_mask(s: torch.Tensor, tau: float, truncation: str) -> torch.Tensor:
@@ -133,12 +69,14 @@ def jacobian_power(
     beta: float = 0.0,
     tau: float = 1e-6,
     truncation: str = "relative",
+    on_spectrum: Callable[[torch.Tensor, torch.Tensor], None] | None = None,
 ) -> torch.Tensor:
     """Direction ``max(s)^beta V diag(s^kappa) U^T g`` via the SVD of J.
 
     J: (rows, params) stacked per-sample Jacobians; g: (rows,) stacked loss gradients.
     Returns (params,). No minus sign and no learning rate: the caller applies
     ``theta -= lr * direction``. Computed in the dtype of J (use float64 for small tau).
+    on_spectrum: called with the singular values s and the mask of those kept.
     """
     if J.ndim != 2 or g.ndim != 1 or J.shape[0] != g.shape[0]:
         raise ValueError(f"expected J (rows, params) and g (rows,), got {tuple(J.shape)} and {tuple(g.shape)}")
@@ -150,6 +88,8 @@ def jacobian_power(
     else:
         U, s, Vh = svd(J)
     keep = _keep_mask(s, tau, truncation)
+    if on_spectrum is not None:
+        on_spectrum(s, keep)
     coeff = _powered(s, keep, kappa) * (U.T @ g.to(J.dtype))
     return _prefactor(s, beta) * (Vh.T @ coeff)
 
@@ -165,10 +105,28 @@ def resolved_eigen_method(n: int, dtype: torch.dtype, device: torch.device | str
         raise ValueError(f"method={method!r}: expected one of {EIGEN_METHODS}")
     if method != "auto":
         return method
-    from higbench.optim import tridiagonal
-
     ok = dtype == torch.float64 and torch.device(device).type == "cpu" and n >= TRIDIAGONAL_MIN_ROWS
     return "tridiagonal" if ok and tridiagonal.available() else "eigh"
+
+
+def gram_eigen(K: torch.Tensor, method: str = "auto", overwrite: bool = False):
+    """(eigenvalues ascending, project v -> U^T v, expand w -> U w) of the Gram matrix K.
+
+    The tridiagonal route (``method`` as in ``gram_coefficients``) never forms U: project
+    and expand apply its Householder reflectors and the tridiagonal eigenvectors to vectors.
+    """
+    if resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal":
+        try:
+            eig = tridiagonal.TridiagonalEigen(K, overwrite=overwrite)
+            return eig.values, eig.project, eig.expand
+        except torch.linalg.LinAlgError:
+            # After the reduction the tridiagonal solver has its own fallbacks; a failed
+            # reduction with overwrite may have left K destroyed: the caller retries from J.
+            if overwrite:
+                raise
+            warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=3)
+    lam, U = eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
+    return lam, (lambda v: U.T @ v), (lambda w: U @ w)
 
 
 def gram_coefficients(
@@ -180,53 +138,30 @@ def gram_coefficients(
     truncation: str = "relative",
     method: str = "auto",
     overwrite: bool = False,
+    on_spectrum: Callable[[torch.Tensor, torch.Tensor], None] | None = None,
 ) -> torch.Tensor:
     """Output-space coefficients c with ``J^T c = jacobian_power(J, g, ...)``.
 
     K: (rows, rows) Gram matrix J J^T (its lower triangle is used); g: (rows,). Needs the
     eigen-pairs of K: eigenvalues s^2, so the relative cutoff on s is a cutoff tau^2 on s^2
-    -- reliable only while tau^2 is well above the precision of K (see ``gram_is_accurate``).
+    -- reliable only while tau^2 is well above the precision of K (see ``solver_choice.gram_is_accurate``).
     method: ``eigh`` (torch.linalg.eigh: all eigenvectors), ``tridiagonal`` (Householder
     tridiagonalisation, eigenvectors applied to g only; ``higbench.optim.tridiagonal``, needs
     SciPy) or ``auto`` (tridiagonal for float64 CPU matrices of 256 rows and more).
     overwrite: K may be destroyed (tridiagonal route; saves a copy of K).
+    on_spectrum: called with the singular values s = sqrt(eigenvalues) and the mask of those kept.
     """
     if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
         raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
     g = g.to(K.dtype)
-    tridiagonal = resolved_eigen_method(K.shape[0], K.dtype, K.device, method) == "tridiagonal"
-    if tridiagonal:
-        from higbench.optim.tridiagonal import TridiagonalEigen
-
-        try:
-            eig = TridiagonalEigen(K, overwrite=overwrite)
-            lam, project, expand = eig.values, eig.project, eig.expand
-        except torch.linalg.LinAlgError:
-            # After the reduction the tridiagonal solver has its own fallbacks; a failed
-            # reduction with overwrite may have left K destroyed: the caller retries from J.
-            if overwrite:
-                raise
-            warnings.warn("tridiagonal eigen-solver failed; retrying with eigh", RuntimeWarning, stacklevel=2)
-            tridiagonal = False
-    if not tridiagonal:
-        lam, U = eigh(K)  # UPLO="L": the lower triangle, no symmetrised copy
-
-        def project(v):
-            return U.T @ v
-
-        def expand(v):
-            return U @ v
-
+    lam, project, expand = gram_eigen(K, method, overwrite)
     s = lam.clamp_min(0).sqrt()  # round-off can make tiny eigenvalues negative
     if truncation == "relative":
         # Eigenvalues below n*eps*max are round-off, whatever tau says.
         floor = K.shape[0] * torch.finfo(K.dtype).eps * lam.abs().max()
         s = torch.where(lam > floor, s, torch.zeros_like(s))
     keep = _keep_mask(s, tau, truncation)
+    if on_spectrum is not None:
+        on_spectrum(s, keep)
     coeff = _powered(s, keep, kappa - 1.0) * project(g)
     return _prefactor(s, beta) * expand(coeff)
-
-
-def gram_is_accurate(tau: float, dtype: torch.dtype = torch.float64, truncation: str = "relative") -> bool:
-    """Whether the Gram route resolves the relative cutoff tau (see ``routes.gram_resolves``)."""
-    return gram_resolves(tau, dtype, truncation)

@@ -103,10 +103,8 @@ def solver_jacobian(
         if not y2.requires_grad:  # y does not depend on u at all
             return y2.detach(), y2.new_zeros(b, m, u_flat_size)
         if method == "batched":
-            seed = torch.eye(m, dtype=y2.dtype, device=y2.device)[:, None, :].expand(m, b, m)
             try:
-                (grad,) = torch.autograd.grad(y2, leaf, seed, is_grads_batched=True, retain_graph=True, materialize_grads=True)
-                return y2.detach(), grad.reshape(m, b, u_flat_size).transpose(0, 1)
+                return y2.detach(), output_jacobian(y2, leaf)
             except RuntimeError:  # an op without a vmap rule: do the passes one by one
                 pass
         rows = []
@@ -116,6 +114,18 @@ def solver_jacobian(
             (grad,) = torch.autograd.grad(y2, leaf, seed, retain_graph=k < m - 1, materialize_grads=True)
             rows.append(grad.reshape(b, u_flat_size))
         return y2.detach(), torch.stack(rows, dim=1)
+
+
+def output_jacobian(y: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """A (b, m, |u|) with A_i = dy_i/du_i, for y (b, m) computed from u (b, ...) in a graph.
+
+    One vmapped backward pass: seed k puts component k on every sample at once (samples
+    independent), so row k of every A_i comes back together. The graph is kept.
+    """
+    b, m = y.shape
+    seed = torch.eye(m, dtype=y.dtype, device=y.device)[:, None, :].expand(m, b, m)
+    (grad,) = torch.autograd.grad(y, u, seed, is_grads_batched=True, retain_graph=True, materialize_grads=True)
+    return grad.reshape(m, b, -1).transpose(0, 1)
 
 
 # ---------------------------------------------------------------------------------------

@@ -29,6 +29,8 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
+from higbench.optim.lapack import eigh, first_success
+
 
 @functools.lru_cache(maxsize=1)
 def available() -> bool:
@@ -116,8 +118,6 @@ def _dstev(d: np.ndarray, e: np.ndarray):
 
 
 def _dense_eigh(d: np.ndarray, e: np.ndarray):
-    from higbench.optim.inversion import eigh
-
     T = torch.from_numpy(np.diag(d) + np.diag(e, -1))  # lower triangle is all eigh reads
     lam, W = eigh(T)
     return lam.numpy(), W.numpy()
@@ -131,8 +131,6 @@ def tridiagonal_eigen(d: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndar
     each on the same intact d and e (no driver here writes into them).
     """
     import scipy.linalg
-
-    from higbench.optim.inversion import first_success
 
     def stemr():
         return scipy.linalg.eigh_tridiagonal(d, e, lapack_driver="stemr", check_finite=False)

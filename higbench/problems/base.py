@@ -16,11 +16,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from higbench.optim.closure import LOSS_REDUCTIONS, reduce_loss
 from higbench.problems.networks import INIT_SCHEMES, initialise
 from higbench.schema import value
 
-# problem.loss_reduction: how the per-sample losses of a batch become the training objective.
-LOSS_REDUCTIONS = ("mean", "sum")
 # problem.solver of the time-stepping problems: the compiled loop with its adjoint, or plain torch.
 PHYSICS_SOLVERS = ("fast", "reference")
 
@@ -92,10 +91,7 @@ class Problem(abc.ABC):
         """The scalar every optimizer differentiates: the batch mean (default) or sum of the
         per-sample losses (``problem.loss_reduction``; the reference's Poisson script sums).
         Curves and logged losses stay per-sample means either way."""
-        reduction = self.cfg.get("loss_reduction", "mean")
-        if reduction not in LOSS_REDUCTIONS:
-            raise ValueError(f"loss_reduction={reduction!r}: expected one of {LOSS_REDUCTIONS}")
-        return per_sample.sum() if reduction == "sum" else per_sample.mean()
+        return reduce_loss(per_sample, self.cfg.get("loss_reduction", "mean"))
 
     def metrics(self, y: torch.Tensor, batch: Batch) -> dict[str, torch.Tensor]:
         """Extra per-sample metrics (name -> (b,)) logged as curves next to the loss."""

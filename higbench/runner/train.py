@@ -1,9 +1,10 @@
 """The training loop: mini-batch updates under a budget, evaluations, the run file.
 
 Clock semantics (as in the paper, appendix B): ``wall_time`` is the training clock. It
-starts once the data set exists, before the network and optimizer are built, so framework
-warm-up and the first (slow) updates count; evaluations of the test loss, checkpoints and
-the creation of the run file are excluded. A resumed run continues the clock of its
+starts once the data set exists and the solvers are compiled (``warmup.py``: numba's compile
+or cache load, recorded apart as ``/env`` ``warmup_s``), before the network and optimizer are
+built, so framework warm-up and the first (slow) updates count; evaluations of the test
+loss, checkpoints and the creation of the run file are excluded. A resumed run continues the clock of its
 checkpoint. (Through the CLI, the pre-flight check has already built the problem and an
 optimizer on the CPU, so one-off Python imports are paid before the clock starts.)
 
@@ -41,22 +42,25 @@ import torch
 import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first optimizer (3-4 s here):
 
 # import it up front, so that no launcher's first run pays it inside the training clock.
+from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.config import init_from_path
 from higbench.errors import ConfigError
+from higbench.optim import memory_guard
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
-from higbench.runfile.writer import RunFileFault, RunFileWriter
-from higbench.runner import checkpoint, memory_guard
+from higbench.runfile.writer import RunFileWriter
+from higbench.runner import checkpoint
 from higbench.runner.environment import MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
-from higbench.runner.threads import resolve_threads
-from higbench.runner.updates import JacobianPowerUpdate, build_update
+from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
+from higbench.runner.threads import fit_to_work, resolve_threads
+from higbench.runner.updates import Update, build_update
+from higbench.runner.warmup import warm_up
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-_UPDATE_COLUMNS = ("step", "wall_time", "loss", "jacobian_s", "inversion_s", "apply_s", "update_s")
 
 
 class Interrupted(Exception):
@@ -71,6 +75,7 @@ class RunSummary:
     final_test_loss: float
     path: Path
     reason: str = ""
+    initial_test_loss: float = math.nan  # the test loss at step 0 (the summary's thresholds are relative to it)
 
 
 class TrainingClock:
@@ -174,7 +179,7 @@ def load_initial_weights(model: torch.nn.Module, path: str, problem_name: str) -
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
     """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
-    if not isinstance(update, JacobianPowerUpdate):
+    if not hasattr(update.optimizer, "last_spectrum"):  # only the Jacobian-power family builds J
         return None
     with torch.no_grad():
         y = problem.outputs(model, problem.test_set()[:1])
@@ -231,6 +236,10 @@ def preflight(cfg: DictConfig) -> None:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
+    if cfg.get("tensorboard"):
+        from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
+
+        summary_writer_class()
     if target.type == "cpu":
         check_memory(cfg, problem, model, update)
 
@@ -238,21 +247,248 @@ def preflight(cfg: DictConfig) -> None:
 # -- the loop --------------------------------------------------------------------------------
 
 
-def _close_failed(writer: RunFileWriter, exc: BaseException, step: int, flush_pending=None) -> None:
-    """Close the run file as ``failed``, whatever else goes wrong on the way.
+def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dict, overrides) -> RunFileWriter:
+    """A new run file, or the checkpoint's file reopened at the rows it recorded."""
+    config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+    if state is None:
+        return RunFileWriter(
+            run_path,
+            config_yaml=config_yaml,
+            overrides=overrides or [],
+            env=env,
+            meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
+        )
+    return RunFileWriter.reopen(
+        run_path,
+        rows=state["rows"],
+        resume_info={
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "from_step": state["step"],
+            "wall_time": state["wall_time"],
+            "overrides": list(overrides or []),
+        },
+        config_yaml=config_yaml,
+    )
 
-    Pending rows are written if the file can still take them (not after a file-system
-    fault: the file then keeps what its last flush holds).
-    """
-    if flush_pending is not None and not isinstance(exc, RunFileFault):
+
+def _is_jacobian_power(opt_cfg) -> bool:
+    return hasattr(get_class(opt_cfg._target_), "step_structured")
+
+
+def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
+    """Optional sinks named by the config (``tensorboard: true``: event files beside the run file)."""
+    if not cfg.get("tensorboard"):
+        return []
+    from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
+
+    return [TensorBoardSink(run_path.parent / "tensorboard")]
+
+
+class TrainingRun:
+    """The state of one run between updates, and what happens at updates, evaluations and checkpoints."""
+
+    def __init__(self, cfg, run_path, problem, model, update: Update, device, state, clock, file: RunFileSink, sinks):
+        self.cfg, self.run_path, self.problem, self.model, self.update = cfg, run_path, problem, model, update
+        self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
+        self.test = problem.test_set()
+        self.memory = MemoryMonitor(device)
+        self.shuffle = torch.Generator().manual_seed(cfg.seed)
+        self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
+        self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
+        self.by_updates = cfg.get("eval_unit", "seconds") == "updates"
+        self.records_spectrum = hasattr(update.optimizer, "last_spectrum")
+        self.spectrum: dict = {}
+        self.step, self.epoch, self.position = 0, 0, 0
+        self.batch_losses: list[float] = []
+        self.next_eval, self.last_eval_step = 0.0, -1
+        self.epoch_iter = None
+        self.epoch_start_rng = self.shuffle.get_state()
+        self.resumed = state is not None
+        self.initial_test_loss = math.nan
+        if state is not None:
+            self._restore(state)
+        self.last_ckpt = clock()
+
+    def _restore(self, state: dict) -> None:
+        curves = self.file.writer.f["curves"]
+        if "test_loss" in curves and curves["test_loss"].shape[0]:
+            self.initial_test_loss = float(curves["test_loss"][0])
+        self.model.load_state_dict(state["model"])
+        self.update.optimizer.load_state_dict(state["optimizer"])
+        self.step, self.epoch, self.position = state["step"], state["epoch"], state["position"]
+        self.next_eval, self.batch_losses = state["next_eval"], list(state["batch_losses"])
+        self.last_eval_step = state["last_eval_step"]
+        self.memory.peak_rss_mb = max(self.memory.peak_rss_mb, state.get("peak_rss_mb", 0.0))
+        # Replay the epoch's first `position` batches: the data order is the original one.
+        self.epoch_start_rng = state["shuffle_epoch_start"]
+        self.shuffle.set_state(self.epoch_start_rng)
+        self.epoch_iter = iter(self.problem.epoch(self.cfg.batch_size, self.shuffle))
+        for _ in range(self.position):
+            next(self.epoch_iter)
+        torch.set_rng_state(state["torch_rng"])
+        if self.device.type == "cuda" and state.get("cuda_rng") is not None:
+            torch.cuda.set_rng_state(state["cuda_rng"], self.device)
+
+    def out_of_budget(self) -> bool:
+        return self.step >= self.max_updates or self.clock() >= self.budget_s
+
+    def record_evaluation(self) -> float:
+        """Test loss and logs at this step (clock paused); every sink flushed."""
+        self.clock.pause()
+        self.last_eval_step = self.step
+        self.model.eval()
+        metrics = evaluate(self.problem, self.model, self.test)
+        self.model.train()
+        train_loss = float(np.mean(self.batch_losses)) if self.batch_losses else math.nan
+        self.batch_losses.clear()
+        row = {"step": self.step, "epoch": self.epoch, "wall_time": self.clock(), "train_loss": train_loss}
+        self.sinks.on_eval({**row, "rss_mb": self.memory.sample(), **metrics})
+        for name, value in self.problem.eval_logs(self.model).items():
+            self.sinks.on_log(name, value)
+        if self.records_spectrum:  # the whole spectrum of the last update, as quantiles
+            self.sinks.on_log("sv_quantiles", spectrum_quantiles(self.spectrum))
+        self.sinks.flush()
+        self.clock.resume()
+        return metrics["test_loss"]
+
+    def save_checkpoint(self) -> None:
+        self.clock.pause()
+        self.sinks.flush()  # the file holds at least the rows the checkpoint records
+        writer = self.file.writer
+        checkpoint.save(
+            self.run_path,
+            {
+                "step": self.step,
+                "epoch": self.epoch,
+                "position": self.position,
+                "wall_time": self.clock(),
+                "next_eval": self.next_eval,
+                "last_eval_step": self.last_eval_step,
+                "batch_losses": list(self.batch_losses),
+                "model": {k: v.detach().cpu().clone() for k, v in self.model.state_dict().items()},
+                "optimizer": self.update.optimizer.state_dict(),
+                "shuffle_epoch_start": self.epoch_start_rng,
+                "torch_rng": torch.get_rng_state(),
+                "cuda_rng": torch.cuda.get_rng_state(self.device) if self.device.type == "cuda" else None,
+                "rows": writer.row_counts(),
+                "peak_rss_mb": self.memory.peak_rss_mb,
+                "run_id": writer.run_id,
+            },
+        )
+        self.last_ckpt = self.clock()
+        self.clock.resume()
+
+    def next_batch(self) -> Batch:
+        while True:
+            if self.epoch_iter is None:
+                self.epoch_start_rng = self.shuffle.get_state()
+                self.epoch_iter = iter(self.problem.epoch(self.cfg.batch_size, self.shuffle))
+                self.position = 0
+            batch = next(self.epoch_iter, None)
+            if batch is not None:
+                self.position += 1
+                return batch
+            if self.position == 0:
+                raise ConfigError("batch_size", self.cfg.batch_size, "the problem's epoch yields no batch of this size")
+            self.epoch, self.epoch_iter = self.epoch + 1, None
+
+    def take_update(self) -> str:
+        """One update; the reason it diverged, or empty."""
         try:
-            flush_pending()
-        except Exception:  # noqa: BLE001 - the original error is the one to report
-            pass
+            result = self.update(self.next_batch())
+        except torch.linalg.LinAlgError as exc:  # a solver or inversion that failed outright
+            self.step += 1
+            return f"linear algebra failed: {exc}"
+        self.step += 1
+        if not result.finite or not math.isfinite(result.loss):
+            return result.reason or "non-finite loss"
+        self.batch_losses.append(result.loss)
+        t = result.timings
+        row = {"step": self.step, "wall_time": self.clock(), "loss": result.loss, "update_s": sum(t.values()), **t}
+        if self.records_spectrum:
+            self.spectrum = result.spectrum
+            row.update(spectrum_columns(result.spectrum))
+        self.sinks.on_update(row)
+        self.memory.sample()
+        return ""
+
+    def loop(self, signals: StopSignals) -> tuple[str, str, float]:
+        """Updates until the budget, a divergence or a stop signal; (status, reason, last test loss)."""
+        final_test = math.nan
+        if not self.resumed:
+            final_test = self.initial_test_loss = self.record_evaluation()
+            self.next_eval = self.cfg.eval_every
+        status, reason = "completed", ""
+        while not self.out_of_budget():
+            signals.check()
+            reason = self.take_update()
+            if reason:
+                status = "diverged"
+                break
+            if self.out_of_budget():
+                break
+            if (self.step if self.by_updates else self.clock()) >= self.next_eval:
+                final_test = self.record_evaluation()
+                self.next_eval += self.cfg.eval_every
+                if not math.isfinite(final_test):
+                    status, reason = "diverged", "non-finite test loss"
+                    break
+            ckpt_every = self.cfg.get("checkpoint_every")
+            if ckpt_every is not None and self.clock() - self.last_ckpt >= ckpt_every:
+                self.save_checkpoint()
+        signals.ignore()
+        if self.step != self.last_eval_step:  # one curve row per step: no second row after a diverged evaluation
+            final_test = self.record_evaluation()
+        if status == "completed" and not math.isfinite(final_test):
+            status, reason = "diverged", "non-finite test loss"
+        return status, reason, final_test
+
+    def finish(self, status: str, reason: str) -> None:
+        """Final weights and attributes, then the file closed with its status."""
+        writer = self.file.writer
+        writer.set_attrs("memory", self.memory.summary())
+        writer.write_weights({k: v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}, self.step)
+        writer.f.attrs["steps"] = self.step
+        writer.f.attrs["wall_time"] = self.clock()
+        writer.check_file()
+        self.sinks.close(status, reason, self.step)
+
+
+def _run(run: TrainingRun, signals: StopSignals) -> tuple[str, str, float]:
+    """The loop with the reliability rules of the module docstring around it."""
+    final_test = math.nan
     try:
-        writer.close("failed", f"{type(exc).__name__}: {exc}", step)
-    except Exception:  # noqa: BLE001
-        pass
+        status, reason, final_test = run.loop(signals)
+    except Interrupted as exc:
+        signals.ignore()
+        status, reason = "interrupted", str(exc)
+        try:
+            if signals.signum is not None and "second signal" not in reason:
+                run.save_checkpoint()  # a clean stop between updates: resumable from exactly here
+            else:
+                run.file.write_pending()
+        except BaseException as fault:  # the disk or file failed on the way out
+            _fail(run, fault, signals)
+            raise
+    except BaseException as exc:
+        signals.ignore()
+        _fail(run, exc, signals)
+        raise
+    try:
+        run.finish(status, reason)
+    except BaseException as exc:  # a failure while closing: the file says failed, not running
+        signals.ignore()
+        _fail(run, exc, signals, write_pending=False)
+        raise
+    return status, reason, final_test
+
+
+def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pending: bool = True) -> None:
+    run.file.close_failed(exc, run.step, write_pending)
+    for sink in run.sinks.sinks:
+        if sink is not run.file:
+            sink.close("failed", str(exc), run.step)
+    signals.restore()
 
 
 def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *, resume: bool = False) -> RunSummary:
@@ -262,222 +498,35 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     run's stored config, see ``checkpoint.resume_config``) instead of creating it.
     """
     run_path = Path(run_path)
-    name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     state = checkpoint.load(run_path) if resume else None
     if state is not None:
         checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
     device, problem = _setup(cfg)
-    test = problem.test_set()
-
+    warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     model = problem.build_model()
     if cfg.get("init_from") and not resume:
         load_initial_weights(model, cfg.init_from, cfg.problem.name)
     update = build_update(problem, model, cfg.optimizer)
-    check_memory(cfg, problem, model, update)
-    shuffle = torch.Generator().manual_seed(cfg.seed)
+    estimate = check_memory(cfg, problem, model, update)
+    if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
+        torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
 
     clock.pause()  # creating/reopening the file is not training
-    config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
-    if state is None:
-        writer = RunFileWriter(
-            run_path,
-            config_yaml=config_yaml,
-            overrides=overrides or [],
-            env=environment(device),
-            meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
-        )
-    else:
-        writer = RunFileWriter.reopen(
-            run_path,
-            rows=state["rows"],
-            resume_info={
-                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                "from_step": state["step"],
-                "wall_time": state["wall_time"],
-                "overrides": list(overrides or []),
-            },
-            config_yaml=config_yaml,
-        )
-    memory = MemoryMonitor(device)
-    budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
-    max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
-    by_updates = cfg.get("eval_unit", "seconds") == "updates"
-    ckpt_every = cfg.get("checkpoint_every")
-
-    step, epoch, position = 0, 0, 0
-    batch_losses: list[float] = []
-    pending: dict[str, list[float]] = {k: [] for k in _UPDATE_COLUMNS}
-    next_eval = 0.0
-    last_eval_step = -1
-    epoch_iter = None
-    epoch_start_rng = shuffle.get_state()
-    if state is not None:
-        model.load_state_dict(state["model"])
-        update.optimizer.load_state_dict(state["optimizer"])
-        step, epoch, position = state["step"], state["epoch"], state["position"]
-        next_eval, batch_losses = state["next_eval"], list(state["batch_losses"])
-        last_eval_step = state["last_eval_step"]
-        memory.peak_rss_mb = max(memory.peak_rss_mb, state.get("peak_rss_mb", 0.0))
-        # Replay the epoch's first `position` batches: the data order is the original one.
-        epoch_start_rng = state["shuffle_epoch_start"]
-        shuffle.set_state(epoch_start_rng)
-        epoch_iter = iter(problem.epoch(cfg.batch_size, shuffle))
-        for _ in range(position):
-            next(epoch_iter)
-        torch.set_rng_state(state["torch_rng"])
-        if device.type == "cuda" and state.get("cuda_rng") is not None:
-            torch.cuda.set_rng_state(state["cuda_rng"], device)
+    extra = _extra_sinks(cfg, run_path)
+    file = RunFileSink(_open_run_file(cfg, run_path, state, {**environment(device), "warmup_s": warmup_s}, overrides))
+    step = state["step"] if state else 0
+    name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     progress = Progress(
         cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
     )
-    last_ckpt = clock()
+    run = TrainingRun(
+        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
+    )
     clock.resume()
-    status, reason = "completed", ""
-
-    def flush_pending() -> None:
-        rows = {k: list(v) for k, v in pending.items()}
-        for values in pending.values():  # cleared first: a stop mid-write never writes them twice
-            values.clear()
-        writer.append_rows("updates", rows)
-
-    def record_evaluation() -> float:
-        nonlocal last_eval_step
-        clock.pause()
-        last_eval_step = step
-        model.eval()
-        metrics = evaluate(problem, model, test)
-        model.train()
-        train_loss = float(np.mean(batch_losses)) if batch_losses else math.nan
-        batch_losses.clear()
-        row = {"step": step, "epoch": epoch, "wall_time": clock(), "train_loss": train_loss, "rss_mb": memory.sample(), **metrics}
-        writer.append_row("curves", row)
-        for name, value in problem.eval_logs(model).items():
-            writer.append_row("logs", {name: value})
-        flush_pending()
-        writer.flush()
-        progress.update(step, row["wall_time"], train_loss, metrics["test_loss"])
-        clock.resume()
-        return metrics["test_loss"]
-
-    def save_checkpoint() -> None:
-        nonlocal last_ckpt
-        clock.pause()
-        flush_pending()
-        writer.flush()  # the file holds at least the rows the checkpoint records
-        checkpoint.save(
-            run_path,
-            {
-                "step": step,
-                "epoch": epoch,
-                "position": position,
-                "wall_time": clock(),
-                "next_eval": next_eval,
-                "last_eval_step": last_eval_step,
-                "batch_losses": list(batch_losses),
-                "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
-                "optimizer": update.optimizer.state_dict(),
-                "shuffle_epoch_start": epoch_start_rng,
-                "torch_rng": torch.get_rng_state(),
-                "cuda_rng": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
-                "rows": writer.row_counts(),
-                "peak_rss_mb": memory.peak_rss_mb,
-                "run_id": writer.run_id,
-            },
-        )
-        last_ckpt = clock()
-        clock.resume()
-
     signals = StopSignals().install()
-    final_test = math.nan
-    try:
-        if state is None:
-            final_test = record_evaluation()
-            next_eval = cfg.eval_every
-        done = step >= max_updates or clock() >= budget_s
-        while not done:
-            signals.check()
-            if epoch_iter is None:
-                epoch_start_rng = shuffle.get_state()
-                epoch_iter = iter(problem.epoch(cfg.batch_size, shuffle))
-                position = 0
-            batch = next(epoch_iter, None)
-            if batch is None:
-                if position == 0:
-                    raise ConfigError("batch_size", cfg.batch_size, "the problem's epoch yields no batch of this size")
-                epoch, epoch_iter = epoch + 1, None
-                continue
-            position += 1
-            try:
-                result = update(batch)
-            except torch.linalg.LinAlgError as exc:  # a solver or inversion that failed outright
-                step += 1
-                status, reason = "diverged", f"linear algebra failed: {exc}"
-                break
-            step += 1
-            if not result.finite or not math.isfinite(result.loss):
-                status, reason = "diverged", result.reason or "non-finite loss"
-                break
-            batch_losses.append(result.loss)
-            t = result.timings
-            for k, v in (
-                ("step", step),
-                ("wall_time", clock()),
-                ("loss", result.loss),
-                ("update_s", sum(t.values())),
-                *t.items(),
-            ):
-                pending[k].append(v)
-            memory.sample()
-            progress.tick(step, clock())
-            if step >= max_updates or clock() >= budget_s:
-                break
-            if (step if by_updates else clock()) >= next_eval:
-                final_test = record_evaluation()
-                next_eval += cfg.eval_every
-                if not math.isfinite(final_test):
-                    status, reason = "diverged", "non-finite test loss"
-                    break
-            if ckpt_every is not None and clock() - last_ckpt >= ckpt_every:
-                save_checkpoint()
-        signals.ignore()
-        if step != last_eval_step:  # one curve row per step: no second row after a diverged evaluation
-            final_test = record_evaluation()
-        if status == "completed" and not math.isfinite(final_test):
-            status, reason = "diverged", "non-finite test loss"
-    except Interrupted as exc:
-        signals.ignore()
-        status, reason = "interrupted", str(exc)
-        try:
-            if signals.signum is not None and "second signal" not in reason:
-                save_checkpoint()  # a clean stop between updates: resumable from exactly here
-            else:
-                flush_pending()
-        except BaseException as fault:  # the disk or file failed on the way out
-            _close_failed(writer, fault, step, flush_pending)
-            progress.close()
-            signals.restore()
-            raise
-    except BaseException as exc:
-        signals.ignore()
-        _close_failed(writer, exc, step, flush_pending)
-        progress.close()
-        signals.restore()
-        raise
-    progress.close()
-    try:
-        writer.set_attrs("memory", memory.summary())
-        writer.write_weights({k: v.detach().cpu().numpy() for k, v in model.state_dict().items()}, step)
-        writer.f.attrs["steps"] = step
-        writer.f.attrs["wall_time"] = clock()
-        writer.check_file()
-    except BaseException as exc:  # a failure while closing: the file says failed, not running
-        signals.ignore()
-        _close_failed(writer, exc, step)
-        signals.restore()
-        raise
-    writer.close(status, reason, step)
+    status, reason, final_test = _run(run, signals)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume
     signals.restore()
-    return RunSummary(status, step, clock(), final_test, run_path, reason)
+    return RunSummary(status, run.step, clock(), final_test, run_path, reason, run.initial_test_loss)

@@ -1,13 +1,20 @@
-"""One training update per mini-batch, with its phases timed.
+"""One training update per mini-batch: ``optimizer.step(closure)``, with its phases timed.
 
-Phases, as in the paper's tables: ``jacobian_s`` (derivatives: the backward pass for
-first-order optimizers, the stacked Jacobian for GN/HIG), ``inversion_s`` (SVD / Gram
-eigen-decomposition; zero for first-order optimizers) and ``apply_s`` (the parameter
-update, including torch.optim's own moment bookkeeping).
+Every optimizer goes through the same call. The closure is a ``LossClosure``
+(``higbench.optim.closure``): torch.optim optimizers (Adam, L-BFGS, ...) call it like any
+closure; the Jacobian-power optimizers (HIG, GN, LM) read its pieces and take their fast
+path (per-sample outputs, batched solver Jacobians, the Gram route).
+
+Phases, as in the paper's tables: ``jacobian_s`` (derivatives: the closure's backward
+passes for first-order optimizers, the stacked Jacobian for GN/HIG/LM), ``inversion_s``
+(SVD / Gram eigen-decomposition; zero for first-order optimizers) and ``apply_s`` (the rest
+of the step: torch.optim's bookkeeping, L-BFGS's two-loop recursion, LM's trial steps).
+An optimizer that times its own phases says so in ``last_timings``.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -17,7 +24,7 @@ from omegaconf import DictConfig
 from torch import nn
 
 from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
-from higbench.optim.hig import JacobianPower
+from higbench.optim.closure import LossClosure, NonFiniteStep
 from higbench.problems.base import Batch, Problem
 
 
@@ -27,6 +34,7 @@ class UpdateResult:
     timings: dict[str, float] = field(default_factory=dict)
     finite: bool = True
     reason: str = ""
+    spectrum: dict = field(default_factory=dict)
 
 
 def _sync(device: torch.device) -> None:
@@ -34,84 +42,61 @@ def _sync(device: torch.device) -> None:
         torch.cuda.synchronize(device)
 
 
-class FirstOrderUpdate:
-    """Any torch.optim optimizer on the problem's objective (batch mean or sum, ``problem.loss_reduction``)."""
+class Update:
+    """``optimizer.step(closure)`` on one batch of the problem's objective (``problem.loss_reduction``).
+
+    The logged loss is the batch mean of the per-sample losses before the update, whatever
+    the reduction. A non-finite loss or gradient stops the step before any parameter moves
+    (the closure is guarded); the Jacobian-power optimizers report their own refusals.
+    """
 
     def __init__(self, problem: Problem, model: nn.Module, optimizer: torch.optim.Optimizer):
         self.problem, self.model, self.optimizer = problem, model, optimizer
-
-    def __call__(self, batch: Batch) -> UpdateResult:
-        dev = self.problem.device
-        t0 = time.perf_counter()
-        self.optimizer.zero_grad(set_to_none=True)
-        per_sample = self.problem.loss(self.problem.outputs(self.model, batch), batch.targets)
-        loss = per_sample.mean()  # logged; the gradient is that of the problem's objective (mean or sum)
-        self.problem.objective(per_sample).backward()
-        _sync(dev)
-        t1 = time.perf_counter()
-        value = loss.item()
-        if not torch.isfinite(loss):
-            return UpdateResult(value, finite=False, reason="non-finite loss")
-        grads_finite = all(torch.isfinite(p.grad).all() for p in self.model.parameters() if p.grad is not None)
-        if not grads_finite:
-            return UpdateResult(value, finite=False, reason="non-finite gradient")
-        self.optimizer.step()
-        _sync(dev)
-        t2 = time.perf_counter()
-        return UpdateResult(value, {"jacobian_s": t1 - t0, "inversion_s": 0.0, "apply_s": t2 - t1})
-
-
-class JacobianPowerUpdate:
-    """GN / HIG: one call of the optimizer's public ``step_structured`` per batch.
-
-    The update itself (derivatives, Gram-or-SVD route, inversion, finiteness checks, phase
-    timings) lives in ``higbench.optim.hig.JacobianPower``, the class researchers use, so
-    the runner's timings and results are those of the public optimizer. Here only the
-    problem is unpacked: y = physics(inputs, model(net_inputs)) (``Problem.outputs``) and
-    the per-sample ``problem.loss``.
-
-    Phases (``JacobianPower.last_timings``): ``jacobian_s`` all derivatives (solver
-    Jacobians, network factors or J, and K or J itself), ``inversion_s`` eigh/SVD and the
-    product mapping the coefficients back to parameters, ``apply_s`` the parameter update.
-    """
-
-    def __init__(self, problem: Problem, model: nn.Module, optimizer: JacobianPower):
-        self.problem, self.model, self.optimizer = problem, model, optimizer
-        # A problem with its own ``outputs`` goes through the optimizer's generic step(closure).
+        # A problem with its own ``outputs`` is differentiated through it generically.
         self.composed = type(problem).outputs is Problem.outputs
 
     @property
     def structured(self) -> bool:
-        """Whether J is computed structured (solver and network apart), as the memory guard sizes it."""
-        return self.composed and self.optimizer.group.get("jacobian", "structured") == "structured"
+        """Whether GN/HIG/LM compute J structured (solver and network apart), as the memory guard sizes it."""
+        return self.composed and self.optimizer.param_groups[0].get("jacobian", "structured") == "structured"
+
+    def closure(self, batch: Batch) -> LossClosure:
+        problem, model = self.problem, self.model
+        return LossClosure(
+            model,
+            batch.net_inputs,
+            problem.physics,
+            lambda y: problem.loss(y, batch.targets),
+            batch.inputs,
+            reduction=problem.cfg.get("loss_reduction", "mean"),  # poisson: sum, as the reference
+            guard=True,
+            outputs_fn=None if self.composed else (lambda: problem.outputs(model, batch)),
+        )
 
     def __call__(self, batch: Batch) -> UpdateResult:
-        opt, problem = self.optimizer, self.problem
-        if self.composed:
-            value = opt.step_structured(
-                self.model,
-                batch.net_inputs,
-                physics=problem.physics,
-                loss=lambda y: problem.loss(y, batch.targets),
-                inputs=batch.inputs,
-                reduction=problem.cfg.get("loss_reduction", "mean"),  # poisson: sum, as the reference
-            )
-        else:
-
-            def closure():
-                y = problem.outputs(self.model, batch)
-                # g is the gradient of the objective (problem.loss_reduction); for a summing
-                # problem the logged batch loss is then that sum, not the mean.
-                return y, problem.objective(problem.loss(y, batch.targets))
-
+        opt, closure = self.optimizer, self.closure(batch)
+        t0 = time.perf_counter()
+        try:
             value = opt.step(closure)
-        return UpdateResult(value.item(), dict(opt.last_timings), opt.last_finite, opt.last_reason)
+        except NonFiniteStep as exc:
+            loss = closure.first_mean
+            return UpdateResult(math.nan if loss is None else loss.item(), finite=False, reason=str(exc))
+        _sync(self.problem.device)
+        total = time.perf_counter() - t0
+        loss = closure.first_mean if closure.first_mean is not None else value
+        timings = getattr(opt, "last_timings", None)
+        if timings is None:  # a torch.optim optimizer: the closure timed the derivatives
+            timings = {"jacobian_s": closure.derivative_s, "inversion_s": 0.0, "apply_s": total - closure.derivative_s}
+        return UpdateResult(
+            loss.item(),
+            dict(timings),
+            getattr(opt, "last_finite", True),
+            getattr(opt, "last_reason", ""),
+            getattr(opt, "last_spectrum", {}),
+        )
 
 
-def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig):
+def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig) -> Update:
     """The optimizer class comes from ``optimizer._target_``; its arguments from the rest."""
-    cls = get_class(opt_cfg._target_)
-    optimizer = cls(model.parameters(), **optimizer_kwargs(opt_cfg))
-    if isinstance(optimizer, JacobianPower):
-        return JacobianPowerUpdate(problem, model, optimizer)
-    return FirstOrderUpdate(problem, model, optimizer)
+    optimizer = get_class(opt_cfg._target_)(model.parameters(), **optimizer_kwargs(opt_cfg))
+    return Update(problem, model, optimizer)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from higbench.optim import inversion
+from higbench.optim import inversion, lapack
 from higbench.optim.inversion import gram_coefficients, jacobian_power
 
 
@@ -52,7 +52,7 @@ def test_svd_without_gesvd_uses_the_gram_route(monkeypatch):
     J, g = _problem()
     want = jacobian_power(J, g, kappa=-1.0, tau=1e-4)
     monkeypatch.setattr(torch.linalg, "svd", _failing(torch.linalg.svd, fail_first=10)[0])
-    monkeypatch.setattr(inversion, "_scipy_svd", _failing(None, fail_first=10)[0])
+    monkeypatch.setattr(lapack, "_scipy_svd", _failing(None, fail_first=10)[0])
     with pytest.warns(RuntimeWarning, match="eigh of the Gram matrix"):
         got = jacobian_power(J, g, kappa=-1.0, tau=1e-4)
     np.testing.assert_allclose(got, want, rtol=1e-7)
@@ -62,8 +62,8 @@ def test_every_route_failing_raises_linalgerror(monkeypatch):
     J, g = _problem()
     monkeypatch.setattr(torch.linalg, "svd", _failing(None, fail_first=99)[0])
     monkeypatch.setattr(torch.linalg, "eigh", _failing(None, fail_first=99)[0])
-    monkeypatch.setattr(inversion, "_scipy_svd", _failing(None, fail_first=99)[0])
-    monkeypatch.setattr(inversion, "_scipy_eigh", _failing(None, fail_first=99)[0])
+    monkeypatch.setattr(lapack, "_scipy_svd", _failing(None, fail_first=99)[0])
+    monkeypatch.setattr(lapack, "_scipy_eigh", _failing(None, fail_first=99)[0])
     with pytest.raises(torch.linalg.LinAlgError, match="every driver"):
         jacobian_power(J, g, kappa=-0.5)
 
@@ -73,7 +73,7 @@ def test_eigh_failure_retries(monkeypatch, fail_first):
     J, g = _problem()
     K = J @ J.T
     want = gram_coefficients(K.clone(), g, kappa=-0.5, tau=1e-5, method="eigh")
-    real_scipy = inversion._scipy_eigh
+    real_scipy = lapack._scipy_eigh
     count = {"n": 0}
 
     def scipy_maybe_failing(K, driver):
@@ -83,7 +83,7 @@ def test_eigh_failure_retries(monkeypatch, fail_first):
         return real_scipy(K, driver)
 
     monkeypatch.setattr(torch.linalg, "eigh", _failing(torch.linalg.eigh, fail_first=1)[0])
-    monkeypatch.setattr(inversion, "_scipy_eigh", scipy_maybe_failing)
+    monkeypatch.setattr(lapack, "_scipy_eigh", scipy_maybe_failing)
     with pytest.warns(RuntimeWarning, match="eigh failed"):
         got = gram_coefficients(K.clone(), g, kappa=-0.5, tau=1e-5, method="eigh")
     np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-12)

@@ -61,7 +61,7 @@ BAD_CLI = [
     (["optimizer=adam", "optimizer.tau=1e-4"], "optimizer.tau", "1e-4"),
     (["optimizer=adam", "+optimizer.kappa=-0.5"], "optimizer.kappa", "-0.5"),
     (["problem=nope"], "problem", "nope"),
-    (["optimizer=lbfgs"], "optimizer", "lbfgs"),
+    (["optimizer=bfgs"], "optimizer", "bfgs"),  # not a config (lbfgs is one)
     (["optimizer.lr=[1"], "optimizer.lr", "[1"),
     # init_from: missing file, not a run file, other problem, no weights, other network
     (["init_from={in}/missing.h5"], "init_from", "missing.h5"),
@@ -286,7 +286,7 @@ def test_constructor_argument_missing_from_yaml_says_to_add_it_with_plus(tmp_pat
 
 
 def test_memory_guard_message_gives_estimate_and_fitting_batch(tmp_path, monkeypatch, capsys):
-    from higbench.runner import memory_guard
+    from higbench.optim import memory_guard
 
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit):
@@ -303,7 +303,7 @@ def test_memory_guard_message_gives_estimate_and_fitting_batch(tmp_path, monkeyp
 
 
 def test_memory_estimate_grows_as_it_should():
-    from higbench.runner.memory_guard import estimate_bytes, largest_batch
+    from higbench.optim.memory_guard import estimate_bytes, largest_batch
 
     small = estimate_bytes(16, 28, 9484, "float32", "gram").total
     double = estimate_bytes(32, 28, 9484, "float32", "gram").total

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from higbench.errors import ConfigError
-from higbench.optim.routes import choose_solver
+from higbench.optim.solver_choice import choose_solver
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
 
@@ -28,6 +28,7 @@ class Estimate:
     total: int
     parts: dict[str, int]
     solver: str
+    work_rows: int = 0  # size of the inversion: the Gram rows, or min(rows, params) for the SVD
 
     def describe(self) -> str:
         return ", ".join(f"{k} {mb(v)}" for k, v in self.parts.items() if v)
@@ -60,7 +61,8 @@ def estimate_bytes(
     batch_size, output_size (|y| per sample), n_params (|theta|); dtype: network dtype (J as
     computed); precision: dtype of the inversion (J is converted to it); solver: gram, svd
     or auto, resolved with tau and truncation by the optimizer's own rule
-    (``higbench.optim.routes.choose_solver``); jacobian: naive (torch.func J in ``dtype``, then cast) or structured (computed in
+    (``higbench.optim.solver_choice.choose_solver``); jacobian: naive (torch.func J in ``dtype``,
+    then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
     """
@@ -86,7 +88,7 @@ def estimate_bytes(
         parts["svd_input"] = rows * p * e2
         parts["svd_factors"] = (rows * k + k * p) * e2
         parts["svd_work"] = (4 * k * k + max(rows, p) * k) * e2
-    return Estimate(sum(parts.values()), parts, solver)
+    return Estimate(sum(parts.values()), parts, solver, rows if solver == "gram" else min(rows, p))
 
 
 def available_bytes(device: str = "cpu") -> tuple[int, str]:

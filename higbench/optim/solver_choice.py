@@ -14,7 +14,7 @@ def _precision_name(precision) -> str:
     return str(precision).replace("torch.", "")
 
 
-def gram_resolves(tau: float, precision="float64", truncation: str = "relative") -> bool:
+def gram_is_accurate(tau: float, precision="float64", truncation: str = "relative") -> bool:
     """Whether the Gram route resolves the relative cutoff tau.
 
     eigh(K) is backward stable: eigenvalues carry an absolute error of order
@@ -47,4 +47,4 @@ def choose_solver(
         raise ValueError(f"solver={solver!r}: expected auto, gram or svd")
     if rows is not None and n_params is not None and rows >= n_params:
         return "svd"
-    return "gram" if gram_resolves(tau, precision, truncation) else "svd"
+    return "gram" if gram_is_accurate(tau, precision, truncation) else "svd"
