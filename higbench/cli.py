@@ -251,17 +251,15 @@ def sweep_resume_command() -> str:
     return shlex.join(["higbench", *args, f"hydra.sweep.dir={sweep_dir}", "resume=true"])
 
 
-SUMMARY_THRESHOLDS = (1e-3, 1e-4, 1e-5)  # test-loss levels whose training-clock time the summary shows
-
-
 def summary_lines(summary, cfg: DictConfig) -> list[str]:
     """The end-of-run lines, read back from the closed run file (the numbers the index shows)."""
     from higbench.results.index import read_run_summary, threshold_column
-    from higbench.runner.progress import job_label
+    from higbench.runner.progress import job_label, summary_thresholds
 
     label = job_label()
     head = f"{label}{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in {summary.wall_time:.1f}s"
-    row, _ = read_run_summary(summary.path, thresholds=SUMMARY_THRESHOLDS)  # never raises
+    thresholds = summary_thresholds(summary.initial_test_loss)  # relative to where the loss started
+    row, _ = read_run_summary(summary.path, thresholds=thresholds)  # never raises
     if "final_test_loss" not in row:  # an unreadable file: say what the loop knew
         row["final_test_loss"] = summary.final_test_loss
     final = row.get("final_test_loss", math.nan)
@@ -270,7 +268,7 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     if summary.status == "diverged":
         lines.append(f"{label}{diverged_hint(cfg)}")
     times = []
-    for t in SUMMARY_THRESHOLDS:
+    for t in thresholds:
         value = row.get(threshold_column(t), math.nan)
         times.append(f"{t:.0e}: " + (f"{value:.1f}s" if math.isfinite(value) else "not reached"))
     lines.append(f"{label}time to test loss " + ", ".join(times))

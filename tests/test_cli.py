@@ -284,3 +284,11 @@ def test_override_value_parses_back_to_the_value(value):
 
     (parsed,) = OverridesParser.create().parse_overrides([f"key={override_value(value)}"])
     assert parsed.value() == value
+
+
+def test_summary_times_thresholds_below_where_the_loss_started(higbench):
+    """Poisson's loss starts at ~440: the summary times 1e1..1e-1, not the oscillator's 1e-3..1e-5."""
+    code, out, err = higbench("problem=poisson", "optimizer=adam", "batch_size=8", "problem.test_size=8")
+    assert code == 0, err
+    line = next(ln for ln in out.splitlines() if "time to test loss" in ln)
+    assert "1e+01:" in line and "1e-03" not in line, line
