@@ -39,6 +39,7 @@ from typing import Any
 
 import yaml
 
+from higbench.errors import override_value as fmt  # the one value-to-override rule
 from higbench.figures.spec import Figure, Preset, Sweep
 from higbench.results.index import COSMETIC_KEYS, DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
@@ -62,19 +63,6 @@ except AttributeError:  # pragma: no cover
 
 
 # -- overrides ------------------------------------------------------------------------------
-
-
-def fmt(value: Any) -> str:
-    """A Python value as a Hydra override value."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str) and any(c in value for c in " ,'\"[]{}()=:*?$\\"):
-        return "'" + value.replace("\\", "\\\\").replace("'", "\\'") + "'"
-    return str(value)
 
 
 @dataclass
