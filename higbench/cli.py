@@ -286,7 +286,7 @@ def diverged_hint(cfg: DictConfig) -> str:
     return "a diverged run is a result (its file says where and why); a smaller optimizer.lr or another seed may train"
 
 
-def _kept(run_path: Path, why: str) -> float:
+def _report_kept_run(run_path: Path, why: str) -> float:
     """A sweep job whose directory holds a run that is not continued: leave it, report its result."""
     from higbench.runfile.reader import load_run
 
@@ -317,7 +317,7 @@ def _hydra_main(cfg: DictConfig) -> float:
     try:
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
-            return _kept(plan.run_path, plan.kept)
+            return _report_kept_run(plan.run_path, plan.kept)
         made = _prepare(plan, output_dir, hydra_cfg, cfg)
         return _run_job(plan, overrides, multirun)
     except ConfigError as exc:  # refused before its run file: nothing of it stays

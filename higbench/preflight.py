@@ -256,7 +256,7 @@ def check_no_links(out: Path, key: str) -> None:
 def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool) -> RunPlan:
     """The one decision about a job's directory (ConfigError when it must not run)."""
     from higbench.runner import checkpoint
-    from higbench.runner.outputs import check_output_dir
+    from higbench.runner.output_location import check_output_dir
 
     output_dir = Path(output_dir)
     if task.get("resume"):
@@ -385,7 +385,7 @@ def check_run(config: DictConfig) -> RunPlan:
 
 def check_sweep(config: DictConfig) -> None:
     """Every job of a multirun (see ``sweep_jobs``), before Hydra makes the sweep directory."""
-    from higbench.runner.outputs import check_output_dir
+    from higbench.runner.output_location import check_output_dir
     from higbench.runner.train import preflight
 
     loader = GlobalHydra.instance().config_loader()

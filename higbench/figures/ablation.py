@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import math
 
-from higbench.figures.claims import at_update, claim, e, final, half_way, need, stable, updates_of
+from higbench.figures.claims import at_update, claim, final, half_way, require, sci, stable, updates_of
 from higbench.figures.data import num
 from higbench.figures.oscillator import gn_search, gn_search_summary
 from higbench.figures.plot import Curves, Series
-from higbench.figures.spec import Budget, By, Figure, Sweep, paper_grid
+from higbench.figures.spec import Budget, Figure, PerPreset, Sweep, paper_grid
 
 BUDGET = Budget(seconds={"paper": 3600, "quick": 30, "standard": 120})
 BETAS = paper_grid("fig12a_beta", "optimizer.beta")
@@ -20,7 +20,7 @@ KAPPAS = paper_grid("fig12b_kappa", "optimizer.kappa")
 TAUS = paper_grid("fig13_tau", "optimizer.tau")
 
 
-def sweep(name: str, opt: str, key: str, values: By, **kw) -> Sweep:
+def sweep(name: str, opt: str, key: str, values: PerPreset, **kw) -> Sweep:
     return Sweep(name, {"problem": "oscillator", "optimizer": opt}, BUDGET, grid={key: values}, **kw)
 
 
@@ -35,8 +35,8 @@ FIGURES = [
         "Oscillator ablation: a) beta from 0 to -0.5, b) kappa from 1 to -1",
         size=(2, 1, 4.8, 3.8),
         sweeps=[
-            sweep("beta", "hig", "optimizer.beta", By(BETAS, [0.0, -0.25, -0.5], [0.0, -0.5])),
-            sweep("kappa", "hig", "optimizer.kappa", By(KAPPAS, [1.0, 0.5, 0.0, -0.5, -1.0], [1.0, -0.5])),
+            sweep("beta", "hig", "optimizer.beta", PerPreset(BETAS, [0.0, -0.25, -0.5], [0.0, -0.5])),
+            sweep("kappa", "hig", "optimizer.kappa", PerPreset(KAPPAS, [1.0, 0.5, 0.0, -0.5, -1.0], [1.0, -0.5])),
         ],
         panels=[
             lines("a) oscillators, HIG: prefactor max(s)^β", "beta", "optimizer.beta", "a) beta"),
@@ -54,7 +54,7 @@ FIGURES = [
                 o,
                 o,
                 "optimizer.tau",
-                By(TAUS, [1e-5, 1e-7, 1e-10], [1e-6]),
+                PerPreset(TAUS, [1e-5, 1e-7, 1e-10], [1e-6]),
                 seed_search=gn_search(**{"optimizer.tau": 1e-6}) if o == "gn" else None,
             )
             for o in ("hig", "gn")
@@ -71,11 +71,11 @@ FIGURES = [
 def beta(datas):
     """Ablation: β has little influence on the outcome. Rule: final losses over β within 10x, none diverged (partly:
     within 100x)"""
-    need(len(runs := datas["fig12"].runs("beta")) >= 2, what="fig12a")
+    require(len(runs := datas["fig12"].runs("beta")) >= 2, what="fig12a")
     fin = {r.cfg("optimizer.beta"): final([r]) for r in runs}
     finite = [v for v in fin.values() if math.isfinite(v)]
     spread = max(finite) / min(finite) if finite else math.inf
-    measured = ", ".join(f"β={num(b)}: {e(v)}" for b, v in sorted(fin.items(), reverse=True)) + f" (spread {spread:.1f}x)"
+    measured = ", ".join(f"β={num(b)}: {sci(v)}" for b, v in sorted(fin.items(), reverse=True)) + f" (spread {spread:.1f}x)"
     halves = [h for r in runs if math.isfinite(h := half_way([r]))]
     values = {"spread": spread, "spread_half": max(halves) / min(halves) if halves else math.inf}
     return measured, spread < 10 and len(finite) == len(fin), spread < 100, values
@@ -87,9 +87,9 @@ def kappa(datas):
     the best positive-κ run (partly: >= 10x)"""
     runs = datas["fig12"].runs("kappa")
     pos, neg = ([final([r]) for r in runs if sign * r.cfg("optimizer.kappa") > 0] for sign in (1, -1))
-    need(pos, neg, what="fig12b (needs kappa > 0 and < 0)")
+    require(pos, neg, what="fig12b (needs kappa > 0 and < 0)")
     ratio = min(pos) / min(neg) if min(neg) > 0 else math.inf
-    return f"best κ>0 {e(min(pos))}, best κ<0 {e(min(neg))} ({ratio:.0f}x)", ratio >= 100, ratio >= 10
+    return f"best κ>0 {sci(min(pos))}, best κ<0 {sci(min(neg))} ({ratio:.0f}x)", ratio >= 100, ratio >= 10
 
 
 @claim("abl-3", "fig13", "GN diverges, HIG stable")
@@ -100,7 +100,7 @@ def tau(datas):
     GN's (partly: the GN part or the HIG part)"""
     d = datas["fig13"]
     hig, gn = d.runs("hig"), d.runs("gn")
-    need(hig, gn, what="fig13")
+    require(hig, gn, what="fig13")
     t = {id(r): r.cfg("optimizer.tau") for r in gn + hig}
     n = min(updates_of(r) for r in gn + hig if r.status != "diverged")
     at = {id(r): math.inf if r.status == "diverged" else at_update(r, n) for r in gn + hig}
@@ -108,9 +108,9 @@ def tau(datas):
     gn_best = min(at[id(g)] for g in gn)
     measured = (
         f"after {n} updates, GN (seed {gn[0].seed}): "
-        + ", ".join(f"τ={num(t[id(r)])} {r.status} {e(at[id(r)])}" for r in gn)
+        + ", ".join(f"τ={num(t[id(r)])} {r.status} {sci(at[id(r)])}" for r in gn)
         + "; HIG: "
-        + ", ".join(f"τ={num(t[id(r)])} {e(at[id(r)])}" for r in hig)
+        + ", ".join(f"τ={num(t[id(r)])} {sci(at[id(r)])}" for r in hig)
         + f"; GN seed search at τ=1e-6: {gn_search_summary(d, 'gn/search')}"
     )
     if not small or not large:
@@ -126,6 +126,6 @@ def kappa_best(datas):
     lowest)"""
     runs = datas["fig12"].runs("kappa")
     fin = {r.cfg("optimizer.kappa"): final([r]) for r in runs}
-    need(-0.5 in fin and len(fin) >= 2, what="fig12b κ=-0.5 and others")
+    require(-0.5 in fin and len(fin) >= 2, what="fig12b κ=-0.5 and others")
     k_best = min(fin, key=fin.get)
-    return f"κ=-0.5 {e(fin[-0.5])}; lowest: κ={num(k_best)} {e(fin[k_best])}", k_best == -0.5, fin[-0.5] <= 2 * fin[k_best]
+    return f"κ=-0.5 {sci(fin[-0.5])}; lowest: κ={num(k_best)} {sci(fin[k_best])}", k_best == -0.5, fin[-0.5] <= 2 * fin[k_best]

@@ -32,10 +32,10 @@ class Missing(Exception):
 
 
 class _Numbers(string.Formatter):
-    """str.format with one extra spec: ``{x:e}`` -> e(x) ('1.2e-5')."""
+    """str.format with one extra spec: ``{x:e}`` -> sci(x) ('1.2e-5')."""
 
     def format_field(self, value, spec):
-        return e(value) if spec == "e" else super().format_field(value, spec)
+        return sci(value) if spec == "e" else super().format_field(value, spec)
 
 
 @dataclass(frozen=True)
@@ -116,12 +116,12 @@ def claim(cid: str, figures: str, paper: str):
     return declare
 
 
-def need(*groups, what: str) -> None:
+def require(*groups, what: str) -> None:
     if any(not g for g in groups):
         raise Missing(what)
 
 
-def e(v: float) -> str:
+def sci(v: float) -> str:
     """1.234e-05 -> '1.2e-5'."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return str(v)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.claims import best, claim, e, end_time, final, half_way, loss_at, median, need
+from higbench.figures.claims import best, claim, end_time, final, half_way, loss_at, median, require, sci
 from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
-from higbench.figures.spec import UPDATES_ONLY, Budget, By, Figure, Preset, Sweep, paper_grid
+from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 270})
 GRID = Budget(seconds={"paper": 3600, "quick": 20, "standard": 120})
@@ -55,7 +55,7 @@ KEYS = {"lr": "optimizer.lr", "b": "batch_size", "tau": "optimizer.tau"}
 
 def grid_figure(fid: str, title: str, problem: str, opt: str, experiment: str) -> Figure:
     """Adam: one panel per η, a line per b; HIG: one row per b, a panel per τ, a line per η."""
-    grid = {KEYS[k]: By(paper_grid(experiment, KEYS[k]), **v) for k, v in REDUCED[fid].items()}
+    grid = {KEYS[k]: PerPreset(paper_grid(experiment, KEYS[k]), **v) for k, v in REDUCED[fid].items()}
     sweep = Sweep(opt, {"problem": problem, "optimizer": opt}, GRID, grid=grid)
     cnn, name = ("CNN " if problem == "dipole_cnn" else ""), OPTIMIZER_NAMES[opt]
     if opt == "adam":
@@ -85,7 +85,7 @@ def fig4a(d: FigureData, ax) -> None:
             d.record("probability", f"x={x[k]:.3f}", run, "t", t, "abs_psi_sq", prob[:, k])
         d.record("control", "u", run, "t", tu, "u", uu)
         fin = float(problem.loss(problem.physics(batch.inputs, u), batch.targets)[0])
-        ax.set_title(f"a) dipole: |Ψ|² under the HIG-trained network ({run.label()}); loss of this state {e(fin)}", fontsize=8)
+        ax.set_title(f"a) dipole: |Ψ|² under the HIG-trained network ({run.label()}); loss of this state {sci(fin)}", fontsize=8)
     else:
         legend(ax)
     ax.set(xlabel="time t", ylabel="x")
@@ -94,12 +94,12 @@ def fig4a(d: FigureData, ax) -> None:
 # conf defaults; Adam's seed 0 is fig4b's run. HIG leaves the initial stage within ~130 updates,
 # so it is evaluated every 10 updates: by time (every ~4 s) only 1-2 evaluations fell in that stage.
 FIG4C = [
-    dip("adam", seeds=By([0, 1, 2], smoke=[0])),
+    dip("adam", seeds=PerPreset([0, 1, 2], smoke=[0])),
     Sweep(
         "hig",
         {"problem": "dipole", "optimizer": "hig", "eval_unit": "updates", "eval_every": 10},
         MAIN,
-        seeds=By([0, 1, 2], smoke=[0]),
+        seeds=PerPreset([0, 1, 2], smoke=[0]),
     ),
 ]
 ENERGIES = [
@@ -117,8 +117,8 @@ FIGURES = [
         "fig4b",
         "Dipole: Adam and HIG for several learning rates",
         [
-            dip("adam", grid={"optimizer.lr": By(FIG4B_ADAM, smoke=[1e-4])}),
-            dip("hig", grid={"optimizer.lr": By(FIG4B_HIG, smoke=[0.5])}),
+            dip("adam", grid={"optimizer.lr": PerPreset(FIG4B_ADAM, smoke=[1e-4])}),
+            dip("hig", grid={"optimizer.lr": PerPreset(FIG4B_HIG, smoke=[0.5])}),
         ],
         panels=[
             Curves(
@@ -178,7 +178,7 @@ def energy_ratio(run: RunData, above: float = PLATEAU[0]) -> float:
 
 def _pair(datas, fid: str):
     adam, hig = datas[fid].runs("adam"), datas[fid].runs("hig")
-    need(adam, hig, what=fid)
+    require(adam, hig, what=fid)
     return adam, hig
 
 
@@ -189,7 +189,7 @@ def plateau(datas):
     adam, hig = _pair(datas, "fig4c")
     ta, th = median(map(plateau_seconds, adam)), median(map(plateau_seconds, hig))
     measured = f"training time with loss in [{PLATEAU[0]}, {PLATEAU[1]}]: Adam {ta:.0f} s, HIG {th:.0f} s; Adam final "
-    measured += e(final(adam))
+    measured += sci(final(adam))
     return measured, ta >= 10 and ta >= 2 * th and final(adam) < PLATEAU[0], ta > th  # a stall is one once Adam has left it
 
 
@@ -223,8 +223,8 @@ def hig_below(datas):
     fa, fh = final(adam), final(hig)
     t10 = 0.1 * min(end_time(r) for r in adam + hig)
     ea, eh = median(loss_at(r, t10) for r in adam), median(loss_at(r, t10) for r in hig)
-    measured = f"median over {len(hig)} seeds: final HIG {e(fh)} vs Adam {e(fa)} ({fa / fh:.2g}x); at {t10:.0f} s HIG "
-    measured += f"{e(eh)} vs Adam {e(ea)}"
+    measured = f"median over {len(hig)} seeds: final HIG {sci(fh)} vs Adam {sci(fa)} ({fa / fh:.2g}x); at {t10:.0f} s HIG "
+    measured += f"{sci(eh)} vs Adam {sci(ea)}"
     return measured, fh <= 0.5 * fa and eh < ea, fh < fa, {"hig": fh, "adam": fa}
 
 
@@ -233,9 +233,9 @@ def limit(datas):
     """Dipole: the attainable accuracy (pure physics optimisation) is about 1e-6. Rule: the best run reaches [1e-7,
     1e-5] (partly: below 1e-7, where the limit is the solver's precision, or (1e-5, 1e-4]); higher means the budget
     was too short to approach the limit"""
-    need(runs := datas["fig4b"].runs(), what="fig4b")
+    require(runs := datas["fig4b"].runs(), what="fig4b")
     low = min(best([r]) for r in runs)
-    shown = "below 1e-7 (float32 evaluation)" if low < 1e-7 else e(low)
+    shown = "below 1e-7 (float32 evaluation)" if low < 1e-7 else sci(low)
     return f"lowest test loss of any fig4b run: {shown}", 1e-7 <= low <= 1e-5, low <= 1e-4, {"low": low, "decisive": low < 1e-7}
 
 
@@ -244,7 +244,7 @@ def adam_large_lr(datas):
     """Dipole: the largest-η Adam run drops fastest initially but ends worst. Rule: the largest-η Adam run is the lowest
     at 10% of the budget and the highest at the end (partly: one of the two)"""
     adam = datas["fig4b"].runs("adam")
-    need(len(adam) >= 2, what="fig4b Adam")
+    require(len(adam) >= 2, what="fig4b Adam")
     lr = max(adam, key=lambda r: r.cfg("optimizer.lr")).cfg("optimizer.lr")
     t10 = 0.1 * min(float(r.curves["wall_time"].iloc[-1]) for r in adam)
     early, late = ({r.cfg("optimizer.lr"): f(r) for r in adam} for f in (lambda r: loss_at(r, t10), lambda r: final([r])))
@@ -261,7 +261,7 @@ def adam_large_lr(datas):
 def tau(datas):
     """Dipole: HIG trains stably for τ from 1e-5 to 1e-3; τ=1e-2 cuts off information. Rule: τ in 1e-5..1e-3 within 10x
     of the best τ and τ=1e-2 worse than all of them (partly: one of the two)"""
-    need(runs := datas["fig9"].runs("hig"), what="fig9")
+    require(runs := datas["fig9"].runs("hig"), what="fig9")
     lr_b = {(r.cfg("optimizer.lr"), r.cfg("batch_size")) for r in runs}
     key = (0.5, 16) if (0.5, 16) in lr_b else sorted(lr_b)[0]
     per_tau = {r.cfg("optimizer.tau"): final([r]) for r in runs if (r.cfg("optimizer.lr"), r.cfg("batch_size")) == key}
@@ -270,7 +270,7 @@ def tau(datas):
         return "taus run: " + ", ".join(num(t) for t in sorted(per_tau)), None, "needs tau in {1e-5, 1e-4, 1e-3} and 1e-2"
     stable, cut = max(mid) <= 10 * min(per_tau.values()), per_tau[1e-2] > max(mid)
     return (
-        f"η={num(key[0])} b={key[1]}: " + ", ".join(f"τ={num(t)}: {e(v)}" for t, v in sorted(per_tau.items())),
+        f"η={num(key[0])} b={key[1]}: " + ", ".join(f"τ={num(t)}: {sci(v)}" for t, v in sorted(per_tau.items())),
         stable and cut,
         stable or cut,
     )
@@ -281,12 +281,12 @@ def cnn(datas):
     """Dipole CNN: the best HIG run beats the best Adam run. Rule: best HIG CNN run's final loss <= half of the best Adam
     CNN run's (partly: below it)"""
     adam, hig = datas["fig10"].runs("adam"), datas["fig11"].runs("hig")
-    need(adam, hig, what="fig10/fig11")
+    require(adam, hig, what="fig10/fig11")
     a, h = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
     fa, fh = final([a]), final([h])
     paper = [final([r]) for r in adam if r.cfg("optimizer.lr") == 2e-4 and r.cfg("batch_size") == 256]
-    vs_paper = f"; Adam at the paper's η=2e-4 b=256 {e(paper[0])} ({paper[0] / fh:.2g}x)" if paper else ""
-    measured = f"best HIG {e(fh)} ({h.label()}), best Adam of the grid {e(fa)} ({a.label()}; HIG's advantage {fa / fh:.2g}x)"
+    vs_paper = f"; Adam at the paper's η=2e-4 b=256 {sci(paper[0])} ({paper[0] / fh:.2g}x)" if paper else ""
+    measured = f"best HIG {sci(fh)} ({h.label()}), best Adam of the grid {sci(fa)} ({a.label()}; HIG's advantage {fa / fh:.2g}x)"
     return measured + vs_paper, fh <= 0.5 * fa, fh < fa, {"hig": fh, "adam": fa, "hig_half": half_way([h])}
 
 
@@ -302,7 +302,7 @@ def adam_trade_off(datas):
     """Dipole (fig. 8): Adam trades slow convergence against oscillation. Rule: at every b the largest-η Adam run is
     the lowest at 10% of the budget and oscillates most over the last half, the smallest-η run the reverse (partly:
     at some b)"""
-    need(runs := datas["fig8"].runs("adam"), what="fig8")
+    require(runs := datas["fig8"].runs("adam"), what="fig8")
     per_b, text = [], []
     for b in sorted({r.cfg("batch_size") for r in runs}):
         rs = sorted((r for r in runs if r.cfg("batch_size") == b), key=lambda r: r.cfg("optimizer.lr"))
@@ -313,7 +313,7 @@ def adam_trade_off(datas):
         per_b.append(early[-1] == min(early) and wobble[-1] == max(wobble) and wobble[0] == min(wobble))
         lo, hi = (num(r.cfg("optimizer.lr")) for r in (rs[0], rs[-1]))
         text.append(f"b={b}: oscillation η={lo} {wobble[0]:.2g}, η={hi} {wobble[-1]:.2g}")
-    need(per_b, what="fig8 (two η at one b)")
+    require(per_b, what="fig8 (two η at one b)")
     return "; ".join(text), all(per_b), any(per_b)
 
 
@@ -321,13 +321,13 @@ def adam_trade_off(datas):
 def tau_floor(datas):
     """Dipole (fig. 9): τ must be above about 1e-6. Rule: at η=0.5, b=16 the τ=1e-6 run ends >= 2x above the best of
     τ in 1e-5..1e-3 (partly: above it)"""
-    need(runs := datas["fig9"].runs("hig"), what="fig9")
+    require(runs := datas["fig9"].runs("hig"), what="fig9")
     per_tau = {r.cfg("optimizer.tau"): final([r]) for r in runs if (r.cfg("optimizer.lr"), r.cfg("batch_size")) == (0.5, 16)}
     mid = [per_tau[t] for t in (1e-5, 1e-4, 1e-3) if t in per_tau]
-    need(mid and 1e-6 in per_tau, what="fig9 τ=1e-6 and 1e-5..1e-3 at η=0.5 b=16")
+    require(mid and 1e-6 in per_tau, what="fig9 τ=1e-6 and 1e-5..1e-3 at η=0.5 b=16")
     low = per_tau[1e-6]
     values = {"tau6": low, "best_mid": min(mid)}
-    return f"τ=1e-6 {e(low)} vs best of 1e-5..1e-3 {e(min(mid))}", low >= 2 * min(mid), low > min(mid), values
+    return f"τ=1e-6 {sci(low)} vs best of 1e-5..1e-3 {sci(min(mid))}", low >= 2 * min(mid), low > min(mid), values
 
 
 @claim("cnn-2", "fig11", "stable for τ 1e-5..1e-3")
@@ -335,6 +335,6 @@ def cnn_tau(datas):
     """Dipole CNN (fig. 11): HIG trains stably for τ from 1e-5 to 1e-3. Rule: every HIG CNN run with τ in 1e-5..1e-3
     completes and ends below its initial loss (partly: all but one)"""
     runs = [r for r in datas["fig11"].runs("hig") if 1e-5 <= r.cfg("optimizer.tau") <= 1e-3]
-    need(runs, what="fig11 τ in 1e-5..1e-3")
+    require(runs, what="fig11 τ in 1e-5..1e-3")
     bad = [r.label() for r in runs if not (r.status == "completed" and r.final_loss < r.initial_loss)]
     return f"{len(runs) - len(bad)}/{len(runs)} stable" + (f"; unstable: {', '.join(bad)}" if bad else ""), not bad, len(bad) <= 1

@@ -16,18 +16,18 @@ from higbench.figures.claims import (
     budget_of,
     claim,
     crossing_time,
-    e,
     end_time,
     final,
     half_way,
     loss_at,
     median,
-    need,
+    require,
+    sci,
     updates_of,
 )
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
-from higbench.figures.spec import Budget, By, Figure, SeedSearch, Sweep, paper_grid
+from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid
 
 FIG2B_OPTIMIZERS = ("adadelta", "adagrad", "adam", "gn", "hig", "rmsprop", "sgd")
 GD_FAMILY = ("adadelta", "adagrad", "adam", "rmsprop", "sgd")
@@ -44,7 +44,7 @@ GN_SEARCH_BUDGET = Budget(seconds={"paper": 60, "quick": 15, "standard": 15})
 
 
 def gn_search(**overrides) -> SeedSearch:
-    return SeedSearch(By(list(range(8)), smoke=[0, 1]), GN_SEARCH_BUDGET, dict(overrides))
+    return SeedSearch(PerPreset(list(range(8)), smoke=[0, 1]), GN_SEARCH_BUDGET, dict(overrides))
 
 
 def osc(name: str, opt: str | None = None, budget: Budget = MAIN, **kw) -> Sweep:
@@ -60,7 +60,7 @@ FIG2B = [
     osc(
         "adam_tuned",
         "adam",
-        grid={"optimizer.lr": By([1e-4, 1e-3, 3e-3], [1e-3, 3e-3], [1e-3]), "batch_size": By([512, 2048], [2048])},
+        grid={"optimizer.lr": PerPreset([1e-4, 1e-3, 3e-3], [1e-3, 3e-3], [1e-3]), "batch_size": PerPreset([512, 2048], [2048])},
     ),
 ]
 
@@ -71,8 +71,8 @@ def _grid(opt: str, lrs: list) -> Sweep:
         opt,
         GRID,
         grid={
-            "optimizer.lr": By(lrs, smoke=lrs[1:2] if opt != "adam" else lrs[:2]),
-            "batch_size": By(GRID_BATCHES, [256, 1024], [512]),
+            "optimizer.lr": PerPreset(lrs, smoke=lrs[1:2] if opt != "adam" else lrs[:2]),
+            "batch_size": PerPreset(GRID_BATCHES, [256, 1024], [512]),
         },
     )
 
@@ -97,7 +97,7 @@ def fig2a(d: FigureData, ax) -> None:
             d.record("state", name, run, "t", t, name, states[:, i])
         d.record("control", "u", run, "t", tu, "u", u)
         err = float(((torch.as_tensor(states[-1]) - batch.targets[0].double()) ** 2).sum())
-        ax.set_title(f"a) oscillators under the HIG-trained network ({run.label()}); final squared error {e(err)}", fontsize=8)
+        ax.set_title(f"a) oscillators under the HIG-trained network ({run.label()}); final squared error {sci(err)}", fontsize=8)
         ax.plot([], [], "o", color="k", mfc="none", label="targets (= initial state)")
     legend(ax, **({"loc": "upper left"} if found else {}))
     ax.set(xlabel="time t", ylabel="oscillator position")
@@ -151,7 +151,7 @@ FIGURES = [
     Figure(
         "fig2c",
         "Oscillators: Adam, GN and HIG for several batch sizes",
-        [osc(o, o, grid={"batch_size": By(bs, bs[::2] if o == "gn" else bs, bs[:2])}) for o, bs in FIG2C_BATCHES.items()],
+        [osc(o, o, grid={"batch_size": PerPreset(bs, bs[::2] if o == "gn" else bs, bs[:2])}) for o, bs in FIG2C_BATCHES.items()],
         panels=[
             Curves(
                 "c) oscillators: Adam, GN, HIG for several batch sizes b",
@@ -215,12 +215,12 @@ def adam_best(datas):
     """Oscillators: Adam is the best of the gradient-descent family, final loss ~1e-4. Rule: Adam best of
     SGD/Adagrad/Adadelta/RMSprop/Adam and final loss in [1e-5, 1e-3] (partly: one of the two)"""
     gd = {o: v for o, v in _finals(datas["fig2b"]).items() if o in GD_FAMILY}
-    need("adam" in gd, what="fig2b Adam")
+    require("adam" in gd, what="fig2b Adam")
     best = min(gd, key=gd.get)
     level = 1e-5 <= gd["adam"] <= 1e-3
     half = half_way(datas["fig2b"].runs("best", optimizer__name="adam"))
     return (
-        f"Adam {e(gd['adam'])}; best of the GD family: {OPTIMIZER_NAMES[best]} ({e(gd[best])})",
+        f"Adam {sci(gd['adam'])}; best of the GD family: {OPTIMIZER_NAMES[best]} ({sci(gd[best])})",
         best == "adam" and level,
         best == "adam" or level,
         {"adam": gd["adam"], "adam_half": half},
@@ -232,9 +232,9 @@ def gn_level(datas):
     """Oscillators: GN's best stable run reaches ~1e-6. Rule: GN's best stable run (best seed of the search) ends in
     [1e-7, 1e-5] without diverging (partly: below Adam's)"""
     f, runs = _finals(datas["fig2b"]), datas["fig2b"].runs("best", optimizer__name="gn")
-    need("gn" in f and "adam" in f, what="fig2b GN/Adam")
+    require("gn" in f and "adam" in f, what="fig2b GN/Adam")
     search = gn_search_summary(datas["fig2b"], "best/search")
-    measured = f"GN {e(f['gn'])} ({runs[0].status}, seed {runs[0].seed}); Adam {e(f['adam'])}; seed search: {search}"
+    measured = f"GN {sci(f['gn'])} ({runs[0].status}, seed {runs[0].seed}); Adam {sci(f['adam'])}; seed search: {search}"
     values = {"gn": f["gn"], "gn_updates": updates_of(runs[0])}
     return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"], values
 
@@ -244,7 +244,7 @@ def hig_best(datas):
     """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven
     and of re-tuned Adam (partly: one of the two)"""
     d, f = datas["fig2b"], _finals(datas["fig2b"])
-    need("hig" in f, what="fig2b HIG")
+    require("hig" in f, what="fig2b HIG")
     ft, tlabel = tuned_adam(d)
     if ft < float("inf"):
         f["adam (re-tuned)"] = ft
@@ -252,11 +252,11 @@ def hig_best(datas):
     level = 1e-8 <= f["hig"] <= 1e-6
     adv = f"HIG's advantage: {f['adam'] / f['hig']:.1f}x over Adam (paper setting)" if "adam" in f else ""
     if ft < float("inf"):
-        adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {e(ft)})"
+        adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {sci(ft)})"
     hig = d.runs("best", optimizer__name="hig")
     values = {"hig": f["hig"], "hig_half": half_way(hig), "hig_updates": min(map(updates_of, hig))}
     return (
-        f"HIG {e(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({e(f[best])}); {adv}",
+        f"HIG {sci(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({sci(f[best])}); {adv}",
         level and best == "hig",
         level or best == "hig",
         values,
@@ -269,7 +269,7 @@ def crossing(datas):
     (partly: from any time on)"""
     d = datas["fig2b"]
     hig, adam, tuned = d.runs("best", optimizer__name="hig"), d.runs("best", optimizer__name="adam"), d.runs("adam_tuned")
-    need(hig, adam, what="fig2b HIG/Adam")
+    require(hig, adam, what="fig2b HIG/Adam")
     t_tuned = [crossing_time(hig[0], r) for r in tuned]
     late = max((x for x in t_tuned if x is not None), default=None)
     never = sum(x is None for x in t_tuned)
@@ -295,12 +295,12 @@ def batch_sizes(datas):
     d = datas["fig2c"]
     fin = {(o, b): final(rs) for o, bs in FIG2C_BATCHES.items() for b in bs if (rs := d.runs(o, batch_size=b))}
     adam = [fin[("adam", b)] for b in FIG2C_BATCHES["adam"] if ("adam", b) in fin]
-    need(len(adam) >= 2 and any(k[0] == "hig" for k in fin), what="fig2c")
+    require(len(adam) >= 2 and any(k[0] == "hig" for k in fin), what="fig2c")
     spread = max(adam) / min(adam)
     ends = {o: (bs[0], bs[-1]) for o in ("hig", "gn") if len(bs := [b for b in FIG2C_BATCHES[o] if (o, b) in fin]) >= 2}
     improves = {o: fin[(o, hi)] < fin[(o, lo)] for o, (lo, hi) in ends.items()}
     measured = f"Adam max/min over b: {spread:.1f}x; " + ", ".join(
-        f"{OPTIMIZER_NAMES[o]} b={lo}->{hi}: {e(fin[(o, lo)])}->{e(fin[(o, hi)])}" for o, (lo, hi) in ends.items()
+        f"{OPTIMIZER_NAMES[o]} b={lo}->{hi}: {sci(fin[(o, lo)])}->{sci(fin[(o, hi)])}" for o, (lo, hi) in ends.items()
     )
     full = spread < 3 and all(improves.values()) and len(improves) == 2
     return measured, full, spread < 3 or any(improves.values()), _per_update(d, ends, fin)
@@ -327,7 +327,7 @@ def gd_family(datas):
     unstable, alike, text = [], [], []
     for fid, opts in (("fig5", FIG5_LRS), ("fig6", {"adam": FIG6_LRS})):
         for opt in opts:
-            need(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
+            require(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
             fin = {(r.cfg("optimizer.lr"), r.cfg("batch_size")): final([r]) for r in runs}
             lrs, bs = sorted({k[0] for k in fin}), sorted({k[1] for k in fin})
             unstable.append(all(fin.get((lrs[-1], b), 0) >= max(v for k, v in fin.items() if k[1] == b) for b in bs))

@@ -13,20 +13,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.claims import PAPER, at_update, best, claim, e, end_time, final, loss_at, need, updates_of
+from higbench.figures.claims import PAPER, at_update, best, claim, end_time, final, loss_at, require, sci, updates_of
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Series, legend, new_figure
-from higbench.figures.spec import Budget, By, Figure, Preset, Sweep
+from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 60, "long": 3000})
 ADAM_LRS, HIG_LRS, TUNED_CONT_LRS = [1e-4, 1e-3, 1e-2], [0.005, 0.02, 0.1], [3e-4, 1e-3]  # not given in the paper
 ADAM_LR, HIG_LR = 1e-4, 0.02  # figure 3c
-HIG_BATCH = By(64, 16, 8, long=64)
+HIG_BATCH = PerPreset(64, 16, 8, long=64)
 BLUES, GREENS = ("#9ecae1", "#4292c6", "#08306b"), ("#a1d99b", "#41ab5d", "#00441b")
 
 
 def notes(p: Preset) -> list[str]:
-    b = HIG_BATCH.at(p)
+    b = HIG_BATCH.for_preset(p)
     return (
         [] if b == 64 else [f"deviation: HIG batch size {b} instead of the paper's 64 (CPU cost of the b=64 Jacobian inversion)"]
     )
@@ -44,15 +44,15 @@ def poi(name: str, opt: str, init_from: str | None = None, grid=None, **fixed) -
 
 
 FIG3B = [
-    poi("adam", "adam", grid={"optimizer.lr": By(ADAM_LRS, smoke=ADAM_LRS[:2])}),
-    poi("hig", "hig", grid={"optimizer.lr": By(HIG_LRS, smoke=[HIG_LR])}),
+    poi("adam", "adam", grid={"optimizer.lr": PerPreset(ADAM_LRS, smoke=ADAM_LRS[:2])}),
+    poi("hig", "hig", grid={"optimizer.lr": PerPreset(HIG_LRS, smoke=[HIG_LR])}),
 ]
 FIG3C = [
     poi("adam_pre", "adam", **{"optimizer.lr": ADAM_LR}),  # = fig3b's Adam eta=1e-4
     poi("adam_cont", "adam", "adam_pre", **{"optimizer.lr": ADAM_LR}),
     poi("hig_cont", "hig", "adam_pre", **{"optimizer.lr": HIG_LR}),
     # Fair baseline: the continued Adam with a re-tuned learning rate, same budget.
-    poi("adam_cont_tuned", "adam", "adam_pre", grid={"optimizer.lr": By(TUNED_CONT_LRS, smoke=TUNED_CONT_LRS[:1])}),
+    poi("adam_cont_tuned", "adam", "adam_pre", grid={"optimizer.lr": PerPreset(TUNED_CONT_LRS, smoke=TUNED_CONT_LRS[:1])}),
 ]
 CHAIN = [
     Series("adam_pre", name="Adam", color=COLORS["adam"]),
@@ -89,7 +89,7 @@ def plot_fig3a(d: FigureData) -> None:
             ax.set(title=title, xticks=[], yticks=[])
             ax.title.set_fontsize(8)
             d.record(title.split(" (")[0], "grid", run, "cell", np.arange(n * n), "value", field.numpy().ravel())
-        axes[0, 1].set_xlabel(f"loss ½‖Δφ−ρ‖² = {e(residual)}", fontsize=8)
+        axes[0, 1].set_xlabel(f"loss ½‖Δφ−ρ‖² = {sci(residual)}", fontsize=8)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     d.save(fig)
 
@@ -144,7 +144,7 @@ def both_decrease(datas):
     """Poisson: Adam and HIG both decrease the loss by up to three orders of magnitude. Rule: both optimizers' best runs
     >= 2.5 decades below the initial loss (partly: >= 1)"""
     adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
-    need(adam, hig, what="fig3b")
+    require(adam, hig, what="fig3b")
     dec = {name: max(np.log10(r.initial_loss / best([r])) for r in runs) for name, runs in (("Adam", adam), ("HIG", hig))}
     measured = ", ".join(f"{k} {v:.1f} decades (best run)" for k, v in dec.items())
     n = max(map(updates_of, hig))
@@ -159,16 +159,16 @@ def pretrained(datas):
     the best Adam continued from the same weights, paper η or re-tuned (partly: below it)"""
     d = datas["fig3c"]
     hig, adam = d.runs("hig_cont"), d.runs("adam_cont")
-    need(hig, adam, what="fig3c continuations")
+    require(hig, adam, what="fig3c continuations")
     h = hig[0]
     drop = h.initial_loss / loss_at(h, 0.25 * end_time(h))
     fh, fa = final(hig), final(adam)
     tuned = {r.cfg("optimizer.lr"): final([r]) for r in d.runs("adam_cont_tuned")}
     fa_best = min([fa, *tuned.values()])
     measured = (
-        f"start {e(h.initial_loss)}; HIG after 1/4 of its budget {drop:.1f}x lower, final {e(fh)} vs Adam continued "
-        f"{e(fa)} (η=1e-4, paper)"
-        + "".join(f", η={lr:g} {e(v)}" for lr, v in sorted(tuned.items()))
+        f"start {sci(h.initial_loss)}; HIG after 1/4 of its budget {drop:.1f}x lower, final {sci(fh)} vs Adam continued "
+        f"{sci(fa)} (η=1e-4, paper)"
+        + "".join(f", η={lr:g} {sci(v)}" for lr, v in sorted(tuned.items()))
         + f"; HIG's advantage {fa / fh:.2g}x (paper η), {fa_best / fh:.2g}x (best Adam)"
     )
     values = {"start": h.initial_loss, "hig_final": fh, "adam_final": fa_best, "hig_b": h.cfg("batch_size")}
@@ -181,10 +181,10 @@ def adam_after_hig(datas):
     """Poisson: Adam started from the HIG run loses HIG's progress. Rule: Adam after HIG ends >= 2x above the HIG run's
     final loss (partly: above it)"""
     hig, after = datas["fig7"].runs("hig_cont"), datas["fig7"].runs("adam_after_hig")
-    need(hig, after, what="fig7b")
+    require(hig, after, what="fig7b")
     fh, fa, start = final(hig), final(after), hig[0].initial_loss
     values = {"hig_final": fh, "adam_after": fa, "start": start, "decisive": fh > start}  # no progress to lose
-    return f"HIG ended at {e(fh)}; Adam continued from it ends at {e(fa)}", fa >= 2 * fh, fa > fh, values
+    return f"HIG ended at {sci(fh)}; Adam continued from it ends at {sci(fa)}", fa >= 2 * fh, fa > fh, values
 
 
 @claim("poi-4", "fig7", "HIG faster per iteration")
@@ -192,7 +192,7 @@ def per_update(datas):
     """Poisson: per iteration, HIG converges faster than Adam. Rule: at HIG's last update count HIG's loss <= half of
     Adam's after as many updates (best runs; partly: below it)"""
     adam, hig = datas["fig7"].runs("adam"), datas["fig7"].runs("hig")
-    need(adam, hig, what="fig7a")
+    require(adam, hig, what="fig7a")
     a, h = min(adam, key=lambda r: r.final_loss), min(hig, key=lambda r: r.final_loss)
     n = min(updates_of(h), updates_of(a))
     first = int(a.curves["step"].iloc[1]) if len(a.curves) > 1 else n + 1
@@ -200,7 +200,7 @@ def per_update(datas):
         return f"Adam's first evaluation after {first} updates, HIG's run {n}", None, "needs Adam evaluated by updates"
     la, lh = at_update(a, n), at_update(h, n)
     values = {"n": n, "hig": lh, "adam": la}
-    return f"after {n} updates: HIG {e(lh)} vs Adam {e(la)} (best runs)", lh <= 0.5 * la, lh < la, values
+    return f"after {n} updates: HIG {sci(lh)} vs Adam {sci(la)} (best runs)", lh <= 0.5 * la, lh < la, values
 
 
 def log_time_slope(run, start: float = 0.5) -> float:
@@ -217,7 +217,7 @@ def adam_lr_and_slope(datas):
     stays steeper. Rule: the smallest-η Adam run ends lowest of the Adam grid, and the best HIG run's log-log slope
     over the last half is steeper than the best Adam run's (partly: one of the two)"""
     adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
-    need(adam, hig, what="fig3b")
+    require(adam, hig, what="fig3b")
     small = min(adam, key=lambda r: r.cfg("optimizer.lr"))
     best_adam, best_hig = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
     sa, sh = log_time_slope(best_adam), log_time_slope(best_hig)

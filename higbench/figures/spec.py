@@ -5,7 +5,7 @@ Presets. ``PRESETS`` maps each preset to the one it falls back to: a value (grid
 budget, per-problem override) with no entry for a preset is taken from the next preset of
 its chain (smoke -> quick -> paper). Adding a preset is one entry here plus the values it
 wants different from its fallback (``Budget(seconds={..., "standard": 600})``,
-``By(paper, standard=[...])``); everything else it inherits.
+``PerPreset(paper, standard=[...])``); everything else it inherits.
 """
 
 from __future__ import annotations
@@ -63,26 +63,28 @@ class Preset:
         return dict(lookup({k: v[problem] for k, v in PROBLEM_OVERRIDES.items() if problem in v}, self.name, {}))
 
 
-class By:
-    """A value per preset: ``By([1e-4, 1e-3, 1e-2], smoke=[1e-4])``; missing presets fall back."""
+class PerPreset:
+    """A value per preset: ``PerPreset([1e-4, 1e-3, 1e-2], smoke=[1e-4])``; missing presets fall back."""
 
     def __init__(self, paper: Any, quick: Any = None, smoke: Any = None, **more: Any):
         self.values = {"paper": paper, **{k: v for k, v in dict(quick=quick, smoke=smoke, **more).items() if v is not None}}
 
-    def at(self, preset: Preset) -> Any:
+    def for_preset(self, preset: Preset) -> Any:
         return lookup(self.values, preset.name)
 
 
-def at(value: Any, preset: Preset) -> Any:
-    """``value`` with every ``By`` inside it (dicts, lists, dataclasses) chosen for ``preset``."""
-    if isinstance(value, By):
-        return value.at(preset)
+def for_preset(value: Any, preset: Preset) -> Any:
+    """``value`` with every ``PerPreset`` inside it (dicts, lists, dataclasses) chosen for ``preset``."""
+    if isinstance(value, PerPreset):
+        return value.for_preset(preset)
     if isinstance(value, dict):
-        return {k: at(v, preset) for k, v in value.items()}
+        return {k: for_preset(v, preset) for k, v in value.items()}
     if isinstance(value, list):
-        return [at(v, preset) for v in value]
+        return [for_preset(v, preset) for v in value]
     if isinstance(value, (Sweep, SeedSearch)):
-        return dataclasses.replace(value, **{f.name: at(getattr(value, f.name), preset) for f in dataclasses.fields(value)})
+        return dataclasses.replace(
+            value, **{f.name: for_preset(getattr(value, f.name), preset) for f in dataclasses.fields(value)}
+        )
     return value
 
 
@@ -114,14 +116,14 @@ class SeedSearch:
     sweep's run with the best stable one (``runs.pick_seed``). ``overrides`` replace the sweep's
     values in the search runs; the search runs form the sweep ``<name>/search``."""
 
-    seeds: list[int] | By
+    seeds: list[int] | PerPreset
     budget: Budget
     overrides: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
 class Sweep:
-    """Runs of one setting: fixed overrides x grid (cartesian) x seeds; values may be ``By``.
+    """Runs of one setting: fixed overrides x grid (cartesian) x seeds; values may be ``PerPreset``.
     init_from: another sweep of the figure whose final weights (same seed) each run starts from."""
 
     name: str
@@ -149,7 +151,7 @@ class Figure:
     sharey: bool = False
 
     def runs(self, preset: Preset) -> list[Sweep]:
-        return at(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)
+        return for_preset(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)
 
 
 # -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----

@@ -28,7 +28,7 @@ from higbench.bench.paper import costs_of_table
 from higbench.figures.claims import Missing, claim
 from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.oscillator import FIG2B, FIG2B_OPTIMIZERS
-from higbench.figures.spec import UPDATES_ONLY, Budget, By, Figure, Preset, Sweep, paper_setting
+from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_setting
 
 # (table, optimizer, batch size) -> paper's (memory MB, update s, Jacobian s); GPU, TensorFlow.
 # One source: higbench.bench.paper, which the benchmark reads too.
@@ -108,7 +108,7 @@ def timing_runs(tid: str):
             batches = sorted({b for (o, b) in PAPER_TIMINGS[tid] if o == opt})
             small = [SMOKE_BATCH[tid][opt]] if opt in SMOKE_BATCH.get(tid, {}) else batches[:1]
             fixed = {"problem": PROBLEMS[tid], "optimizer": opt}
-            out.append(Sweep(opt, fixed, Budget(updates=TIMING[tid][opt]), grid={"batch_size": By(batches, smoke=small)}))
+            out.append(Sweep(opt, fixed, Budget(updates=TIMING[tid][opt]), grid={"batch_size": PerPreset(batches, smoke=small)}))
         return out
 
     return runs

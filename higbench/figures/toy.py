@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.claims import claim, e, final, half_way, median, need
+from higbench.figures.claims import claim, final, half_way, median, require, sci
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
-from higbench.figures.spec import Budget, By, Figure, Sweep
+from higbench.figures.spec import Budget, Figure, PerPreset, Sweep
 
 GAMMAS = (1.0, 0.01)
 OPTIMIZERS = ("adam", "gn", "hig")
 BUDGET = Budget(seconds={"paper": 120, "quick": 30, "standard": 60})
-SEEDS = By([0, 1, 2], smoke=[0, 1])
+SEEDS = PerPreset([0, 1, 2], smoke=[0, 1])
 TUNED_LRS = [0.003, 0.03]  # fair baseline: Adam's learning rate re-tuned at the same budget (the paper's is 0.3)
 # A tanh neuron whose output hardly varies over the data set and sits near +-1.
 SATURATED_STD, SATURATED_MEAN = 0.1, 0.9
@@ -81,7 +81,7 @@ FIGURES = [
                 "adam_tuned",
                 {"problem": "toy", "optimizer": "adam", "problem.gamma": 0.01},
                 BUDGET,
-                grid={"optimizer.lr": By(TUNED_LRS, smoke=TUNED_LRS[:1])},
+                grid={"optimizer.lr": PerPreset(TUNED_LRS, smoke=TUNED_LRS[:1])},
                 seeds=SEEDS,
             ),
         ],
@@ -104,7 +104,7 @@ def saturated(run: RunData) -> int:
 
 def _by_opt(datas, gamma: float, *needed: str) -> dict[str, list[RunData]]:
     runs = {o: datas["fig1"].runs("toy", problem__gamma=gamma, optimizer__name=o) for o in OPTIMIZERS}
-    need(*(runs[o] for o in needed or OPTIMIZERS), what=f"fig1 gamma={gamma:g}")
+    require(*(runs[o] for o in needed or OPTIMIZERS), what=f"fig1 gamma={gamma:g}")
     return runs
 
 
@@ -131,7 +131,7 @@ def stall(datas):
     half = {o: half_way(runs[o]) for o in runs}
     flat = all(final(runs[o]) >= half[o] / 1.5 for o in ("adam", "gn"))
     level = all(0.1 <= x <= 0.4 for x in (fa, fg))
-    measured = f"final loss Adam {e(fa)} (half-way {e(half['adam'])}), GN {e(fg)} (half-way {e(half['gn'])}) (medians)"
+    measured = f"final loss Adam {sci(fa)} (half-way {sci(half['adam'])}), GN {sci(fg)} (half-way {sci(half['gn'])}) (medians)"
     values = {"adam_final": fa, "gn_final": fg, "adam_half": half["adam"], "gn_half": half["gn"]}
     return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level, values
 
@@ -144,9 +144,9 @@ def hig_best(datas):
     fh, fa, fg = final(runs["hig"]), final(runs["adam"]), final(runs["gn"])
     tuned = {lr: final(rs) for lr in TUNED_LRS if (rs := d.runs("adam_tuned", optimizer__lr=lr))}
     fa_best = min([fa, *tuned.values()])
-    tuned_text = ", ".join(f"η={lr:g} {e(v)}" for lr, v in tuned.items())
+    tuned_text = ", ".join(f"η={lr:g} {sci(v)}" for lr, v in tuned.items())
     measured = (
-        f"final loss (median of seeds) HIG {e(fh)} vs Adam η=0.3 (paper) {e(fa)} ({fa / fh:.1f}x), GN {e(fg)}; "
+        f"final loss (median of seeds) HIG {sci(fh)} vs Adam η=0.3 (paper) {sci(fa)} ({fa / fh:.1f}x), GN {sci(fg)}; "
         f"re-tuned Adam: {tuned_text or 'not run'} (HIG's advantage against the best: {fa_best / fh:.1f}x)"
     )
     values = {"hig_final": fh, "hig_half": half_way(runs["hig"]), "adam_best": fa_best, "gn_final": fg}
@@ -191,7 +191,7 @@ def trajectories(datas):
     straightness (|end - start| / length) >= 0.9 (partly: one of the two)"""
     runs = _by_opt(datas, 0.01)
     found = {o: path_shares(rs[0].logs["probe_output"]) for o, rs in runs.items() if rs and "probe_output" in rs[0].logs}
-    need(len(found) == 3, what="fig1 probe trajectories")
+    require(len(found) == 3, what="fig1 probe trajectories")
     (sa, _), (sh, _), (_, straight) = found["adam"], found["hig"], found["gn"]
     measured = f"share of the path along y_2: Adam {sa:.2f}, HIG {sh:.2f}; GN straightness {straight:.2f}"
     values = {"adam_y2_share": sa, "hig_y2_share": sh, "gn_straightness": straight}

@@ -306,7 +306,9 @@ def test_a_new_preset_is_one_entry_and_falls_back(monkeypatch):
     quick, mine = Preset("quick"), Preset("mine")
     assert spec.Budget(seconds={"paper": 3600, "quick": 60}).overrides(mine) == {"budget.seconds": 60.0}
     assert spec.Budget(seconds={"paper": 3600, "quick": 60, "mine": 300}).overrides(mine) == {"budget.seconds": 300.0}
-    assert spec.By([1, 2, 3], quick=[1]).at(mine) == [1] and spec.By([1, 2, 3], mine=[2]).at(quick) == [1, 2, 3]
+    assert spec.PerPreset([1, 2, 3], quick=[1]).for_preset(mine) == [1] and spec.PerPreset([1, 2, 3], mine=[2]).for_preset(
+        quick
+    ) == [1, 2, 3]
     assert mine.problem_overrides("dipole") == quick.problem_overrides("dipole")
     for fid, fig in registry.figures().items():  # every figure expands, as at its fallback
         assert [j.override_list() for j in expand(fig, mine)] == [j.override_list() for j in expand(fig, quick)], fid
