@@ -68,6 +68,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from higbench.runfile.reader import check_contained
+
 FORMAT_VERSION = 1
 H5PY_VERSION = h5py.__version__  # recorded in each run's environment
 STATUSES = ("running", "completed", "diverged", "interrupted", "failed")
@@ -205,11 +207,18 @@ class RunFileWriter:
         self.path = Path(path)
         self._unflushed = 0
         self._inode = None
+        if self.path.is_symlink():  # resume writes a run in its own directory only
+            raise RunFileFault(errno.ELOOP, f"run file {self.path} is a symbolic link; refusing to write through it")
         self.check_space()
         try:
             self.f = h5py.File(self.path, "r+")
         except BlockingIOError as exc:
             raise RunFileBusy(f"run file {self.path} is open in another process (is that run still going?)") from exc
+        try:
+            check_contained(self.f)  # nothing it writes may land in another file
+        except BaseException:
+            self.f.close()
+            raise
         self._inode = self._stat_key()
         self.run_id = run_id_of(self.f)
         for group, names in rows.items():  # check everything before changing anything

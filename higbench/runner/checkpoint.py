@@ -197,7 +197,7 @@ def _check_run_id(state: dict, run_file: Path, resume_value: Any) -> None:
     try:
         file_id = str(read_head(run_file).run_id or "")
     except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({exc.kind})") from None
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
     ckpt_id = str(state.get("run_id") or "")
     if ckpt_id != file_id:
         raise ConfigError(
@@ -240,6 +240,11 @@ def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> Non
         )
 
 
+def _why(exc: UnreadableRunFile) -> str:
+    """What to say of an unreadable run file: the error's name, or what was refused in it."""
+    return exc.detail.split(": ", 1)[-1] if exc.kind == "refused" else exc.kind
+
+
 # -- resolving what to resume ----------------------------------------------------------------
 
 
@@ -265,7 +270,7 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
     except RunFileLocked:
         raise ConfigError("resume", resume_value, f"{run_file} is open in another process (that run is still going)") from None
     except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({exc.kind})") from None
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
     status, config = str(head.attrs.get("status", "")), head.config_yaml
     if status not in RESUMABLE_STATUSES:
         raise ConfigError(
