@@ -286,6 +286,12 @@ class RunFileWriter:
         """{group: {dataset: rows}} of the tables now (recorded by checkpoints)."""
         return {group: {name: int(ds.shape[0]) for name, ds in self.f[group].items()} for group in TABLES if group in self.f}
 
+    def last_value(self, group: str, name: str) -> float:
+        """The last row of ``/group/name`` (NaN if there is none): a resumed run's last evaluation."""
+        if group in self.f and name in self.f[group] and self.f[group][name].shape[0]:
+            return float(self.f[group][name][-1])
+        return float("nan")
+
     # -- status --
     def set_status(self, status: str, reason: str = "", step: int = -1) -> None:
         if status not in STATUSES:
