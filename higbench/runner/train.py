@@ -390,6 +390,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
 
     signals = StopSignals().install()
     final_test = math.nan
+    if state is not None:  # its last evaluation: a resume with nothing left to do evaluates nothing
+        final_test = writer.last_value("curves", "test_loss")
     try:
         if state is None:
             final_test = record_evaluation()
