@@ -60,6 +60,7 @@ import errno
 import json
 import os
 import resource
+import sys
 import time
 import uuid
 from collections.abc import Mapping
@@ -95,6 +96,13 @@ class DiskFull(RunFileFault):
 
     def __str__(self) -> str:
         return self.strerror
+
+
+class RunFileReadOnly(RunFileFault):
+    """The file can no longer be written (immutable or append-only flag, read-only mount)."""
+
+    def __str__(self) -> str:
+        return self.args[1] if len(self.args) > 1 else "run file read-only"
 
 
 class RunFileLost(RunFileFault):
@@ -209,6 +217,7 @@ class RunFileWriter:
         self._inode = None
         if self.path.is_symlink():  # resume writes a run in its own directory only
             raise RunFileFault(errno.ELOOP, f"run file {self.path} is a symbolic link; refusing to write through it")
+        self.check_writable()
         self.check_space()
         try:
             self.f = h5py.File(self.path, "r+")
@@ -267,6 +276,7 @@ class RunFileWriter:
         """Raise DiskFull unless the unflushed data, ``extra`` bytes and the reserve fit."""
         if self._inode is not None:
             self.check_file()  # a file that is gone has no disk to fill
+            self.check_writable()
         size = self.path.stat().st_size if self.path.exists() else 0
         need = 2 * (self._unflushed + extra) + RESERVE_BYTES
         free = free_bytes(self.path, size)
@@ -274,6 +284,18 @@ class RunFileWriter:
             raise DiskFull(
                 f"no space left for {self.path} ({free // 1024} KiB free, the next write needs about {need // 1024} KiB "
                 "with the reserve for closing the file); run stopped before writing"
+            )
+
+    def check_writable(self) -> None:
+        """Raise RunFileReadOnly if a write would fail: HDF5 cannot survive a failed write
+        (it crashes the process), so this is checked before every write, like the disk space."""
+        why = read_only_reason(self.path, getattr(self, "f", None))
+        if why:
+            self._read_only = True
+            raise RunFileReadOnly(
+                errno.EPERM,
+                f"run file {self.path} became read-only while the run was writing it ({why}); run stopped. "
+                "It keeps every row up to its last flush; its status cannot be written",
             )
 
     def check_file(self) -> None:
@@ -354,12 +376,50 @@ class RunFileWriter:
         """Write the final status and close; the file is closed whatever happens."""
         if not self.f.id.valid:
             return
+        if getattr(self, "_read_only", False) or read_only_reason(self.path, self.f):
+            # Nothing can be written, and closing writes (HDF5 then fails, and may crash the
+            # process): the file is left open, untouched, until the process exits.
+            _ABANDONED.append(self.f)
+            return
         try:
             if status is not None:
                 self.set_status(status, reason, step)
             self.f.attrs["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         finally:
             self.f.close()
+
+
+_ABANDONED: list[h5py.File] = []  # read-only run files never closed (see RunFileWriter.close)
+_FS_IOC_GETFLAGS = 0x80086601  # Linux: the inode's attribute flags (chattr)
+_FS_IMMUTABLE_FL, _FS_APPEND_FL = 0x10, 0x20
+
+
+def read_only_reason(path: Path, f: h5py.File | None = None) -> str:
+    """Why ``path`` cannot be written into now ("" if it can, or if that cannot be told)."""
+    try:
+        if os.statvfs(path.parent).f_flag & os.ST_RDONLY:
+            return "its file system is mounted read-only"
+    except OSError:
+        return ""
+    try:
+        import fcntl
+
+        fd = f.id.get_vfd_handle() if f is not None and f.id.valid else None
+        own = fd is None
+        if own:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        try:
+            flags = int.from_bytes(fcntl.ioctl(fd, _FS_IOC_GETFLAGS, b"\0" * 8)[:4], sys.byteorder)
+        finally:
+            if own:
+                os.close(fd)
+    except (OSError, ImportError, TypeError, ValueError):  # no such ioctl here (tmpfs of old kernels, NFS, macOS)
+        return ""
+    if flags & _FS_IMMUTABLE_FL:
+        return "immutable flag set (chattr +i)"
+    if flags & _FS_APPEND_FL:
+        return "append-only flag set (chattr +a)"
+    return ""
 
 
 def run_id_of(f: h5py.File) -> str:
