@@ -120,7 +120,7 @@ def _run_job(cfg: DictConfig) -> float:
     from higbench.runner.progress import announce, start_text
 
     announce(cfg.get("progress", True), start_text(cfg))  # replaces the checks' transient line
-    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner import checkpoint
     from higbench.runner.train import train
 
@@ -164,6 +164,10 @@ def _run_job(cfg: DictConfig) -> float:
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
         if isinstance(exc, DiskFull) and not os.path.lexists(run_path):  # refused before its file existed
             remove_hydra_outputs(output_dir, hydra_cfg.output_subdir)
+        if isinstance(exc, RunFileReadOnly):  # closing it (also at exit) would write, fail and crash HDF5
+            print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+            logging.shutdown()
+            os._exit(1)
         if multirun:
             print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
             return math.inf
