@@ -7,6 +7,7 @@ nothing of another file is ever returned, no run file changes.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -275,3 +276,22 @@ def test_init_from_refuses_a_diverged_run_with_finite_weights(sources, tmp_path,
     work.mkdir()
     line = refused(["problem=toy", "optimizer=sgd", f"init_from={src}"], work, monkeypatch, capsys, "init_from")
     assert "diverged" in line, line
+
+
+def test_unreadable_directory_is_a_row_like_an_unreadable_file(sources, tmp_path, monkeypatch):
+    _, done, _ = sources
+    tree = tmp_path / "tree"
+    copy_run(done, tree / "good")
+    copy_run(done, tree / "hidden" / "run")
+    real = os.scandir
+
+    def scandir(path="."):  # as for a directory without read permission (root reads every one)
+        if Path(path) == tree / "hidden":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "scandir", scandir)
+    runs = load_runs(tree)
+    rows = dict(zip(runs["path"], runs["status"]))
+    assert rows == {str(tree / "good" / "run.h5"): "completed", str(tree / "hidden"): "corrupt"}, runs[["path", "status"]]
+    assert "cannot be read" in runs.set_index("path").loc[str(tree / "hidden"), "error"]
