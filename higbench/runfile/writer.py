@@ -166,7 +166,10 @@ def dataset_info(group: str, name: str) -> tuple[str, str] | None:
 class RunFileWriter:
     def __init__(self, path: str | Path, config_yaml: str, overrides: list[str], env: Mapping, meta: Mapping):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _creation_fault(self.path.parent, exc) from None
         self._unflushed = 0
         self._inode = None
         self.check_space()
@@ -176,9 +179,9 @@ class RunFileWriter:
             # superblock v3, whose "open for write" flag makes a killed writer's file unopenable.
             self.f = h5py.File(self.path, "w-", libver=("earliest", "latest"))
         except (FileExistsError, OSError) as exc:
-            if self.path.exists():
+            if os.path.lexists(self.path):
                 raise RunFileExists(f"run file {self.path} already exists; refusing to overwrite it") from exc
-            raise
+            raise _creation_fault(self.path, exc) from None
         self._inode = self._stat_key()
         self.run_id = new_run_id()
         self.f.attrs["format_version"] = FORMAT_VERSION
@@ -420,6 +423,21 @@ def read_only_reason(path: Path, f: h5py.File | None = None) -> str:
     if flags & _FS_APPEND_FL:
         return "append-only flag set (chattr +a)"
     return ""
+
+
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _creation_fault(path: Path, exc: OSError) -> RunFileFault:
+    """One line for a run file (or its directory) that cannot be created: a full disk, no
+    free inodes, a quota (``DiskFull``: nothing was written), anything else (``RunFileFault``)."""
+    code = exc.errno
+    if code is None:  # h5py puts the errno in its message only
+        code = next((c for c in (*_NO_ROOM, errno.EACCES, errno.EROFS) if f"errno = {c}," in str(exc)), None)
+    why = os.strerror(code) if code else " ".join(str(exc).split())[:200]
+    if code in _NO_ROOM:
+        return DiskFull(f"cannot create {path}: {why} (no space, no free inodes or over quota); nothing was written")
+    return RunFileFault(code or errno.EIO, f"cannot create {path}: {why}; nothing was written")
 
 
 def run_id_of(f: h5py.File) -> str:

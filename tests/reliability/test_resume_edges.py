@@ -1,4 +1,4 @@
-"""Resume at the edges: nothing left to do."""
+"""Edges of a run's storage: a resume with nothing left to do, no free inode for the run file."""
 
 from __future__ import annotations
 
@@ -37,3 +37,31 @@ def test_resume_with_the_budget_spent_completes_with_the_last_test_loss(tmp_path
     assert after["step"].tolist() == curves["step"].tolist(), "no second row for the same step"
     assert load_updates(run)["step"].tolist() == list(range(1, state["step"] + 1))
     assert meta["steps"] == state["step"]
+
+
+def test_no_free_inodes_at_file_creation_is_one_line_and_leaves_nothing(tmp_path, monkeypatch, capsys):
+    """Creating the run file fails with ENOSPC (inodes exhausted: free bytes remain, so the
+    free-space check passes): one line, exit 1, no Hydra files or log left behind."""
+    import errno
+
+    import h5py
+
+    from higbench import cli
+    from higbench.runfile import writer
+
+    real = h5py.File
+
+    def no_inode(path, mode="r", **kwargs):
+        if mode == "w-":
+            raise OSError(errno.ENOSPC, f"Unable to synchronously create file (errno = {errno.ENOSPC}, No space left)")
+        return real(path, mode, **kwargs)
+
+    monkeypatch.setattr(writer.h5py, "File", no_inode)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    with pytest.raises(SystemExit) as info:
+        cli.main(["problem=toy", "optimizer=sgd", "budget.max_updates=3", "threads=1", "progress=false", "hydra.run.dir=run"])
+    lines = [ln for ln in capsys.readouterr().err.strip().splitlines() if ln.strip()]
+    assert info.value.code == 1 and len(lines) == 1 and "No space left" in lines[0], lines
+    assert list(work.iterdir()) == [], [str(p) for p in work.rglob("*")]
