@@ -280,9 +280,14 @@ class RunFileWriter:
         if self._inode is not None:
             self.check_file()  # a file that is gone has no disk to fill
             self.check_writable()
-        size = self.path.stat().st_size if self.path.exists() else 0
         need = 2 * (self._unflushed + extra) + RESERVE_BYTES
-        free = free_bytes(self.path, size)
+        try:
+            size = self.path.stat().st_size if self.path.exists() else 0
+            free = free_bytes(self.path, size)
+        except FileNotFoundError:  # its directory went between the checks above and here
+            if self._inode is not None:
+                self.check_file()
+            raise
         if free < need:
             raise DiskFull(
                 f"no space left for {self.path} ({free // 1024} KiB free, the next write needs about {need // 1024} KiB "
