@@ -18,8 +18,14 @@ loop needs to continue as if never stopped:
 
 The checkpoint is serialised in memory first and written only if it fits on the disk
 beside the run file's reserve (``writer.DiskFull`` otherwise; the previous one stays).
-Temporary files of a writer killed mid-save (``run.h5.ckpt.tmp<pid>``) are removed by the
-next save and by resume.
+The temporary file (``run.h5.ckpt.tmp<random>``) is created exclusively, so nothing planted
+under its name (a link to another file) is followed; those of a writer killed mid-save are
+unlinked by the next save (which removes a link, never its target).
+
+Checkpoints may come from somebody else (a shared run dir), so loading one runs no code:
+it holds only tensors and plain containers, and is read with torch's restricted unpickler
+(``weights_only=True``) after refusing links, non-zip files and compressed records; its
+``run_id`` is compared with the run file's before anything in it is used (``load``).
 
 The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
 and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
