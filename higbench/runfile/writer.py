@@ -42,7 +42,11 @@ limit (RLIMIT_FSIZE) against what is not yet flushed plus a reserve for closing
 (``RESERVE_BYTES``); short of it, it raises ``DiskFull`` before touching the file, and the
 runner closes the file as ``failed`` inside the reserve. The file then holds every row
 up to its last flush. (What remains: another process filling the disk between the check
-and the write.) At every flush the writer also checks that the path still names the file
+and the write.) Likewise it checks that the file can still be written (no immutable or
+append-only flag, no read-only mount; ``RunFileReadOnly``): such a file cannot even take
+its status, so it is left open and untouched (closing would write) and the CLI exits 1.
+A run file or directory that cannot be created (no space, no free inode, a quota) is a
+``DiskFull``/``RunFileFault`` too. At every flush the writer also checks that the path still names the file
 it writes (``RunFileLost``: deleted or replaced under a live run).
 
 Identity: every run file carries a random ``run_id`` (root attribute); its checkpoints
