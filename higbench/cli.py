@@ -172,8 +172,15 @@ def _run_job(cfg: DictConfig) -> float:
             print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
             return math.inf
         fail(exc, code=1)
+    # The file is closed with its status: a stop signal now must not end the process with
+    # 128+signal while the file says completed. Ignored while reporting (and, for a single
+    # run, until exit); a sweep gets its handlers back for the next job.
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     for line in summary_lines(summary, cfg):  # through logging: the console and <run dir>/higbench.log
         log.info(line)
+    if multirun:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     if summary.status == "interrupted":
         print(f"resume with: higbench {shlex.quote(f'resume={summary.path.parent}')}", file=sys.stderr)
         signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)

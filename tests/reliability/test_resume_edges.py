@@ -65,3 +65,26 @@ def test_no_free_inodes_at_file_creation_is_one_line_and_leaves_nothing(tmp_path
     lines = [ln for ln in capsys.readouterr().err.strip().splitlines() if ln.strip()]
     assert info.value.code == 1 and len(lines) == 1 and "No space left" in lines[0], lines
     assert list(work.iterdir()) == [], [str(p) for p in work.rglob("*")]
+
+
+def test_stop_signal_just_after_the_file_is_closed_exits_as_the_file_says(tmp_path):
+    """SIGTERM while the CLI reports a run whose file is closed ``completed``: exit 0, not 143."""
+    import subprocess
+    import sys
+
+    from rel_helpers import cli_env
+
+    code = (
+        "import os, signal\n"
+        "from higbench import cli\n"
+        "real = cli.summary_lines\n"
+        "def late(*a):\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    return real(*a)\n"
+        "cli.summary_lines = late\n"
+        "cli.main(['problem=toy', 'optimizer=sgd', 'budget.max_updates=5', 'threads=1', 'progress=false', 'hydra.run.dir=run'])\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=cli_env(), capture_output=True, text=True, timeout=300)
+    meta, _ = load_run(tmp_path / "run" / "run.h5")
+    assert meta["status"] == "completed"
+    assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
