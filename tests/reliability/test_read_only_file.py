@@ -1,6 +1,7 @@
 """A write error other than a full disk: the run file becomes immutable (``chattr +i``) or
 append-only mid-run. HDF5 crashes the process on a failed write (rc -11, file left
-``running``); the writer checks before every write, so the run stops with one line, exit 1.
+``running``); the writer checks before every write, so the run stops with one line, exit 1
+(HDF5's own reports of a write already under way when the flag landed may precede it).
 """
 
 from __future__ import annotations
@@ -39,6 +40,9 @@ def test_run_file_made_read_only_mid_run_stops_with_one_line(tmp_path, flag):
         subprocess.run(["chattr", "-i", "-a", str(run_file)], capture_output=True)
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]
     assert proc.returncode == 1, (proc.returncode, err[-3000:])
-    assert len(lines) == 1 and lines[0].startswith("higbench: error: ") and "read-only" in lines[0], err[-3000:]
+    assert lines[-1].startswith("higbench: error: ") and "read-only" in lines[-1], err[-3000:]
+    # Before it, HDF5 may report writes that failed when a chunk was written back between the
+    # check and the flag (h5py's "Exception ignored in ObjectID.__dealloc__"); no traceback of ours.
+    assert "higbench/" not in err and "Segmentation" not in err, err[-3000:]
     meta, curves = load_run(run_file)  # readable up to its last flush, no repair needed
     assert meta["status"] == "running" and len(curves) > 0
