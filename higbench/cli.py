@@ -190,7 +190,7 @@ def parallel_jobs(hydra_cfg: DictConfig) -> int:
 
 def _train(plan: RunPlan, overrides: list[str], multirun: bool):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
-    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault
+    from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner.train import train
 
     os.environ["HIGBENCH_PARALLEL_JOBS"] = str(parallel_jobs(HydraConfig.get()))  # the run file's env records it
@@ -201,6 +201,10 @@ def _train(plan: RunPlan, overrides: list[str], multirun: bool):
     except RunFileBusy as exc:
         raise ConfigError("resume", str(plan.run_path), str(exc)) from None
     except RunFileFault as exc:  # disk full, file gone: the file (if any) says failed
+        if isinstance(exc, RunFileReadOnly):  # closing it (also at exit) would write, fail and crash HDF5
+            print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+            logging.shutdown()
+            os._exit(1)
         refused_at_creation = isinstance(exc, DiskFull) and not os.path.lexists(plan.run_path)
         raise JobFailed(" ".join(str(exc).split()), written=not refused_at_creation) from None
 
@@ -219,8 +223,15 @@ def _run_job(plan: RunPlan, overrides: list[str], multirun: bool) -> float:
     start = plan.start_config()
     announce(start.get("progress", True), start_text(start))  # replaces the checks' transient line
     summary = _train(plan, overrides, multirun)
+    # The file is closed with its status: a stop signal now must not end the process with
+    # 128+signal while the file says completed. Ignored while reporting (and, for a single
+    # run, until exit); a sweep gets its handlers back for the next job.
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     for line in summary_lines(summary, start):  # through logging: the console and <run dir>/higbench.log
         log.info(line)
+    if multirun:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     if summary.status == "interrupted":
         _interrupted(summary, multirun)
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.

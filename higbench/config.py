@@ -275,6 +275,8 @@ def check_init_from_file(path: str, problem_name: str) -> None:
         raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
     if head.problem and head.problem != problem_name:
         raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
+    if head.status == "diverged":  # its weights, finite or not, are where it failed
+        raise ConfigError("init_from", path, "run diverged; a diverged run cannot start another")
 
 
 def init_from_path(path: str) -> Path:

@@ -297,16 +297,26 @@ def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: b
         return {**task, "resume": None}, False, None
     empty = checkpoint.recorded_nothing(run_path)
     if empty:
-        stored = task if multirun else OmegaConf.to_container(OmegaConf.create(_stored_config(run_path, task["resume"])))
+        stored = task if multirun else _parse_stored(_stored_config(run_path, task["resume"]), task["resume"])
     else:
         _status, stored_yaml = checkpoint.inspect_run(run_path, task["resume"])
-        stored = OmegaConf.to_container(OmegaConf.create(stored_yaml))
+        stored = _parse_stored(stored_yaml, task["resume"])
     check_stored_targets(stored, task, task["resume"])  # before anything of it is built
     merged = checkpoint.resume_config(stored, task, overrides)
     validate(merged)
     if not empty:
         checkpoint.check_owner(checkpoint.load(run_path), run_path, task["resume"])  # readable, of this run
     return merged, not empty, empty
+
+
+def _parse_stored(yaml_text: str, resume_value) -> dict:
+    """A stored config, parsed with the run-file reader's bounds (size, aliases expanded)."""
+    from higbench.runfile.reader import UnreadableRunFile, parse_config
+
+    try:
+        return parse_config(yaml_text)
+    except UnreadableRunFile as exc:
+        raise ConfigError("resume", resume_value, f"its stored config is refused: {exc}") from None
 
 
 def _stored_config(run_file: Path, resume_value) -> str:

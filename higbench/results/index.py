@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
 from higbench.runfile.reader import (
@@ -42,11 +41,6 @@ from higbench.runfile.reader import (
     read_tables,
     run_file_path,
 )
-
-try:  # libyaml's parser: the config YAML of every run is parsed, pure Python is slow
-    _YamlLoader = yaml.CSafeLoader
-except AttributeError:  # pragma: no cover
-    _YamlLoader = yaml.SafeLoader
 
 DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # The one status rule. A done run ended by its own rule and is a result: never run again
@@ -101,6 +95,22 @@ def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_F
     return sorted(found)
 
 
+def unreadable_dirs(root: str | Path | Iterable[str | Path]) -> list[tuple[Path, str]]:
+    """Directories under ``root`` that cannot be listed (runs in them would be missed
+    silently): (directory, why), each a ``corrupt`` row of the index, as an unreadable file is."""
+    roots = [root] if isinstance(root, (str, os.PathLike)) else list(root)
+    bad: list[tuple[Path, str]] = []
+
+    def note(exc: OSError) -> None:
+        bad.append((Path(exc.filename), f"directory cannot be read ({exc.strerror}); run files in it are not indexed"))
+
+    for r in roots:
+        if Path(r).is_dir():
+            for _ in os.walk(r, onerror=note):
+                pass
+    return sorted(bad)
+
+
 # -- reading one file ------------------------------------------------------------------------
 
 
@@ -145,7 +155,8 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
     if "format_version" not in attrs or "config" not in attrs:
         raise ValueError("not a higbench run file (no format_version/config attributes)")
     row: dict = {}
-    config = yaml.load(attrs.pop("config") or "{}", Loader=_YamlLoader) or {}
+    attrs.pop("config")
+    config = run.config  # parsed by the reader, with bounds (an alias bomb is refused there)
     row["config_id"] = config_id(config) if isinstance(config, dict) else None
     if isinstance(config, dict) and config.get("init_from"):
         row["_config"] = config  # config_id is set again once its parent is known (load_runs)
@@ -400,6 +411,7 @@ def load_runs(
             ]
     else:
         results = _read_chunk(paths, thresholds, curves)
+    results += [({"path": str(d), "status": "corrupt", "error": why}, None) for d, why in unreadable_dirs(root)]
     for row, _ in results:
         row["source"] = "figures" if FIGURE_RUNS_DIR in Path(row["path"]).parts else "runs"
     _chain_ids([row for row, _ in results])

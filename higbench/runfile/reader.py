@@ -6,12 +6,24 @@ index, the figures, resume and ``init_from`` read run files through these functi
 Files are opened with ``locking=False`` unless said otherwise: a run that is still going
 (or whose writer was killed) can be read up to its last flush; its ``status`` is then
 ``running``. With ``locking=True`` a file held by a live writer raises ``RunFileLocked``.
+
+Files other people wrote (``init_from=``, ``resume=``, a shared runs tree) are not trusted.
+Every reader here first checks that the file is self-contained (``check_contained``): only
+hard links (no soft, external or user-defined links), no dataset with external storage
+(``external=``: its bytes would come from another file) or a virtual layout (mapped onto
+other files), no filter but HDF5's built-in ones (no plugin is loaded), and no dataset that
+declares more bytes than its file could hold (an unallocated 200000 x 200000 dataset reads
+as 320 GB of fill values). The stored config is parsed with bounds (``parse_config``): at
+most ``MAX_CONFIG_BYTES`` of text and ``MAX_CONFIG_NODES`` nodes once YAML aliases are
+expanded (a 640-byte alias bomb expands to billions). Such a file is an ``UnreadableRunFile``
+(kind ``refused``): one line for the CLI, a ``corrupt`` row in the index.
 """
 
 from __future__ import annotations
 
 import errno
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,8 +62,17 @@ class RunFileOpenForWrite(UnreadableRunFile):
     the file (``h5clear -s <file>`` makes a dead run's file readable)."""
 
 
+class RefusedRunFile(UnreadableRunFile):
+    """A file with content no run file has: links or storage outside it, a config too large."""
+
+    def __init__(self, message: str):
+        super().__init__(message, "refused", message)
+
+
 def _unreadable(p: Path, exc: Exception) -> UnreadableRunFile:
     """The exception to raise for a failed open/read of run file ``p``."""
+    if isinstance(exc, RefusedRunFile):
+        return RefusedRunFile(f"{p}: {exc}")
     kind, detail = type(exc).__name__, f"{type(exc).__name__}: {exc}"
     if isinstance(exc, BlockingIOError) and exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EACCES):
         return RunFileLocked(f"{p}: open in another process (file locked by its writer)", kind, detail)
@@ -59,6 +80,119 @@ def _unreadable(p: Path, exc: Exception) -> UnreadableRunFile:
         why = "open-for-write flag set: writer still running elsewhere, or killed (h5clear -s recovers)"
         return RunFileOpenForWrite(f"{p}: {why}", kind, why)
     return UnreadableRunFile(f"{p}: not a readable run file ({kind})", kind, detail)
+
+
+# -- what a file from somebody else may hold ---------------------------------------------------
+
+_BUILTIN_FILTERS = frozenset(
+    getattr(h5py.h5z, name)
+    for name in ("FILTER_DEFLATE", "FILTER_SHUFFLE", "FILTER_FLETCHER32", "FILTER_SZIP", "FILTER_NBIT", "FILTER_SCALEOFFSET")
+) | {32000}  # lzf, built into h5py
+_COMPRESSION_RATIO = 1100  # deflate expands at most ~1032x; an uncompressed dataset holds its bytes
+_SLACK_BYTES = 1 << 20  # a killed writer's resized table may lack its last chunk (read as fill)
+
+
+def check_contained(f: h5py.File, datasets: bool = True) -> None:
+    """Raise ``RefusedRunFile`` unless every object of ``f`` lives in ``f`` (see module doc).
+
+    ``datasets=False``: links only (a caller that checks each dataset it reads itself,
+    with ``check_dataset``: the run index, which reads a few of them per file).
+    """
+    names: list[bytes] = []
+
+    def visit(name: bytes, info):  # a value other than None stops the visit (raising here cannot)
+        if info.type != h5py.h5l.TYPE_HARD:
+            return name, info.type
+        names.append(name)
+        return None
+
+    foreign = f.id.links.visit(visit, info=True)
+    if foreign is not None:
+        name, kind = foreign
+        why = _LINK_KINDS.get(kind, "a user-defined link")
+        raise RefusedRunFile(f"{name.decode(errors='replace')} is {why}; run files hold hard links only")
+    if datasets:
+        size = f.id.get_filesize()
+        for name in names:
+            obj = h5py.h5o.open(f.id, name)
+            if isinstance(obj, h5py.h5d.DatasetID):
+                check_dataset(name.decode(errors="replace"), obj, size)
+
+
+_LINK_KINDS = {h5py.h5l.TYPE_SOFT: "a soft link", h5py.h5l.TYPE_EXTERNAL: "an external link (to another file)"}
+
+
+def check_dataset(name: str, ds: h5py.h5d.DatasetID, file_size: int) -> None:
+    """Refuse a dataset whose bytes would come from elsewhere, or more bytes than its file holds."""
+    plist = ds.get_create_plist()
+    if plist.get_layout() == h5py.h5d.VIRTUAL:
+        raise RefusedRunFile(f"{name} is a virtual dataset (mapped onto other files)")
+    if plist.get_external_count():
+        raise RefusedRunFile(f"{name} has external storage (its bytes live in another file)")
+    filters = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
+    unknown = [code for code in filters if code not in _BUILTIN_FILTERS]
+    if unknown:
+        raise RefusedRunFile(f"{name} needs filter {unknown[0]} (not built into HDF5; no plugin is loaded)")
+    declared = ds.dtype.itemsize * math.prod(ds.shape or ())
+    bound = file_size * (_COMPRESSION_RATIO if filters else 1) + _SLACK_BYTES
+    if declared > bound:
+        raise RefusedRunFile(f"{name} declares {declared:,} bytes in a {file_size:,}-byte file")
+
+
+MAX_CONFIG_BYTES = 256 * 1024  # a run's resolved config is a few KB
+MAX_CONFIG_NODES = 50_000  # YAML nodes once aliases are expanded
+
+
+def parse_config(text: str) -> dict:
+    """A stored config (YAML) as a dict, with bounds; ``RefusedRunFile`` beyond them.
+
+    Aliases are counted as often as they are used, so an alias bomb is refused after
+    composing its few nodes, before anything is built from it.
+    """
+    if len(text) > MAX_CONFIG_BYTES:
+        raise RefusedRunFile(f"config attribute is {len(text):,} bytes (at most {MAX_CONFIG_BYTES:,})")
+    loader = _YamlLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is not None:
+            _count_nodes(node)
+        data = loader.construct_document(node) if node is not None else {}
+    except yaml.YAMLError as exc:
+        raise RefusedRunFile(f"config attribute is not YAML ({' '.join(str(exc).split())[:120]})") from None
+    finally:
+        loader.dispose()
+    if not isinstance(data, dict):
+        raise RefusedRunFile(f"config attribute is a {type(data).__name__}, not a mapping")
+    return data
+
+
+def _count_nodes(root) -> None:
+    """Expanded size of a composed YAML graph (shared nodes counted per use), memoised."""
+    sizes: dict[int, int] = {}
+
+    def size(node, depth: int) -> int:
+        if id(node) in sizes:
+            return sizes[id(node)]
+        if depth > 100:
+            raise RefusedRunFile("config attribute nests more than 100 levels")
+        sizes[id(node)] = MAX_CONFIG_NODES + 1  # a node reached again through itself (a cycle): too big
+        if isinstance(node, yaml.MappingNode):
+            n = 1 + sum(size(k, depth + 1) + size(v, depth + 1) for k, v in node.value)
+        elif isinstance(node, yaml.SequenceNode):
+            n = 1 + sum(size(v, depth + 1) for v in node.value)
+        else:
+            n = 1
+        sizes[id(node)] = n = min(n, MAX_CONFIG_NODES + 1)
+        return n
+
+    if size(root, 0) > MAX_CONFIG_NODES:
+        raise RefusedRunFile(f"config attribute expands to more than {MAX_CONFIG_NODES:,} YAML nodes (aliases)")
+
+
+try:  # libyaml's parser when present
+    _YamlLoader = yaml.CSafeLoader
+except AttributeError:  # pragma: no cover
+    _YamlLoader = yaml.SafeLoader
 
 
 @dataclass(frozen=True)
@@ -75,6 +209,7 @@ class RunHead:
     has_weights: bool
     attrs: dict = field(default_factory=dict, repr=False)
     rows: dict = field(default_factory=dict, repr=False)  # {table: {column: rows}} (what checkpoints record)
+    config: dict = field(default_factory=dict, repr=False)  # config_yaml parsed (``parse_config``)
 
     @property
     def n_updates(self) -> int:
@@ -90,10 +225,12 @@ def read_head(path: str | Path, locking: bool = False) -> RunHead:
         raise UnreadableRunFile(f"{p}: no such run file")
     try:
         with h5py.File(p, "r", locking=locking) as f:
+            check_contained(f)
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            has_weights = "weights" in f and len(f["weights"]) > 0
+            has_weights = _check_weights(f)
             rows = _row_counts(f)
-    except Exception as exc:  # noqa: BLE001 - not HDF5, truncated, ...
+        config = parse_config(str(attrs.get("config", "")))
+    except Exception as exc:  # noqa: BLE001 - not HDF5, truncated, refused, ...
         raise _unreadable(p, exc) from None
     steps = attrs.get("steps")
     try:
@@ -110,7 +247,25 @@ def read_head(path: str | Path, locking: bool = False) -> RunHead:
         has_weights=has_weights,
         attrs=attrs,
         rows=rows,
+        config=config,
     )
+
+
+def _check_weights(f: h5py.File) -> bool:
+    """Whether ``f`` holds final weights; ``RefusedRunFile`` if they are not real numbers."""
+    if "weights" not in f:
+        return False
+    group = f["weights"]
+    if not isinstance(group, h5py.Group):
+        raise RefusedRunFile("weights is not a group of datasets")
+    for name, obj in group.items():
+        if not isinstance(obj, h5py.Dataset):
+            raise RefusedRunFile(f"weights/{name} is a group, not an array of weights")
+        kind = obj.dtype.kind
+        if kind not in "fiu":
+            what = {"c": "complex numbers", "S": "strings", "U": "strings", "O": "objects or strings", "b": "booleans"}
+            raise RefusedRunFile(f"weights/{name} holds {what.get(kind, f'dtype {obj.dtype}')}, not real numbers")
+    return len(group) > 0
 
 
 def _row_counts(f: h5py.File) -> dict[str, dict[str, int]]:
@@ -130,6 +285,7 @@ class RunTables:
     tables: dict[str, dict[str, np.ndarray]]
     memory: dict
     env: dict
+    config: dict = field(default_factory=dict)  # attrs["config"] parsed (``parse_config``)
 
 
 def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], locking: bool = True) -> RunTables:
@@ -144,13 +300,15 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
         raise UnreadableRunFile(f"{p}: no such run file")
     try:
         with h5py.File(p, "r", locking=locking) as f:
+            check_contained(f, datasets=False)  # _columns checks the datasets it reads
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
             tables = {group: _columns(f, group, names) for group, names in columns.items()}
             memory = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
             env = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
-    except Exception as exc:  # noqa: BLE001 - truncated, garbage, not HDF5, half-written
+        config = parse_config(str(attrs.get("config") or "{}"))
+    except Exception as exc:  # noqa: BLE001 - truncated, garbage, not HDF5, half-written, refused
         raise _unreadable(p, exc) from None
-    return RunTables(attrs, tables, memory, env)
+    return RunTables(attrs, tables, memory, env, config)
 
 
 def _columns(f: h5py.File, group: str, names: Sequence[str] | None) -> dict[str, np.ndarray]:
@@ -160,6 +318,7 @@ def _columns(f: h5py.File, group: str, names: Sequence[str] | None) -> dict[str,
         return {}
     if names is None:
         names = [gid.get_objname_by_idx(i).decode() for i in range(gid.get_num_objs())]
+    size = f.id.get_filesize()
     cols = {}
     for name in names:
         try:
@@ -168,6 +327,7 @@ def _columns(f: h5py.File, group: str, names: Sequence[str] | None) -> dict[str,
             continue
         if len(ds.shape) != 1 or ds.dtype.kind not in "fiub":
             continue
+        check_dataset(f"{group}/{name}", ds, size)
         values = np.empty(ds.shape, dtype=ds.dtype)
         if values.size:
             ds.read(h5py.h5s.ALL, h5py.h5s.ALL, values)
@@ -180,7 +340,14 @@ def _attr(value):
 
 
 def _open(path: str | Path) -> h5py.File:
-    return h5py.File(path, "r", locking=False)
+    """Open a run file to read, refusing content that leaves it (``check_contained``)."""
+    f = h5py.File(path, "r", locking=False)
+    try:
+        check_contained(f)
+    except BaseException:
+        f.close()
+        raise
+    return f
 
 
 _NUMERIC_ATTRS = {"steps": int, "status_step": int, "format_version": int, "wall_time": float}
@@ -194,7 +361,7 @@ def read_meta(f: h5py.File) -> dict:
                 meta[key] = kind(float(meta[key])) if kind is int else kind(meta[key])
             except ValueError:
                 pass
-    meta["config"] = yaml.safe_load(meta.get("config", "{}")) or {}
+    meta["config"] = parse_config(str(meta.get("config") or "{}"))
     meta["overrides"] = json.loads(meta.get("overrides", "[]"))
     meta["resumes"] = json.loads(meta.get("resumes", "[]"))
     meta["env"] = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
@@ -249,8 +416,9 @@ def load_logs(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def load_weights(path: str | Path) -> dict[str, np.ndarray]:
-    """Final weights as {state_dict name: array}."""
+    """Final weights as {state_dict name: array}; ``RefusedRunFile`` if they are not arrays of
+    real numbers (complex ones would lose their imaginary part in a real network)."""
     with _open(path) as f:
-        if "weights" not in f:
+        if not _check_weights(f):
             raise KeyError(f"{path}: no final weights stored (status {_attr(f.attrs.get('status', '?'))})")
         return {name: ds[()] for name, ds in f["weights"].items()}

@@ -42,7 +42,11 @@ limit (RLIMIT_FSIZE) against what is not yet flushed plus a reserve for closing
 (``RESERVE_BYTES``); short of it, it raises ``DiskFull`` before touching the file, and the
 runner closes the file as ``failed`` inside the reserve. The file then holds every row
 up to its last flush. (What remains: another process filling the disk between the check
-and the write.) At every flush the writer also checks that the path still names the file
+and the write.) Likewise it checks that the file can still be written (no immutable or
+append-only flag, no read-only mount; ``RunFileReadOnly``): such a file cannot even take
+its status, so it is left open and untouched (closing would write) and the CLI exits 1.
+A run file or directory that cannot be created (no space, no free inode, a quota) is a
+``DiskFull``/``RunFileFault`` too. At every flush the writer also checks that the path still names the file
 it writes (``RunFileLost``: deleted or replaced under a live run).
 
 Identity: every run file carries a random ``run_id`` (root attribute); its checkpoints
@@ -60,6 +64,7 @@ import errno
 import json
 import os
 import resource
+import sys
 import time
 import uuid
 from collections.abc import Mapping
@@ -67,6 +72,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from higbench.runfile.reader import check_contained
 
 FORMAT_VERSION = 1
 H5PY_VERSION = h5py.__version__  # recorded in each run's environment
@@ -93,6 +100,13 @@ class DiskFull(RunFileFault):
 
     def __str__(self) -> str:
         return self.strerror
+
+
+class RunFileReadOnly(RunFileFault):
+    """The file can no longer be written (immutable or append-only flag, read-only mount)."""
+
+    def __str__(self) -> str:
+        return self.args[1] if len(self.args) > 1 else "run file read-only"
 
 
 class RunFileLost(RunFileFault):
@@ -156,7 +170,10 @@ def dataset_info(group: str, name: str) -> tuple[str, str] | None:
 class RunFileWriter:
     def __init__(self, path: str | Path, config_yaml: str, overrides: list[str], env: Mapping, meta: Mapping):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _creation_fault(self.path.parent, exc) from None
         self._unflushed = 0
         self._inode = None
         self.check_space()
@@ -166,9 +183,9 @@ class RunFileWriter:
             # superblock v3, whose "open for write" flag makes a killed writer's file unopenable.
             self.f = h5py.File(self.path, "w-", libver=("earliest", "latest"))
         except (FileExistsError, OSError) as exc:
-            if self.path.exists():
+            if os.path.lexists(self.path):
                 raise RunFileExists(f"run file {self.path} already exists; refusing to overwrite it") from exc
-            raise
+            raise _creation_fault(self.path, exc) from None
         self._inode = self._stat_key()
         self.run_id = new_run_id()
         self.f.attrs["format_version"] = FORMAT_VERSION
@@ -205,11 +222,19 @@ class RunFileWriter:
         self.path = Path(path)
         self._unflushed = 0
         self._inode = None
+        if self.path.is_symlink():  # resume writes a run in its own directory only
+            raise RunFileFault(errno.ELOOP, f"run file {self.path} is a symbolic link; refusing to write through it")
+        self.check_writable()
         self.check_space()
         try:
             self.f = h5py.File(self.path, "r+")
         except BlockingIOError as exc:
             raise RunFileBusy(f"run file {self.path} is open in another process (is that run still going?)") from exc
+        try:
+            check_contained(self.f)  # nothing it writes may land in another file
+        except BaseException:
+            self.f.close()
+            raise
         self._inode = self._stat_key()
         self.run_id = run_id_of(self.f)
         for group, names in rows.items():  # check everything before changing anything
@@ -258,13 +283,31 @@ class RunFileWriter:
         """Raise DiskFull unless the unflushed data, ``extra`` bytes and the reserve fit."""
         if self._inode is not None:
             self.check_file()  # a file that is gone has no disk to fill
-        size = self.path.stat().st_size if self.path.exists() else 0
+            self.check_writable()
         need = 2 * (self._unflushed + extra) + RESERVE_BYTES
-        free = free_bytes(self.path, size)
+        try:
+            size = self.path.stat().st_size if self.path.exists() else 0
+            free = free_bytes(self.path, size)
+        except FileNotFoundError:  # its directory went between the checks above and here
+            if self._inode is not None:
+                self.check_file()
+            raise
         if free < need:
             raise DiskFull(
                 f"no space left for {self.path} ({free // 1024} KiB free, the next write needs about {need // 1024} KiB "
                 "with the reserve for closing the file); run stopped before writing"
+            )
+
+    def check_writable(self) -> None:
+        """Raise RunFileReadOnly if a write would fail: HDF5 cannot survive a failed write
+        (it crashes the process), so this is checked before every write, like the disk space."""
+        why = read_only_reason(self.path, getattr(self, "f", None))
+        if why:
+            self._read_only = True
+            raise RunFileReadOnly(
+                errno.EPERM,
+                f"run file {self.path} became read-only while the run was writing it ({why}); run stopped. "
+                "It keeps every row up to its last flush; its status cannot be written",
             )
 
     def check_file(self) -> None:
@@ -276,6 +319,12 @@ class RunFileWriter:
     def row_counts(self) -> dict[str, dict[str, int]]:
         """{group: {dataset: rows}} of the tables now (recorded by checkpoints)."""
         return {group: {name: int(ds.shape[0]) for name, ds in self.f[group].items()} for group in TABLES if group in self.f}
+
+    def last_value(self, group: str, name: str) -> float:
+        """The last row of ``/group/name`` (NaN if there is none): a resumed run's last evaluation."""
+        if group in self.f and name in self.f[group] and self.f[group][name].shape[0]:
+            return float(self.f[group][name][-1])
+        return float("nan")
 
     # -- status --
     def set_status(self, status: str, reason: str = "", step: int = -1) -> None:
@@ -339,12 +388,65 @@ class RunFileWriter:
         """Write the final status and close; the file is closed whatever happens."""
         if not self.f.id.valid:
             return
+        if getattr(self, "_read_only", False) or read_only_reason(self.path, self.f):
+            # Nothing can be written, and closing writes (HDF5 then fails, and may crash the
+            # process): the file is left open, untouched, until the process exits.
+            _ABANDONED.append(self.f)
+            return
         try:
             if status is not None:
                 self.set_status(status, reason, step)
             self.f.attrs["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         finally:
             self.f.close()
+
+
+_ABANDONED: list[h5py.File] = []  # read-only run files never closed (see RunFileWriter.close)
+_FS_IOC_GETFLAGS = 0x80086601  # Linux: the inode's attribute flags (chattr)
+_FS_IMMUTABLE_FL, _FS_APPEND_FL = 0x10, 0x20
+
+
+def read_only_reason(path: Path, f: h5py.File | None = None) -> str:
+    """Why ``path`` cannot be written into now ("" if it can, or if that cannot be told)."""
+    try:
+        if os.statvfs(path.parent).f_flag & os.ST_RDONLY:
+            return "its file system is mounted read-only"
+    except OSError:
+        return ""
+    try:
+        import fcntl
+
+        fd = f.id.get_vfd_handle() if f is not None and f.id.valid else None
+        own = fd is None
+        if own:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+        try:
+            flags = int.from_bytes(fcntl.ioctl(fd, _FS_IOC_GETFLAGS, b"\0" * 8)[:4], sys.byteorder)
+        finally:
+            if own:
+                os.close(fd)
+    except (OSError, ImportError, TypeError, ValueError):  # no such ioctl here (tmpfs of old kernels, NFS, macOS)
+        return ""
+    if flags & _FS_IMMUTABLE_FL:
+        return "immutable flag set (chattr +i)"
+    if flags & _FS_APPEND_FL:
+        return "append-only flag set (chattr +a)"
+    return ""
+
+
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _creation_fault(path: Path, exc: OSError) -> RunFileFault:
+    """One line for a run file (or its directory) that cannot be created: a full disk, no
+    free inodes, a quota (``DiskFull``: nothing was written), anything else (``RunFileFault``)."""
+    code = exc.errno
+    if code is None:  # h5py puts the errno in its message only
+        code = next((c for c in (*_NO_ROOM, errno.EACCES, errno.EROFS) if f"errno = {c}," in str(exc)), None)
+    why = os.strerror(code) if code else " ".join(str(exc).split())[:200]
+    if code in _NO_ROOM:
+        return DiskFull(f"cannot create {path}: {why} (no space, no free inodes or over quota); nothing was written")
+    return RunFileFault(code or errno.EIO, f"cannot create {path}: {why}; nothing was written")
 
 
 def run_id_of(f: h5py.File) -> str:

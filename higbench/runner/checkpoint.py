@@ -18,8 +18,14 @@ loop needs to continue as if never stopped:
 
 The checkpoint is serialised in memory first and written only if it fits on the disk
 beside the run file's reserve (``writer.DiskFull`` otherwise; the previous one stays).
-Temporary files of a writer killed mid-save (``run.h5.ckpt.tmp<pid>``) are removed by the
-next save and by resume.
+The temporary file (``run.h5.ckpt.tmp<random>``) is created exclusively, so nothing planted
+under its name (a link to another file) is followed; those of a writer killed mid-save are
+unlinked by the next save (which removes a link, never its target).
+
+Checkpoints may come from somebody else (a shared run dir), so loading one runs no code:
+it holds only tensors and plain containers, and is read with torch's restricted unpickler
+(``weights_only=True``) after refusing links, non-zip files and compressed records; its
+``run_id`` is compared with the run file's before anything in it is used (``load``).
 
 The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
 and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
@@ -31,9 +37,14 @@ device, memory cap) may be changed on the command line.
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import io
 import os
+import stat
+import tempfile
 import time
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +55,9 @@ from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_
 
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 SUFFIX = ".ckpt"
-FORMAT = 1
+FORMAT = 1  # every format-1 checkpoint holds only tensors and plain containers
+READABLE_FORMATS = (1,)
+TMP_MARK = ".tmp"  # temporaries: run.h5.ckpt.tmp<random>
 RESUMABLE_STATUSES = ("running", "interrupted", "failed")
 
 
@@ -54,12 +67,15 @@ def checkpoint_path(run_path: str | Path) -> Path:
 
 
 def save(run_path: str | Path, state: dict[str, Any]) -> Path:
-    """Write the checkpoint of ``run_path`` atomically (temp file, fsync, rename)."""
+    """Write the checkpoint of ``run_path`` atomically (temp file, fsync, rename).
+
+    The temporary file is created exclusively (``mkstemp``: ``O_CREAT|O_EXCL``), so a link
+    or file planted under its name is never followed or overwritten.
+    """
     import torch
 
     final = checkpoint_path(run_path)
     remove_stale_temporaries(run_path)
-    tmp = final.with_name(f"{final.name}.tmp{os.getpid()}")
     state = {"format": FORMAT, "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **state}
     buffer = io.BytesIO()
     torch.save(state, buffer)
@@ -70,17 +86,23 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
             f"no space left for checkpoint {final} ({free // 1024} KiB free, it needs {len(data) // 1024} KiB "
             "plus the reserve for closing the run file); run stopped before writing"
         )
+    tmp = None
     try:
-        with open(tmp, "wb") as f:
+        fd, name = tempfile.mkstemp(prefix=f"{final.name}{TMP_MARK}", dir=final.parent)
+        tmp = Path(name)
+        with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), 0o666 & ~_umask())  # as an ordinary file would be (mkstemp: 0600)
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, final)
+        os.replace(tmp, final)  # rename replaces a link at ``final`` itself, never its target
     except OSError as exc:
-        tmp.unlink(missing_ok=True)  # the previous checkpoint stays as it was
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)  # the previous checkpoint stays as it was
         raise RunFileFault(exc.errno, f"cannot write checkpoint {final} ({exc.strerror or exc}); run stopped") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
         raise
     try:  # make the rename itself durable
         fd = os.open(final.parent, os.O_RDONLY)
@@ -93,51 +115,95 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
     return final
 
 
-def load(run_path: str | Path) -> dict[str, Any]:
-    import torch
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
+
+def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
+    """The checkpoint of run file ``run_path``: checked, then deserialised without running code.
+
+    Refused (``ConfigError`` on ``resume``): a missing checkpoint, a link, anything but a
+    torch zip archive of uncompressed records (a plain pickle is never unpickled), an archive
+    holding any object but tensors and plain containers (``weights_only=True``: torch's
+    restricted unpickler constructs nothing else and calls no function), another format, a
+    checkpoint of another run (its ``run_id`` is compared before anything in it is used).
+    The file is read once per process: an unchanged checkpoint is deserialised only once.
+    """
     path = checkpoint_path(run_path)
-    if not path.is_file():
+    value = str(run_path) if resume_value is None else resume_value
+
+    def refuse(why: str) -> ConfigError:
+        return ConfigError("resume", value, f"checkpoint {path.name} {why}")
+
+    if not os.path.lexists(path):
         raise ConfigError(
-            "resume",
-            str(run_path),
-            f"no checkpoint {path.name} next to the run file (was checkpoint_every null and the run killed?)",
+            "resume", value, f"no checkpoint {path.name} next to the run file (was checkpoint_every null and the run killed?)"
         )
     try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # noqa: BLE001 - truncated or foreign file
-        raise ConfigError(
-            "resume", str(run_path), f"checkpoint {path.name} is unreadable ({type(exc).__name__}: {exc})"
-        ) from None
-    if state.get("format") != FORMAT:
-        raise ConfigError("resume", str(run_path), f"checkpoint format {state.get('format')} is not {FORMAT}")
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
+    except OSError as exc:
+        why = (
+            "is a symbolic link; checkpoints are never read through links"
+            if os.path.islink(path)
+            else f"cannot be opened ({exc.strerror})"
+        )
+        raise refuse(why) from None
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(f.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise refuse("is not a regular file")
+        key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        if _LOADED is not None and _LOADED[0] == key:
+            state = copy.deepcopy(_LOADED[1])
+        else:
+            state = _deserialise(f, st.st_size, refuse)
+            _remember(key, state)
+    if not isinstance(state, dict):
+        raise refuse(f"holds a {type(state).__name__}, not a checkpoint")
+    if state.get("format") not in READABLE_FORMATS:
+        raise refuse(f"has format {show(state.get('format'))}; this version reads {', '.join(map(str, READABLE_FORMATS))}")
+    _check_run_id(state, Path(run_path), value)
     return state
 
 
-def remove(run_path: str | Path) -> None:
-    checkpoint_path(run_path).unlink(missing_ok=True)
-    remove_stale_temporaries(run_path)
+_LOADED: tuple[tuple, dict] | None = None  # (file identity, state) of the last checkpoint read
 
 
-def remove_stale_temporaries(run_path: str | Path) -> None:
-    """Temporary files of checkpoint writers that died mid-save (a run file has one writer)."""
-    final = checkpoint_path(run_path)
-    own = f"{final.name}.tmp{os.getpid()}"
-    for p in final.parent.glob(f"{final.name}.tmp*"):
-        if p.name != own:
-            p.unlink(missing_ok=True)
+def _remember(key: tuple, state: dict) -> None:
+    global _LOADED
+    _LOADED = (key, copy.deepcopy(state))  # the caller's copy is loaded into models and mutated
 
 
-def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> None:
-    """Refuse a checkpoint that is not of ``run_file`` (its run_id differs)."""
-    head = read_head(run_file)
-    file_id = str(head.run_id or "")
-    short = [
-        f"{group}/{name} has {head.rows.get(group, {}).get(name, 0)}, the checkpoint {n}"
-        for group, names in (state.get("rows") or {}).items()
-        for name, n in names.items()
-        if head.rows.get(group, {}).get(name, 0) < n
-    ]
+def _deserialise(f, size: int, refuse) -> Any:
+    """A torch zip archive read with the restricted unpickler; ``refuse(why)`` otherwise."""
+    import pickle
+
+    import torch
+
+    try:
+        with zipfile.ZipFile(f) as archive:
+            records = archive.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise refuse(f"is unreadable: not a checkpoint archive ({exc}); other formats are never unpickled") from None
+    if any(r.compress_type != zipfile.ZIP_STORED for r in records) or sum(r.file_size for r in records) > size:
+        raise refuse("is unreadable: compressed or oversized records (torch never writes them)")
+    f.seek(0)
+    try:
+        return torch.load(f, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise refuse(f"holds objects other than tensors and plain containers; refusing to load it ({first})") from None
+    except Exception as exc:  # noqa: BLE001 - truncated, damaged
+        raise refuse(f"is unreadable ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
+
+
+def _check_run_id(state: dict, run_file: Path, resume_value: Any) -> None:
+    try:
+        file_id = str(read_head(run_file).run_id or "")
+    except UnreadableRunFile as exc:
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
     ckpt_id = str(state.get("run_id") or "")
     if ckpt_id != file_id:
         raise ConfigError(
@@ -146,10 +212,43 @@ def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> Non
             f"checkpoint {checkpoint_path(run_file).name} belongs to another run "
             f"(its run id {ckpt_id or '<none>'}, the run file's {file_id or '<none>'}); refusing to resume from it",
         )
+
+
+def remove(run_path: str | Path) -> None:
+    checkpoint_path(run_path).unlink(missing_ok=True)
+    remove_stale_temporaries(run_path)
+
+
+def remove_stale_temporaries(run_path: str | Path) -> None:
+    """Temporary files of checkpoint writers that died mid-save (a run file has one writer:
+    its file lock keeps a second one out). ``unlink`` removes a link, never its target."""
+    final = checkpoint_path(run_path)
+    for p in final.parent.glob(f"{final.name}{TMP_MARK}*"):
+        with contextlib.suppress(OSError):
+            if stat.S_ISREG(p.lstat().st_mode) or p.is_symlink():
+                p.unlink()
+
+
+def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> None:
+    """Refuse a checkpoint that is not of ``run_file`` (its run_id differs) or records more
+    rows than the file holds."""
+    _check_run_id(state, run_file, resume_value)
+    head = read_head(run_file)
+    short = [
+        f"{group}/{name} has {head.rows.get(group, {}).get(name, 0)}, the checkpoint {n}"
+        for group, names in (state.get("rows") or {}).items()
+        for name, n in names.items()
+        if head.rows.get(group, {}).get(name, 0) < n
+    ]
     if short:
         raise ConfigError(
             "resume", resume_value, f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
         )
+
+
+def _why(exc: UnreadableRunFile) -> str:
+    """What to say of an unreadable run file: the error's name, or what was refused in it."""
+    return exc.detail.split(": ", 1)[-1] if exc.kind == "refused" else exc.kind
 
 
 # -- resolving what to resume ----------------------------------------------------------------
@@ -167,6 +266,9 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
 
 def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
     """(status, stored config YAML) of a run to resume; ConfigError if it cannot be resumed."""
+    if run_file.is_symlink():  # the run would go on elsewhere while its checkpoint and logs stay here
+        why = f"{run_file} is a symbolic link (to {os.readlink(run_file)}); resume runs in their own directory"
+        raise ConfigError("resume", resume_value, why)
     if not run_file.is_file():
         raise ConfigError("resume", resume_value, f"no run file {run_file}")
     try:  # with file locking: a live writer holds the file, and we must not write into it
@@ -174,7 +276,7 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
     except RunFileLocked:
         raise ConfigError("resume", resume_value, f"{run_file} is open in another process (that run is still going)") from None
     except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({exc.kind})") from None
+        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
     status, config = str(head.attrs.get("status", "")), head.config_yaml
     if status not in RESUMABLE_STATUSES:
         raise ConfigError(
@@ -235,8 +337,6 @@ def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
     with the run's own value (re-running the same command with ``resume=...``) but not
     changed: that would be another experiment.
     """
-    import copy
-
     merged = copy.deepcopy(stored)
     for key, line in override_keys(overrides):
         if key.startswith("hydra.") or key == "hydra":

@@ -415,7 +415,9 @@ class TrainingRun:
     def loop(self, signals: StopSignals) -> tuple[str, str, float]:
         """Updates until the budget, a divergence or a stop signal; (status, reason, last test loss)."""
         final_test = math.nan
-        if not self.resumed:
+        if self.resumed:  # its last evaluation: a resume with nothing left to do evaluates nothing
+            final_test = self.file.writer.last_value("curves", "test_loss")
+        else:
             final_test = self.initial_test_loss = self.record_evaluation()
             self.next_eval = self.cfg.eval_every
         status, reason = "completed", ""

@@ -95,3 +95,36 @@ def train_here(cfg, path, **kwargs):
         return train(cfg, path, **kwargs)
     finally:
         torch.set_num_threads(threads)
+
+
+def sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def stopped_run(path: Path, monkeypatch, overrides=(), after: int = 25):
+    """A run trained here and stopped cleanly (as by SIGTERM) after ``after`` loop turns:
+    status interrupted, checkpoint saved next to it."""
+    import signal
+
+    from higbench.runner.checkpoint import checkpoint_path
+    from higbench.runner.train import StopSignals
+
+    calls = {"n": 0}
+    original = StopSignals.check
+
+    def check(self):
+        calls["n"] += 1
+        if calls["n"] == after:
+            self.signum = signal.SIGTERM
+        original(self)
+
+    with monkeypatch.context() as m:
+        m.setattr(StopSignals, "check", check)
+        cfg = compose_here(
+            ["problem=toy", "optimizer=adam", "budget.max_updates=1000", "eval_unit=updates", "eval_every=5", *FAST, *overrides]
+        )
+        summary = train_here(cfg, path)
+    assert summary.status == "interrupted" and checkpoint_path(path).is_file()
+    return summary
