@@ -26,7 +26,7 @@ def test_resume_with_the_budget_spent_completes_with_the_last_test_loss(tmp_path
     """Stopped right after an evaluation, resumed with nothing left to do: ``completed`` with
     the last recorded test loss (it was ``diverged``, "non-finite test loss", checkpoint gone)."""
     run = tmp_path / "run" / "run.h5"
-    stopped_run(run, monkeypatch, after=13)
+    stopped_run(run, monkeypatch, after=11)  # the 11th loop turn starts at step 10, just after its evaluation
     state = torch.load(checkpoint_path(run), weights_only=True)
     assert state["step"] == state["last_eval_step"] > 0, "the stop must land just after an evaluation"
     _, curves = load_run(run)

@@ -31,6 +31,7 @@ EXPECTED = {
     "fig12a_beta": ("oscillator", "hig", {"optimizer.beta"}),
     "fig12b_kappa": ("oscillator", "hig", {"optimizer.kappa"}),
     "fig13_tau": ("oscillator", "hig", {"optimizer", "optimizer.tau"}),
+    "poisson_authors": ("poisson", "hig", {"optimizer.lr"}),
     "toy_lr_grid": ("toy", "adam", {"optimizer.lr", "batch_size"}),
     "toy_optuna": ("toy", "hig", {"optimizer.lr", "optimizer.tau", "batch_size"}),
 }
