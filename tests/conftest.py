@@ -1,14 +1,12 @@
-"""Shared test helpers: run the CLI in a subprocess with tiny budgets, in a tmp dir."""
+"""Shared fixtures: the CLI in this process (``higbench``) or as a process (``cli``), tiny budgets, a tmp dir."""
 
 from __future__ import annotations
 
 import importlib.util
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import run_cli
 
 ROOT = Path(__file__).resolve().parent.parent  # higbench is installed (editable): no sys.path entry needed
 
@@ -28,13 +26,6 @@ def pytest_collection_modifyitems(config, items):
 
 # A budget of a few updates, one evaluation per update, no progress bar.
 TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false"]
-
-
-def run_cli(args: list[str], cwd: Path, timeout: float = 180) -> subprocess.CompletedProcess:
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    return subprocess.run(
-        [sys.executable, "-m", "higbench.cli", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
-    )
 
 
 @pytest.fixture

@@ -1,48 +1,21 @@
-"""Helpers of the fault-injection suite (tests/reliability): run the CLI as a subprocess, watch a run file."""
+"""Helpers of the fault-injection suite (tests/reliability): train in this process, watch a run file; the
+CLI as a process comes from tests/cli_runner.py."""
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import h5py
 import pytest
+from cli_runner import cli_env, run_cli, start_cli  # noqa: F401  (the one process runner, re-exported)
 
 REPO = Path(__file__).resolve().parents[2]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
 
 # Small, fast runs: one torch thread (the test machine has 2 shared cores; 2 threads per
 # process oversubscribe it 20x), no progress bar.
 FAST = ["threads=1", "progress=false"]
-
-
-def cli_env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    env.pop("HYDRA_FULL_ERROR", None)
-    return env
-
-
-def run_cli(args: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
-    """``python -m higbench.cli *args`` in ``cwd``; text output captured."""
-    return subprocess.run(
-        [sys.executable, "-m", "higbench.cli", *args], cwd=cwd, env=cli_env(), capture_output=True, text=True, timeout=timeout
-    )
-
-
-def start_cli(args: list[str], cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-m", "higbench.cli", *args],
-        cwd=cwd,
-        env=cli_env(),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
 
 
 def table_rows(path: Path, group: str = "curves") -> int:

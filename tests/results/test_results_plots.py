@@ -2,13 +2,8 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sweeps"))  # synthetic.py
-from synthetic import write_run  # noqa: E402
+from synthetic import write_run
 
 from higbench.results.__main__ import main as results_main  # noqa: E402
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
-sys.path[:0] = [str(REPO), str(HERE)]
+sys.path[:0] = [str(REPO), str(HERE.parent)]  # tests/: synthetic.py
 
 
 def sweep(updates: int, optimizer: str, repeats: int, only: list[str] | None) -> None:

@@ -153,7 +153,7 @@ WRITER = textwrap.dedent(
 def test_run_being_written_and_killed_writer(tree):
     """A live writer's file shows as running; after SIGKILL it reads up to the last flush."""
     path = tree / "live/run.h5"
-    code = WRITER.format(repo=str(REPO), here=os.path.dirname(__file__), path=str(path))
+    code = WRITER.format(repo=str(REPO), here=os.path.dirname(os.path.dirname(__file__)), path=str(path))  # tests/: synthetic.py
     proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import TINY, cli_command, cli_env
+from cli_runner import cli_env, start_cli
+from conftest import TINY
 
 from higbench.results import load_runs
 
@@ -14,10 +14,7 @@ SWEEP = ["-m", "optimizer=adam", "optimizer.lr=0.01,0.1", *TINY]
 
 
 def start_together(cwd, *argvs):
-    procs = [
-        subprocess.Popen(cli_command(*argv), cwd=cwd, env=cli_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        for argv in argvs
-    ]
+    procs = [start_cli(argv, cwd, env=cli_env(launcher_threads=True)) for argv in argvs]
     return [(p, *p.communicate(timeout=300)) for p in procs]
 
 

@@ -9,9 +9,15 @@ from __future__ import annotations
 import joblib
 import pytest
 import yaml
-from conftest import GRID, TINY, run_cli
+from cli_runner import cli_env, run_cli
+from conftest import GRID, TINY
 
 from higbench.results import load_runs
+
+
+def sweep_cli(args: list[str], cwd, timeout: float = 180):
+    """A sweep that must succeed; its launcher chooses the workers' threads."""
+    return run_cli(args, cwd, timeout=timeout, env=cli_env(launcher_threads=True), check=True)
 
 
 def check_sweep(sweep_dir):
@@ -33,21 +39,23 @@ def check_sweep(sweep_dir):
 
 def test_basic_launcher(tmp_path):
     sweep = tmp_path / "sweep"
-    run_cli("-m", "+experiment=toy_lr_grid", *TINY, f"hydra.sweep.dir={sweep}", cwd=tmp_path)
+    sweep_cli(["-m", "+experiment=toy_lr_grid", *TINY, f"hydra.sweep.dir={sweep}"], tmp_path)
     check_sweep(sweep)
 
 
 def test_joblib_two_workers_cap_threads(tmp_path):
     sweep = tmp_path / "sweep"
-    run_cli(
-        "-m",
-        "+experiment=toy_lr_grid",
-        *TINY,
-        "threads=null",  # torch's default thread count (conf/config.yaml sets threads=1)
-        f"hydra.sweep.dir={sweep}",
-        "hydra/launcher=joblib",
-        "hydra.launcher.n_jobs=2",
-        cwd=tmp_path,
+    sweep_cli(
+        [
+            "-m",
+            "+experiment=toy_lr_grid",
+            *TINY,
+            "threads=null",  # torch's default thread count (conf/config.yaml sets threads=1),
+            f"hydra.sweep.dir={sweep}",
+            "hydra/launcher=joblib",
+            "hydra.launcher.n_jobs=2",
+        ],
+        tmp_path,
     )
     runs = check_sweep(sweep)
     # loky starts its workers with OMP_NUM_THREADS = cores // n_jobs; torch takes its default from it
@@ -59,17 +67,19 @@ def test_joblib_two_workers_cap_threads(tmp_path):
 def test_joblib_explicit_threads(tmp_path):
     """`threads=N` wins over the launcher's cap (torch.set_num_threads in the job)."""
     sweep = tmp_path / "sweep"
-    run_cli(
-        "-m",
-        "+experiment=toy_lr_grid",
-        *TINY,
-        "optimizer.lr=0.1",
-        "batch_size=64",
-        "threads=3",
-        f"hydra.sweep.dir={sweep}",
-        "hydra/launcher=joblib",
-        "hydra.launcher.n_jobs=2",
-        cwd=tmp_path,
+    sweep_cli(
+        [
+            "-m",
+            "+experiment=toy_lr_grid",
+            *TINY,
+            "optimizer.lr=0.1",
+            "batch_size=64",
+            "threads=3",
+            f"hydra.sweep.dir={sweep}",
+            "hydra/launcher=joblib",
+            "hydra.launcher.n_jobs=2",
+        ],
+        tmp_path,
     )
     runs = load_runs(sweep)
     assert len(runs) == 1 and runs["env.torch_threads"].tolist() == [3]
@@ -78,15 +88,17 @@ def test_joblib_explicit_threads(tmp_path):
 @pytest.mark.slow
 def test_submitit_local(tmp_path):
     sweep = tmp_path / "sweep"
-    run_cli(
-        "-m",
-        "+experiment=toy_lr_grid",
-        *TINY,
-        "threads=1",
-        f"hydra.sweep.dir={sweep}",
-        "hydra/launcher=submitit_local",
-        "hydra.launcher.timeout_min=5",
-        cwd=tmp_path,
+    sweep_cli(
+        [
+            "-m",
+            "+experiment=toy_lr_grid",
+            *TINY,
+            "threads=1",
+            f"hydra.sweep.dir={sweep}",
+            "hydra/launcher=submitit_local",
+            "hydra.launcher.timeout_min=5",
+        ],
+        tmp_path,
         timeout=300,
     )
     runs = check_sweep(sweep)
@@ -99,14 +111,16 @@ def test_submitit_local(tmp_path):
 def test_optuna_sweeper(tmp_path):
     """Optuna proposes lr/tau/batch_size, minimises what the job returns (the final test loss)."""
     sweep = tmp_path / "sweep"
-    run_cli(
-        "-m",
-        "+experiment=toy_optuna",
-        *TINY,
-        "hydra.sweeper.n_trials=3",
-        "hydra.sweeper.n_jobs=1",
-        f"hydra.sweep.dir={sweep}",
-        cwd=tmp_path,
+    sweep_cli(
+        [
+            "-m",
+            "+experiment=toy_optuna",
+            *TINY,
+            "hydra.sweeper.n_trials=3",
+            "hydra.sweeper.n_jobs=1",
+            f"hydra.sweep.dir={sweep}",
+        ],
+        tmp_path,
     )
     runs = load_runs(sweep)
     assert len(runs) == 3 and set(runs["status"]) == {"completed"}
