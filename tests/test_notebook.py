@@ -1,4 +1,7 @@
-"""examples/hig_in_your_code.ipynb runs top to bottom, and HIG ends below Adam at equal wall clock."""
+"""examples/hig_in_your_code.ipynb runs top to bottom, and HIG ends far below Adam at lr=1e-3 at equal wall clock.
+
+Against the re-tuned Adam (lr=1e-2) six seconds decide nothing reliably (1.1x above to 10x
+below over repeated runs), so the notebook says so and the test does not assert it."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ nbclient = pytest.importorskip("nbclient", reason="needs the dev extra (nbformat
 NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "hig_in_your_code.ipynb"
 
 
-def test_notebook_runs_and_hig_beats_adam():
+def test_notebook_runs_and_hig_beats_adam_at_its_default_lr():
     nb = nbformat.read(NOTEBOOK, as_version=4)
     for cell in nb.cells:  # run from scratch, not from the stored outputs
         if cell.cell_type == "code":
@@ -28,4 +31,4 @@ def test_notebook_runs_and_hig_beats_adam():
     final = json.loads(code[-1].outputs[-1]["text"])
     hig, adams = final.pop("HIG (lr=1)"), final
     assert hig < 1e-2, f"HIG's final test loss {hig:.2e} (expected < 1e-2 after 6 s)"
-    assert all(hig < a for a in adams.values()), f"HIG {hig:.2e} not below Adam {adams}"
+    assert hig < adams["Adam (lr=1e-3)"] / 3, f"HIG {hig:.2e} not well below Adam at lr=1e-3 {adams}"
