@@ -95,3 +95,13 @@ def test_idle_cores_reads_the_real_machine():
 @pytest.mark.parametrize("threads,rows,expected", [(2, 512, 1), (2, 4096, 2), (2, None, 2), (1, 8192, 1)])
 def test_small_eigen_solves_run_on_one_thread(threads, rows, expected):
     assert T.fit_to_work(threads, rows) == expected
+
+
+def test_the_threads_benchmark_prints_a_row_per_size(capsys):
+    """`python -m higbench.bench.threads`, whose table sets PARALLEL_MIN_ROWS, runs (tiny sizes)."""
+    from higbench.bench.threads import main
+
+    main(["--rows", "64", "300", "--repeats", "1"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and line[2].isdigit()]
+    assert [r.split("|")[1].strip() for r in rows] == ["64", "300"]
+    assert all(float(r.split("|")[4]) > 0 for r in rows)

@@ -27,9 +27,10 @@ from __future__ import annotations
 import os
 import time
 
-# Gram rows from which a second thread pays for the eigen-solve (between the oscillator's 512,
-# which loses, and Poisson's 4096, which gains, on an idle 2-core machine).
-PARALLEL_MIN_ROWS = 2048
+# Gram rows from which a second thread pays for the eigen-solve: `python -m higbench.bench.threads`
+# on an idle 2-core machine gave 2/1-thread time ratios of 0.98 at 512 rows, 1.08 at 1024, 0.81 at
+# 1536, 0.68 at 2048 and 0.57 at 4096 (docs/benchmarks.md, "Threads").
+PARALLEL_MIN_ROWS = 1536
 IDLE_INTERVAL_S = 0.2
 
 
