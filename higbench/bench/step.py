@@ -51,6 +51,7 @@ from pathlib import Path
 import torch
 
 from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
+from higbench.dtypes import DTYPES
 
 PHASES = ("jacobian_s", "inversion_s", "apply_s")
 DEFAULT_OUT = Path("outputs") / "bench"
@@ -484,7 +485,7 @@ def main(argv=None) -> None:
 
     args.threads = resolve_threads(args.threads if args.threads == "auto" else int(args.threads))
     torch.set_num_threads(args.threads)
-    dtype = {"float32": torch.float32, "float64": torch.float64}[args.dtype]
+    dtype = DTYPES[args.dtype]
     if args.memory_probe:
         spec = json.loads(args.memory_probe)
         spec["overrides"] = tuple(spec["overrides"])

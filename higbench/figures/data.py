@@ -129,10 +129,11 @@ class RunData:
         import torch
         from omegaconf import OmegaConf
 
+        from higbench.dtypes import DTYPES  # torch: imported only when a figure rebuilds a network
         from higbench.problems import build_problem
 
         cfg = OmegaConf.create(self.meta["config"])
-        dtype = {"float32": torch.float32, "float64": torch.float64}[cfg.dtype]
+        dtype = DTYPES[cfg.dtype]
         problem = build_problem(cfg.problem, dtype=dtype, device=torch.device("cpu"), seed=int(cfg.seed))
         model = problem.build_model()
         model.load_state_dict({k: torch.as_tensor(v) for k, v in self.weights.items()})

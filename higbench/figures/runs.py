@@ -39,6 +39,7 @@ from typing import Any
 
 import yaml
 
+from higbench.errors import dotted_get
 from higbench.errors import override_value as fmt  # the one value-to-override rule
 from higbench.figures.spec import Figure, Preset, Sweep
 from higbench.results.index import COSMETIC_KEYS, DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
@@ -93,12 +94,7 @@ class Job:
 
     def value(self, key: str, default: Any = None) -> Any:
         """A resolved config value by dotted key (``optimizer.lr``)."""
-        node: Any = self.config or {}
-        for part in key.split("."):
-            if not isinstance(node, dict) or part not in node:
-                return default
-            node = node[part]
-        return node
+        return dotted_get(self.config or {}, key, default)
 
 
 def expand(figure: Figure, preset: Preset) -> list[Job]:

@@ -30,6 +30,7 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
+from higbench.dtypes import DTYPES
 from higbench.optim.closure import LossClosure, reduce_loss
 from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, jacobian_power
 from higbench.optim.jacobians import per_sample_jacobian
@@ -44,7 +45,6 @@ from higbench.optim.structured import (
 
 SOLVERS = ("auto", "gram", "svd")
 JACOBIANS = ("structured", "naive")
-_DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
 
 class JacobianPower(torch.optim.Optimizer):
@@ -94,9 +94,9 @@ class JacobianPower(torch.optim.Optimizer):
         if jacobian not in JACOBIANS:
             raise ValueError(f"jacobian={jacobian!r}: expected one of {JACOBIANS}")
         if isinstance(precision, str):
-            if precision not in _DTYPES:
-                raise ValueError(f"precision={precision!r}: expected one of {tuple(_DTYPES)}")
-            precision = _DTYPES[precision]
+            if precision not in DTYPES:
+                raise ValueError(f"precision={precision!r}: expected one of {tuple(DTYPES)}")
+            precision = DTYPES[precision]
         defaults = dict(
             lr=lr, kappa=kappa, beta=beta, tau=tau, truncation=truncation, solver=solver, precision=precision, jacobian=jacobian
         )

@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Any
 
 from higbench.config import RESUMABLE_KEYS  # the schema marks them (resumable=True)
-from higbench.errors import ConfigError, show
+from higbench.errors import ABSENT, ConfigError, dotted_get, dotted_set, show
 from higbench.runfile.reader import RUN_FILE, RunFileLocked, UnreadableRunFile, read_head, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
@@ -312,23 +312,6 @@ def override_keys(overrides: list[str]) -> list[tuple[str, str]]:
     return [(o.key_or_group, o.input_line) for o in parsed]
 
 
-def _lookup(data: dict, dotted: str):
-    node: Any = data
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return KeyError
-        node = node[part]
-    return node
-
-
-def _assign(data: dict, dotted: str, value) -> None:
-    parts = dotted.split(".")
-    node = data
-    for part in parts[:-1]:
-        node = node.setdefault(part, {})
-    node[parts[-1]] = value
-
-
 def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
     """The stored config of the run, with the command-line changes that resuming allows.
 
@@ -342,14 +325,14 @@ def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
         if key.startswith("hydra.") or key == "hydra":
             continue
         top = key.split(".")[0]
-        new = _lookup(composed, key)
+        new = dotted_get(composed, key)
         if top in RESUMABLE_KEYS:
-            if new is not KeyError:
-                _assign(merged, key, new)
+            if new is not ABSENT:
+                dotted_set(merged, key, new)
             continue
-        old = _lookup(stored, key)
-        if new is KeyError or old is KeyError or new != old:
-            shown = "<absent>" if old is KeyError else show(old)
+        old = dotted_get(stored, key)
+        if new is ABSENT or old is ABSENT or new != old:
+            shown = "<absent>" if old is ABSENT else show(old)
             raise ConfigError(
                 key,
                 line.split("=", 1)[-1],

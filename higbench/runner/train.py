@@ -46,6 +46,7 @@ from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.config import init_from_path
+from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError
 from higbench.optim import memory_guard
 from higbench.problems.base import Batch, Problem, build_problem
@@ -59,7 +60,6 @@ from higbench.runner.threads import fit_to_work, resolve_threads
 from higbench.runner.updates import Update, build_update
 from higbench.runner.warmup import warm_up
 
-DTYPES = {"float32": torch.float32, "float64": torch.float64}
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 

@@ -1,6 +1,7 @@
 """Seed search, minimum budgets, seed counts, root causes and the reference data (no training)."""
 
 import json
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -127,11 +128,16 @@ def test_fig13_rule_compares_tau_at_equal_updates():
     assert verdict == "partly"  # at 10 updates both GN runs sit at 0.1: no instability, only the HIG part holds
 
 
-def test_every_claim_has_a_cause_or_cannot_fail_quietly():
-    for c in registry.claims().values():
-        assert c.min_seeds >= 1
-        if c.cause is not None:
-            assert c.cause.category in registry.CAUSES, c.id
+def test_every_published_partly_or_not_names_its_cause():
+    """Each committed claim row that is not reproduced says why: a cause of the registry's
+    vocabulary with its text, or ``open`` with what its runs lack (never an empty cause)."""
+    results = Path(__file__).resolve().parents[2] / "docs" / "results"
+    rows = [c for f in sorted(results.glob("*.json")) for c in json.loads(f.read_text()).get("claims", [])]
+    assert {c["id"] for c in rows} == set(registry.claims()), "every claim of the registry has a committed row"
+    for c in rows:
+        if c["verdict"] in ("partly", "not") or c["verdict"].startswith("n/a ("):
+            category, text = c["cause"]
+            assert category in (*registry.CAUSES, "open") and text.strip(), c["id"]
 
 
 def test_report_shows_root_cause_and_reference_section(tmp_path):

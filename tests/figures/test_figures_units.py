@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -156,19 +157,22 @@ def test_joblist_sweeper_runs_a_job_list(tmp_path):
     assert len(made) == 2 and "optimizer=adam" in made[1] and "seed=1" in made[1]
 
 
-def test_figures_runs_has_no_scheduler_of_its_own():
-    import ast
-    import inspect
-
+def test_missing_runs_go_out_as_one_multirun_longest_first(tmp_path, monkeypatch):
+    """The figures schedule nothing themselves: a round of missing runs is one ``higbench -m``
+    over a job list (Hydra's launcher runs it), longest first, joblib capped at --jobs."""
     from higbench.figures import runs
 
-    imported = {
-        alias.name.split(".")[0]
-        for node in ast.walk(ast.parse(inspect.getsource(runs)))
-        if isinstance(node, ast.Import | ast.ImportFrom)
-        for alias in (node.names if isinstance(node, ast.Import) else [ast.alias(node.module or "")])
-    }
-    assert not imported & {"concurrent", "threading", "multiprocessing", "h5py"}, imported
+    calls = []
+    monkeypatch.setattr(runs.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or SimpleNamespace(returncode=0))
+    jobs = [Job("f", "s", {"budget.seconds": t, "seed": i}, seed=i) for i, t in enumerate([20, 90, 45])]
+    runs.launch(jobs, tmp_path, n_jobs=2, log=lambda _: None)
+    assert len(calls) == 1, calls
+    cmd = calls[0]
+    assert cmd[1:5] == ["-m", "higbench.cli", "-m", "hydra/sweeper=joblist"]
+    assert "hydra/launcher=joblib" in cmd and "hydra.launcher.n_jobs=2" in cmd
+    jobs_file = Path(next(a for a in cmd if a.startswith("hydra.sweeper.jobs_file=")).split("=", 1)[1])
+    listed = json.loads(jobs_file.read_text())
+    assert [job[0] for job in listed] == ["budget.seconds=90", "budget.seconds=45", "budget.seconds=20"]
 
 
 def test_cli_lists_figures_and_plans_without_running(tmp_path, capsys):
