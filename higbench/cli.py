@@ -52,7 +52,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
-from higbench.errors import EXIT_BAD_INPUT, ConfigError
+from higbench.errors import EXIT_BAD_INPUT, ConfigError, quiet_broken_pipe
 from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
 
@@ -393,7 +393,7 @@ def _run_app(argv: list[str]) -> list[str] | None:
     sys.argv = [sys.argv[0], *argv]
     overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
     try:
-        with _quiet_broken_pipe():
+        with quiet_broken_pipe():
             _hydra_main()
     except (HydraException, OmegaConfBaseException, ValueError) as exc:
         if _JOB_STARTED:
@@ -430,7 +430,7 @@ def _print_sweep_configs(argv: list[str]) -> None:
         shown = sweep_configs(overrides, part)
     except (HydraException, OmegaConfBaseException) as exc:
         refuse(composition_error(exc, overrides))
-    with _quiet_broken_pipe():
+    with quiet_broken_pipe():
         for num, (job, text) in enumerate(shown):
             print(f"# job {num}: {' '.join(job)}\n{text}", flush=True)
 
@@ -464,17 +464,6 @@ def _refuse_early(argv: list[str]) -> ConfigError | None:
         if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
             return ConfigError(arg, "<missing>", "needs a value (e.g. --cfg job)")
     return None
-
-
-@contextlib.contextmanager
-def _quiet_broken_pipe():
-    """``higbench --help | head``: the reader left; stop quietly (no BrokenPipeError traceback)."""
-    try:
-        yield
-    except BrokenPipeError:
-        with contextlib.suppress(OSError):
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        sys.exit(0)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@ of higbench.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import sys
 from typing import Any
@@ -78,3 +80,14 @@ def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
     message = " ".join(str(exc).split())  # one line, whatever the cause
     print(f"higbench: error: {message}", file=sys.stderr, flush=True)
     sys.exit(code)
+
+
+@contextlib.contextmanager
+def quiet_broken_pipe():
+    """``higbench --help | head``: the reader left; stop quietly (no BrokenPipeError traceback)."""
+    try:
+        yield
+    except BrokenPipeError:
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(0)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from higbench.errors import quiet_broken_pipe
 from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
 from higbench.results.profile import (
     all_targets,
@@ -218,6 +219,12 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``higbench-results``; piped into ``head``, it stops quietly when the reader leaves."""
+    with quiet_broken_pipe():
+        return _main(argv)
+
+
+def _main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     roots = [Path(r) for r in args.roots]
     thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
