@@ -1,6 +1,7 @@
 """A fifth problem is one module plus one YAML file, and nothing under higbench/ changes.
 
-The problem lives in tests/custom_problem/ (``heat_problem.py`` and ``conf/problem/heat.yaml``).
+The problem is the recipe's (docs/recipe.md): examples/heat/ (``heat_problem.py`` and
+``conf/problem/heat.yaml``), outside the package.
 The test suite registers it the way a user would: Hydra's search path for the YAML
 (``hydra.searchpath``) and the module on ``PYTHONPATH`` for its ``_target_``. It then goes
 through the real console entry point: it trains with HIG and with Adam, and a bad value of
@@ -18,7 +19,7 @@ import pytest
 
 from higbench.results import load_run
 
-HERE = Path(__file__).resolve().parent / "custom_problem"
+HERE = Path(__file__).resolve().parents[1] / "examples" / "heat"
 ROOT = HERE.parent.parent
 TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false", "threads=1"]
 
