@@ -13,7 +13,6 @@ otherwise) filled by another file while the run writes, and the process's file-s
 
 from __future__ import annotations
 
-import hashlib
 import os
 import resource
 import shlex
@@ -30,41 +29,27 @@ import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
-from rel_helpers import FAST, REPO, compose_here, files_under, run_cli, start_cli, table_rows, train_here, wait_for_rows
+from rel_helpers import (
+    FAST,
+    REPO,
+    compose_here,
+    files_under,
+    run_cli,
+    sha256,
+    start_cli,
+    stopped_run,
+    table_rows,
+    train_here,
+    wait_for_rows,
+)
 
 from higbench import cli
 from higbench.results.index import load_runs
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runfile.writer import DiskFull, RunFileWriter
 from higbench.runner import checkpoint
-from higbench.runner.train import StopSignals
 
 LONG_RUN = ["problem=toy", "optimizer=adam", "budget.seconds=30", "eval_unit=updates", "eval_every=10", *FAST]
-
-
-def digest(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def interrupted_run(path: Path, monkeypatch, overrides=(), after: int = 25):
-    """A run stopped cleanly (as by SIGTERM) after ``after`` updates: status interrupted, checkpoint saved."""
-    calls = {"n": 0}
-    original = StopSignals.check
-
-    def check(self):
-        calls["n"] += 1
-        if calls["n"] == after:
-            self.signum = signal.SIGTERM
-        original(self)
-
-    with monkeypatch.context() as m:
-        m.setattr(StopSignals, "check", check)
-        cfg = compose_here(
-            ["problem=toy", "optimizer=adam", "budget.max_updates=1000", "eval_unit=updates", "eval_every=5", *FAST, *overrides]
-        )
-        summary = train_here(cfg, path)
-    assert summary.status == "interrupted" and checkpoint.checkpoint_path(path).is_file()
-    return summary
 
 
 def one_error_line(err: str) -> str:
@@ -167,26 +152,26 @@ def test_file_size_limit_reached_mid_run(tmp_path):
 
 def test_checkpoint_of_another_run_is_refused(tmp_path, monkeypatch, capsys):
     a, b = tmp_path / "a" / "run.h5", tmp_path / "b" / "run.h5"
-    interrupted_run(a, monkeypatch)
-    interrupted_run(b, monkeypatch, ["optimizer.lr=0.01"], after=15)
+    stopped_run(a, monkeypatch)
+    stopped_run(b, monkeypatch, ["optimizer.lr=0.01"], after=15)
     shutil.copy(checkpoint.checkpoint_path(a), checkpoint.checkpoint_path(b))  # the stray one
-    before = {p: digest(p) for p in (a, b, checkpoint.checkpoint_path(a), checkpoint.checkpoint_path(b))}
+    before = {p: sha256(p) for p in (a, b, checkpoint.checkpoint_path(a), checkpoint.checkpoint_path(b))}
     monkeypatch.chdir(tmp_path)
     for value in (str(b.parent), str(b)):
         with pytest.raises(SystemExit) as info:
             cli.main([f"resume={value}"])
         assert info.value.code == 2
         assert "belongs to another run" in one_error_line(capsys.readouterr().err)
-    assert {p: digest(p) for p in before} == before
+    assert {p: sha256(p) for p in before} == before
     # in-job check too (what a sweep job does): train refuses before reopening the file
     with pytest.raises(cli.ConfigError, match="belongs to another run"):
         train_here(compose_here([]), b, resume=True)
-    assert {p: digest(p) for p in before} == before
+    assert {p: sha256(p) for p in before} == before
 
 
 def test_checkpoint_without_run_id_or_with_more_rows_is_refused(tmp_path, monkeypatch, capsys):
     run = tmp_path / "r" / "run.h5"
-    interrupted_run(run, monkeypatch)
+    stopped_run(run, monkeypatch)
     ckpt = checkpoint.checkpoint_path(run)
     state = torch.load(ckpt, weights_only=False)
     monkeypatch.chdir(tmp_path)
@@ -194,28 +179,28 @@ def test_checkpoint_without_run_id_or_with_more_rows_is_refused(tmp_path, monkey
         bad = dict(state, rows={g: dict(v) for g, v in state["rows"].items()})
         change(bad)
         torch.save(bad, ckpt)
-        before = digest(run)
+        before = sha256(run)
         with pytest.raises(SystemExit) as info:
             cli.main([f"resume={run.parent}"])
         line = one_error_line(capsys.readouterr().err)
         assert info.value.code == 2, line
         assert ("another run" if case == "legacy" else "fewer rows") in line, line
-        assert digest(run) == before and load_run(run)[0]["status"] == "interrupted"
+        assert sha256(run) == before and load_run(run)[0]["status"] == "interrupted"
 
 
 @pytest.mark.slow
 def test_new_run_does_not_adopt_a_stray_checkpoint(tmp_path, monkeypatch):
     a = tmp_path / "a" / "run.h5"
-    interrupted_run(a, monkeypatch)
+    stopped_run(a, monkeypatch)
     target = tmp_path / "new"
     target.mkdir()
     shutil.copy(checkpoint.checkpoint_path(a), target / "run.h5.ckpt")
-    stray = digest(target / "run.h5.ckpt")
+    stray = sha256(target / "run.h5.ckpt")
     r = run_cli(["problem=toy", "optimizer=sgd", "budget.max_updates=20", *FAST, f"hydra.run.dir={target}"], cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "moved to run.h5.ckpt.stray-" in r.stderr
     kept = list(target.glob("run.h5.ckpt.stray-*"))
-    assert len(kept) == 1 and digest(kept[0]) == stray, "the stray checkpoint was lost or changed"
+    assert len(kept) == 1 and sha256(kept[0]) == stray, "the stray checkpoint was lost or changed"
     with h5py.File(target / "run.h5", "r") as f:
         assert f.attrs["run_id"] != torch.load(kept[0], weights_only=False)["run_id"]
     assert load_updates(target / "run.h5")["step"].tolist() == list(range(1, 21)), "it continued another run"
@@ -246,7 +231,7 @@ def test_failure_while_closing_leaves_status_failed(tmp_path, monkeypatch, where
 def test_failure_while_stopping_on_a_signal_leaves_status_failed(tmp_path, monkeypatch):
     monkeypatch.setattr(checkpoint, "save", lambda *a, **k: (_ for _ in ()).throw(DiskFull("no space left (injected)")))
     with pytest.raises(DiskFull):
-        interrupted_run(tmp_path / "run.h5", monkeypatch)
+        stopped_run(tmp_path / "run.h5", monkeypatch)
     meta, curves = load_run(tmp_path / "run.h5")
     assert meta["status"] == "failed" and len(curves) >= 5
 
@@ -296,14 +281,14 @@ def test_killed_before_first_checkpoint(tmp_path):
     wait_for_rows(run_file, 3, proc)
     proc.kill()
     proc.communicate()
-    before = digest(run_file)
+    before = sha256(run_file)
     r = run_cli([f"resume={run_file.parent}"], cwd=tmp_path)
     line = one_error_line(r.stderr)
     assert r.returncode == 2 and "before its first checkpoint" in line and "1000" in line, line
     assert "set checkpoint_every" not in line
     r = run_cli([*LONG_RUN, f"hydra.run.dir={run_file.parent}"], cwd=tmp_path)  # a new run there: refused
     assert r.returncode == 2 and "already holds a run file" in one_error_line(r.stderr)
-    assert digest(run_file) == before
+    assert sha256(run_file) == before
     # a run that stopped before its first update (status running, no update, no checkpoint)
     empty_dir = tmp_path / "empty"
     w = RunFileWriter(empty_dir / "run.h5", "a: 1\n", [], env={}, meta={})
@@ -317,10 +302,10 @@ def test_large_unreadable_file_is_never_taken_over(tmp_path):
     d = tmp_path / "garbage"
     d.mkdir()
     (d / "run.h5").write_bytes(b"x" * (checkpoint.EMPTY_FILE_BYTES + 1))
-    before = digest(d / "run.h5")
+    before = sha256(d / "run.h5")
     r = run_cli(["problem=toy", "optimizer=sgd", "budget.max_updates=5", *FAST, f"hydra.run.dir={d}"], cwd=tmp_path)
     assert r.returncode == 2 and "already holds a run file" in one_error_line(r.stderr)
-    assert digest(d / "run.h5") == before and files_under(d) == ["run.h5"]
+    assert sha256(d / "run.h5") == before and files_under(d) == ["run.h5"]
 
 
 # -- 5. sweeps run again into their directory ------------------------------------------------
@@ -331,7 +316,7 @@ SWEEP = ["-m", "problem=toy", "optimizer=adam", "optimizer.lr=0.001,0.002,0.003"
 def _sweep_state(sweep: Path) -> dict[str, str]:
     """Digests of every file of the sweep except what a re-run may add (new .hydra/rerun-*, multirun-rerun-*)."""
     return {
-        str(p.relative_to(sweep)): digest(p)
+        str(p.relative_to(sweep)): sha256(p)
         for p in sorted(sweep.rglob("*"))
         if p.is_file() and "rerun-" not in str(p.relative_to(sweep)) and not p.name.endswith(".log")
     }
@@ -375,12 +360,12 @@ def test_interrupted_sweep_is_completed_in_place(tmp_path):
     first = sorted(sweep.glob("0_*/run.h5"))[0]
     assert load_run(second)[0]["status"] == "interrupted"
     rows_before = table_rows(second)
-    kept = {p: digest(p) for p in [first, *first.parent.joinpath(".hydra").glob("*.yaml"), sweep / "multirun.yaml"]}
-    hydra_second = {p: digest(p) for p in second.parent.joinpath(".hydra").glob("*.yaml")}
+    kept = {p: sha256(p) for p in [first, *first.parent.joinpath(".hydra").glob("*.yaml"), sweep / "multirun.yaml"]}
+    hydra_second = {p: sha256(p) for p in second.parent.joinpath(".hydra").glob("*.yaml")}
     r = run_cli([*args, "resume=true"], cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    assert {p: digest(p) for p in kept} == kept, "the completed job's files changed"
-    assert {p: digest(p) for p in hydra_second} == hydra_second, "the resumed job's .hydra/ was rewritten"
+    assert {p: sha256(p) for p in kept} == kept, "the completed job's files changed"
+    assert {p: sha256(p) for p in hydra_second} == hydra_second, "the resumed job's .hydra/ was rewritten"
     runs = sorted(sweep.glob("*/run.h5"))
     assert len(runs) == 3 and all(load_run(p)[0]["status"] == "completed" for p in runs)
     meta, curves = load_run(second)
@@ -406,7 +391,7 @@ def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
         other = tmp_path / "other.h5"
         shutil.copy(run_file, other)
         os.replace(other, run_file)
-        replacement = digest(run_file)
+        replacement = sha256(run_file)
     out, err = proc.communicate(timeout=90)
     assert proc.returncode == 1, (out, err)
     line = one_error_line(err)
@@ -419,7 +404,7 @@ def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
         assert not run_file.exists()
         assert (run_file.parent / ".hydra" / "config.yaml").is_file(), "the run's other files went with it"
     else:
-        assert digest(run_file) == replacement, "the run wrote into the file that replaced its own"
+        assert sha256(run_file) == replacement, "the run wrote into the file that replaced its own"
 
 
 # -- 7. unusable output locations ------------------------------------------------------------
@@ -547,7 +532,7 @@ def test_stale_checkpoint_temporaries_are_removed(tmp_path, monkeypatch):
     run.parent.mkdir()
     stale = run.parent / "run.h5.ckpt.tmp99999999"
     stale.write_bytes(b"half a checkpoint")
-    interrupted_run(run, monkeypatch)  # its checkpoint save cleans up
+    stopped_run(run, monkeypatch)  # its checkpoint save cleans up
     assert not stale.exists() and [p.name for p in run.parent.glob("run.h5.ckpt*")] == ["run.h5.ckpt"]
 
 
