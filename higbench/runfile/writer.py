@@ -156,6 +156,10 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("updates", "inversion_s"): ("s", "time of the inversion (GN/HIG: Gram/SVD; first-order: 0)"),
     ("updates", "apply_s"): ("s", "time to apply the update to the weights"),
     ("updates", "update_s"): ("s", "whole update: jacobian_s + inversion_s + apply_s"),
+    ("updates", "sv_max"): ("singular value", "GN/HIG/LM: largest singular value of this update's Jacobian"),
+    ("updates", "sv_min_kept"): ("singular value", "GN/HIG/LM: smallest singular value kept by the truncation tau"),
+    ("updates", "sv_dropped"): ("count", "GN/HIG/LM: singular values the truncation tau dropped"),
+    ("logs", "sv_quantiles"): ("singular value", "GN/HIG/LM: 11 quantiles (0, 0.1, ..., 1) of the last update's singular values"),
 }
 
 
