@@ -70,8 +70,9 @@ bench: install
 # Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG/GN/Adam, dipole HIG/Adam,
 # paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes).
 TTL_BUDGET ?= 900
+TTL_JOBS ?= 1
 bench-time-to-loss: install
-	$(BIN)/python scripts/time_to_loss.py --budget $(TTL_BUDGET)
+	$(BIN)/python scripts/time_to_loss.py --budget $(TTL_BUDGET) --jobs $(TTL_JOBS)
 
 figures: install
 	$(BIN)/python -m higbench.figures $(IDS) --preset $(PRESET) --out $(OUT)

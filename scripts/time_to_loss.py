@@ -1,14 +1,14 @@
 """Training-clock seconds to reach test losses 1e-3 .. 1e-7 (the number optimizers are compared by).
 
 Runs ``higbench problem=P optimizer=O`` at the paper's settings (the pair's defaults in
-conf/problem_optimizer/) for a training-clock budget, one run after another (so runs do
-not compete for the cores), then reads each run file's curves and reports, per threshold,
+conf/problem_optimizer/) for a training-clock budget, one run after another by default
+(``--jobs 2``: two at once, each on one thread, for a 2-core machine), then reads each run file's curves and reports, per threshold,
 the training clock (``wall_time``: evaluations excluded, as in the paper) of the first
 evaluation whose test loss is at or below it. The resolution is the evaluation interval
 (``--eval-every``, seconds of training clock).
 
     python scripts/time_to_loss.py                         # 900 s per run (make bench-time-to-loss)
-    python scripts/time_to_loss.py --budget 120 --runs oscillator:hig oscillator:adam
+    python scripts/time_to_loss.py --budget 120 --runs oscillator:hig oscillator:gn:seed=7
     python scripts/time_to_loss.py --from-runs outputs/bench/time_to_loss   # re-read, no new runs
 
 Writes ``<out>/time_to_loss.csv`` and ``.md``; prints one JSON line per run.
@@ -23,11 +23,14 @@ import os
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 THRESHOLDS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
-DEFAULT_RUNS = ("oscillator:hig", "oscillator:gn", "oscillator:adam", "dipole:hig", "dipole:adam")
+# GN at the paper's settings diverges for most seeds; seed 7 is its stable one (figure 2b's seed search).
+# Ordered so that two jobs finish together: L-BFGS diverges within seconds at these settings.
+DEFAULT_RUNS = ("oscillator:lbfgs", "oscillator:hig", "oscillator:adam", "oscillator:gn:seed=7", "oscillator:lm")
 
 
 def time_to(curves, threshold: float) -> float | None:
@@ -45,6 +48,7 @@ def summarise(run_file: Path) -> dict:
         "problem": cfg["problem"]["name"] if cfg["problem"].get("model", "mlp") == "mlp" else "dipole_cnn",
         "optimizer": cfg["optimizer"]["name"],
         "batch_size": cfg["batch_size"],
+        "seed": cfg.get("seed"),
         "lr": cfg["optimizer"].get("lr"),
         "budget_s": cfg["budget"]["seconds"],
         "threads": meta.get("env", {}).get("torch_threads"),
@@ -60,8 +64,18 @@ def summarise(run_file: Path) -> dict:
     return out
 
 
-def launch(problem: str, optimizer: str, budget: float, eval_every: float, out_dir: Path, extra: list[str]) -> Path:
-    run_dir = out_dir / f"{problem}_{optimizer}"
+def parse_spec(spec: str) -> tuple[str, str, list[str]]:
+    """``PROBLEM:OPTIMIZER[:KEY=VALUE,...]`` -> (problem, optimizer, overrides of this run)."""
+    problem, _, rest = spec.partition(":")
+    optimizer, _, extra = rest.partition(":")
+    if not problem or not optimizer:
+        raise ValueError(f"--runs {spec}: expected PROBLEM:OPTIMIZER[:KEY=VALUE,...]")
+    return problem, optimizer, [kv for kv in extra.split(",") if kv]
+
+
+def launch(spec: str, budget: float, eval_every: float, out_dir: Path, extra: list[str]) -> Path:
+    problem, optimizer, own = parse_spec(spec)
+    run_dir = out_dir / "_".join([problem, optimizer, *(kv.replace("=", "") for kv in own)])
     if run_dir.exists():
         run_dir = out_dir / f"{problem}_{optimizer}_{time.strftime('%Y%m%d-%H%M%S')}"  # never overwrite a run
     cmd = [
@@ -75,6 +89,7 @@ def launch(problem: str, optimizer: str, budget: float, eval_every: float, out_d
         "progress=false",
         f"hydra.run.dir={run_dir}",
         *extra,
+        *own,
     ]
     print("running:", " ".join(cmd[3:]), file=sys.stderr, flush=True)
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
@@ -111,7 +126,8 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description="Training-clock seconds to reach test losses 1e-3..1e-7 (see docstring).")
     parser.add_argument("--budget", type=float, default=900.0, help="training-clock seconds per run (default 900: 15 minutes)")
     parser.add_argument("--eval-every", type=float, default=5.0, help="seconds of training clock between evaluations")
-    parser.add_argument("--runs", nargs="+", default=list(DEFAULT_RUNS), metavar="PROBLEM:OPTIMIZER")
+    parser.add_argument("--runs", nargs="+", default=list(DEFAULT_RUNS), metavar="PROBLEM:OPTIMIZER[:KEY=VALUE,...]")
+    parser.add_argument("--jobs", type=int, default=1, help="runs at once; with more than one, each runs on one thread")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra overrides for every run")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench" / "time_to_loss")
     parser.add_argument("--from-runs", type=Path, default=None, help="summarise the run files under this folder, run nothing")
@@ -122,20 +138,23 @@ def main(argv=None) -> None:
 
         files = find_run_files(args.from_runs)
     else:
-        files = []
         for spec in args.runs:
-            problem, _, optimizer = spec.partition(":")
-            if not optimizer:
-                parser.error(f"--runs {spec}: expected PROBLEM:OPTIMIZER")
-            files.append(launch(problem, optimizer, args.budget, args.eval_every, args.out, args.set))
+            try:
+                parse_spec(spec)
+            except ValueError as err:
+                parser.error(str(err))
+        extra = [*args.set, *(["threads=1"] if args.jobs > 1 else [])]
+        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:  # each job is its own process
+            files = list(pool.map(lambda spec: launch(spec, args.budget, args.eval_every, args.out, extra), args.runs))
     rows = []
     for f in files:
         row = summarise(f)
         rows.append(row)
         print(json.dumps(row), flush=True)
     load = os.getloadavg()[0]
+    jobs = f"{args.jobs} runs at once, 1 thread each" if args.jobs > 1 else "one run at a time"
     note = (
-        f"Time to loss, measured {time.strftime('%Y-%m-%d %H:%M')} (load at the end {load:.1f}); "
+        f"Time to loss, measured {time.strftime('%Y-%m-%d %H:%M')} ({jobs}; load at the end {load:.1f}); "
         f"training clock of the first evaluation at or below each test loss ('-': not within the budget)."
     )
     write(rows, args.out if args.from_runs is None else args.from_runs, note)
