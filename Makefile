@@ -67,8 +67,8 @@ lint: install-dev
 bench: install
 	$(BIN)/python -m higbench.bench.step
 
-# Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG/GN/Adam, dipole HIG/Adam,
-# paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes).
+# Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG, GN (seed 7), Adam, L-BFGS, LM at
+# paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes), TTL_JOBS at once.
 TTL_BUDGET ?= 900
 TTL_JOBS ?= 1
 bench-time-to-loss: install

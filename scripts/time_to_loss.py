@@ -2,8 +2,8 @@
 
 Runs ``higbench problem=P optimizer=O`` at the paper's settings (the pair's defaults in
 conf/problem_optimizer/) for a training-clock budget, one run after another by default
-(``--jobs 2``: two at once, each on one thread, for a 2-core machine), then reads each run file's curves and reports, per threshold,
-the training clock (``wall_time``: evaluations excluded, as in the paper) of the first
+(``--jobs 2``: two at once, each on one thread, for a 2-core machine), then reads each run
+file's curves and reports, per threshold, the training clock (``wall_time``: evaluations excluded, as in the paper) of the first
 evaluation whose test loss is at or below it. The resolution is the evaluation interval
 (``--eval-every``, seconds of training clock).
 
@@ -122,6 +122,34 @@ def write(rows: list[dict], out_dir: Path, note: str) -> None:
     (out_dir / "time_to_loss.md").write_text("\n".join(lines) + "\n")
 
 
+def plot(files: list[Path], path: Path) -> None:
+    """Test loss (solid) and training loss (dashed) against the training clock, one colour per run:
+    where a curve flattens while its training loss keeps falling, the limit is generalisation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from higbench.runfile.reader import load_run
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for i, f in enumerate(files):
+        row, (_meta, curves) = summarise(f), load_run(f)
+        curves = curves[curves["wall_time"] > 0]
+        label = f"{row['optimizer']} b={row['batch_size']}" + (f" seed {row['seed']}" if row["seed"] else "")
+        label += f" ({row['status']})" if row["status"] != "completed" else ""
+        ax.plot(curves["wall_time"], curves["test_loss"], color=f"C{i}", label=label)
+        ax.plot(curves["wall_time"], curves["train_loss"], color=f"C{i}", ls="--", lw=0.8)
+    for t in THRESHOLDS:
+        ax.axhline(t, color="grey", lw=0.4)
+    ax.set(xscale="log", yscale="log", xlabel="training clock (s)", ylabel="loss (solid: test, dashed: training batch)")
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3, which="major")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description="Training-clock seconds to reach test losses 1e-3..1e-7 (see docstring).")
     parser.add_argument("--budget", type=float, default=900.0, help="training-clock seconds per run (default 900: 15 minutes)")
@@ -158,6 +186,7 @@ def main(argv=None) -> None:
         f"training clock of the first evaluation at or below each test loss ('-': not within the budget)."
     )
     write(rows, args.out if args.from_runs is None else args.from_runs, note)
+    plot(files, (args.out if args.from_runs is None else args.from_runs) / "time_to_loss.png")
     print(f"wrote {(args.out if args.from_runs is None else args.from_runs) / 'time_to_loss.md'}", file=sys.stderr)
 
 

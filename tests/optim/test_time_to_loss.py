@@ -27,3 +27,15 @@ def test_table_marks_unreached_thresholds(tmp_path):
     text = (tmp_path / "time_to_loss.md").read_text()
     assert "| oscillator | hig | 128 | 10 | completed | 7 | 3 | - | - | - | - | 0.0002 |" in text
     assert pd.read_csv(tmp_path / "time_to_loss.csv").loc[0, "t_1e-03"] == 3.0
+
+
+def test_run_spec_carries_its_own_overrides():
+    assert time_to_loss.parse_spec("oscillator:gn:seed=7,batch_size=64") == ("oscillator", "gn", ["seed=7", "batch_size=64"])
+    assert time_to_loss.parse_spec("toy:hig") == ("toy", "hig", [])
+    for bad in ("oscillator", ":hig", "oscillator:"):
+        try:
+            time_to_loss.parse_spec(bad)
+        except ValueError as err:
+            assert bad in str(err)
+        else:
+            raise AssertionError(f"{bad!r} accepted")

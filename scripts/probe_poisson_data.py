@@ -1,0 +1,147 @@
+"""Probe: does HIG's rising Poisson test loss come from our data distribution?
+
+The paper (figure 3b/3c) has HIG lower the Poisson loss quickly, also after Adam pre-training;
+with our band-limited Fourier potentials HIG's test loss rises after pre-training. The authors'
+script draws PhiFlow ``Noise`` potentials instead. This probe varies the data alone
+(``problem.data=fourier|phiflow_noise``), everything else at the authors' script's settings
+(experiment ``poisson_authors``: network [64, 128, 64], b = 64, HIG tau 1e-5):
+
+1. from scratch, ``--seconds`` of training clock: HIG eta 0.01 (the script's) and 0.02 (the
+   paper's figure 3c), Adam eta 1e-4 (figure 3c) and 3e-4 (the script's);
+2. continued from the from-scratch Adam eta 1e-4 run's final weights (figure 3c), ``--cont-seconds``:
+   HIG eta 0.01 and 0.02, and Adam eta 1e-4 continued.
+
+Every run is evaluated after each HIG update (Adam every 10), so curves compare per update.
+
+    python scripts/probe_poisson_data.py                 # ~35 min on 2 cores, then the summary
+    python scripts/probe_poisson_data.py --report-only   # re-read outputs/probes/poisson_data
+
+Writes ``poisson_data.csv`` (one row per run), ``poisson_data_curves.csv`` (per evaluation)
+and ``poisson_data.png`` to ``--out`` (default docs/results/probes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ("phiflow_noise", "fourier")
+HIG_LRS, ADAM_LRS, PRE_LR = (0.01, 0.02), (1e-4, 3e-4), 1e-4
+EVAL = {"hig": ["eval_unit=updates", "eval_every=1"], "adam": ["eval_unit=updates", "eval_every=10"]}
+
+
+def job(data: str, optimizer: str, lr: float, seconds: float, init_from: Path | None = None) -> list[str]:
+    out = ["+experiment=poisson_authors", f"problem.data={data}", f"optimizer={optimizer}", f"optimizer.lr={lr:g}"]
+    out += [f"budget.seconds={seconds:g}", *EVAL[optimizer]]
+    return out + ([f"init_from={init_from}"] if init_from else [])
+
+
+def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int) -> None:
+    """One multirun of ``jobs`` through the job-list sweeper (never into an existing folder)."""
+    if sweep_dir.exists():
+        raise SystemExit(f"{sweep_dir} exists: its runs are kept; use --report-only or another --root")
+    sweep_dir.parent.mkdir(parents=True, exist_ok=True)
+    jobs_file = sweep_dir.with_suffix(".jobs.json")
+    jobs_file.write_text(json.dumps(jobs, indent=1))
+    cmd = [sys.executable, "-m", "higbench.cli", "-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs_file}",
+           "hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}", f"hydra.sweep.dir={sweep_dir}",
+           "threads=1", "progress=false"]  # fmt: skip
+    print(f"{time.strftime('%H:%M:%S')} {len(jobs)} runs -> {sweep_dir}", file=sys.stderr, flush=True)
+    subprocess.run(cmd, cwd=ROOT, check=True)
+
+
+def runs_under(root: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    from higbench.results.index import load_runs
+
+    runs, curves = load_runs(root, curves=True)
+    runs["from"] = np.where(runs["init_from"].notna(), "Adam-pretrained", "scratch")
+    return runs, curves
+
+
+def train(root: Path, seconds: float, cont_seconds: float, n_jobs: int) -> None:
+    scratch = [job(d, "hig", lr, seconds) for d in DATA for lr in HIG_LRS]
+    scratch += [job(d, "adam", lr, seconds) for d in DATA for lr in ADAM_LRS]
+    launch(scratch, root / "scratch", n_jobs)
+    runs, _ = runs_under(root / "scratch")
+    pre = runs[(runs["optimizer.name"] == "adam") & np.isclose(runs["optimizer.lr"], PRE_LR)]
+    cont = []
+    for _, parent in pre.iterrows():
+        cont += [job(parent["problem.data"], "hig", lr, cont_seconds, parent["path"]) for lr in HIG_LRS]
+        cont.append(job(parent["problem.data"], "adam", PRE_LR, cont_seconds, parent["path"]))
+    launch(cont, root / "continued", n_jobs)
+
+
+def summarise(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    rows = []
+    for _, r in runs.sort_values(["from", "problem.data", "optimizer.name", "optimizer.lr"]).iterrows():
+        c = curves[curves["path"] == r["path"]].sort_values("step")
+        loss = c.set_index("step")["test_loss"]
+        row = {"from": r["from"], "data": r["problem.data"], "optimizer": r["optimizer.name"], "lr": r["optimizer.lr"],
+               "status": r["status"], "updates": int(r["steps"]), "train_s": round(float(r["train_time_s"]), 1),
+               "s_per_update": round(float(r["train_time_s"]) / max(int(r["steps"]), 1), 3),
+               "test_start": loss.iloc[0]}  # fmt: skip
+        for n in (1, 3, 10, 30):
+            row[f"test_after_{n}"] = loss[loss.index >= n].iloc[0] if (loss.index >= n).any() else np.nan
+        row |= {"test_min": loss.min(), "test_end": loss.iloc[-1], "end_over_start": loss.iloc[-1] / loss.iloc[0]}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def plot(runs: pd.DataFrame, curves: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(9, 6.4), squeeze=False)
+    colors = {("hig", 0.01): "#41ab5d", ("hig", 0.02): "#00441b", ("adam", 1e-4): "#4292c6", ("adam", 3e-4): "#9ecae1"}
+    for i, data in enumerate(DATA):
+        for j, origin in enumerate(("scratch", "Adam-pretrained")):
+            ax = axes[i, j]
+            for _, r in runs[(runs["problem.data"] == data) & (runs["from"] == origin)].iterrows():
+                c = curves[curves["path"] == r["path"]].sort_values("step")
+                key = (r["optimizer.name"], round(float(r["optimizer.lr"]), 6))
+                label = f"{'HIG' if key[0] == 'hig' else 'Adam'} η={key[1]:g}"
+                label += " (diverged)" if r["status"] == "diverged" else ""
+                ax.plot(c["step"].clip(lower=0.8), c["test_loss"], color=colors.get(key, "grey"), label=label)
+            ax.set(xscale="log", yscale="log", title=f"{data}, {origin}", xlabel="updates (log)", ylabel="test loss")
+            ax.title.set_fontsize(9)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7)
+    fig.suptitle("Poisson, authors' network and b=64: test loss per update for both data choices", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description="Poisson data probe (see docstring).")
+    parser.add_argument("--seconds", type=float, default=300.0, help="training clock of the from-scratch runs")
+    parser.add_argument("--cont-seconds", type=float, default=240.0, help="training clock of the continued runs")
+    parser.add_argument("--jobs", type=int, default=2, help="runs at once, one thread each")
+    parser.add_argument("--root", type=Path, default=ROOT / "outputs" / "probes" / "poisson_data")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
+    parser.add_argument("--report-only", action="store_true")
+    args = parser.parse_args(argv)
+    if not args.report_only:
+        train(args.root, args.seconds, args.cont_seconds, args.jobs)
+    runs, curves = runs_under(args.root)
+    table = summarise(runs, curves)
+    args.out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(args.out / "poisson_data.csv", index=False, float_format="%.4g")
+    keep = curves.merge(runs[["path", "from", "problem.data", "optimizer.name", "optimizer.lr"]], on="path")
+    keep.drop(columns=["path"]).to_csv(args.out / "poisson_data_curves.csv", index=False, float_format="%.5g")
+    plot(runs, curves, args.out / "poisson_data.png")
+    print(table.to_string(index=False))
+
+
+if __name__ == "__main__":
+    main()
