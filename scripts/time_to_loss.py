@@ -142,6 +142,7 @@ def plot(files: list[Path], path: Path) -> None:
         ax.plot(curves["wall_time"], curves["train_loss"], color=f"C{i}", ls="--", lw=0.8)
     for t in THRESHOLDS:
         ax.axhline(t, color="grey", lw=0.4)
+    ax.set_xlim(left=1.0)  # the first evaluations (< 1 s) say nothing on a log axis
     ax.set(xscale="log", yscale="log", xlabel="training clock (s)", ylabel="loss (solid: test, dashed: training batch)")
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3, which="major")
@@ -181,8 +182,10 @@ def main(argv=None) -> None:
         print(json.dumps(row), flush=True)
     load = os.getloadavg()[0]
     jobs = f"{args.jobs} runs at once, 1 thread each" if args.jobs > 1 else "one run at a time"
+    if args.from_runs is not None:
+        jobs = f"re-read from the run files under {args.from_runs}"
     note = (
-        f"Time to loss, measured {time.strftime('%Y-%m-%d %H:%M')} ({jobs}; load at the end {load:.1f}); "
+        f"Time to loss, table made {time.strftime('%Y-%m-%d %H:%M')} ({jobs}; load at the end {load:.1f}); "
         f"training clock of the first evaluation at or below each test loss ('-': not within the budget)."
     )
     write(rows, args.out if args.from_runs is None else args.from_runs, note)
