@@ -130,6 +130,14 @@ def expand_paper_adam(runs: pd.DataFrame, tuned: dict[str, float]) -> pd.DataFra
     return pd.concat([runs, twins.assign(setting="Adam (paper η)")], ignore_index=True)
 
 
+def made(runs: pd.DataFrame) -> str:
+    """When, where and how the runs were made, from their run files."""
+    revisions = ", ".join(sorted(set(runs["env.git_revision"].dropna().astype(str).str[:7])))
+    threads = "/".join(map(str, sorted(set(runs["env.torch_threads"].dropna().astype(int)))))
+    return (f"Runs trained {runs['started'].min()} to {runs['finished'].max()} on {runs['env.cpu_count'].max()} CPU "
+            f"cores, {threads} thread(s) per run, revision {revisions}")  # fmt: skip
+
+
 def markdown_table(df: pd.DataFrame) -> str:
     head = ["setting", *map(str, df.columns)]
     rows = [[str(i), *(f"{v:.2f}" for v in r)] for i, r in zip(df.index, df.to_numpy())]
@@ -157,7 +165,7 @@ def report(root: Path, out: Path, problems, seeds) -> None:
     lines = [
         f"Performance profile over {pairs} (problem, target) pairs, {len(runs)} runs "
         f"({', '.join(f'{p} {BUDGET_S[p]} s' for p in problems)} of training clock per run; seeds {list(seeds)}; "
-        f"re-tuned Adam η: {', '.join(f'{p} {tuned[p]:g}' for p in problems)}). Report made "
+        f"re-tuned Adam η: {', '.join(f'{p} {tuned[p]:g}' for p in problems)}). {made(runs)}; report made "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {load[0]:.1f}.",
         "",
         "rho(tau): fraction of pairs solved within tau times the fastest setting's time",

@@ -39,7 +39,9 @@ EVAL = {"hig": ["eval_unit=updates", "eval_every=1"], "adam": ["eval_unit=update
 
 
 def job(data: str, optimizer: str, lr: float, seconds: float, init_from: Path | None = None) -> list[str]:
-    out = ["+experiment=poisson_authors", f"problem.data={data}", f"optimizer={optimizer}", f"optimizer.lr={lr:g}"]
+    # experiment poisson_authors's settings, spelled out (its own sweep is of the basic sweeper)
+    out = ["problem=poisson", f"problem.data={data}", "problem.hidden=[64,128,64]", "batch_size=64"]
+    out += [f"optimizer={optimizer}", f"optimizer.lr={lr:g}"]
     out += [f"budget.seconds={seconds:g}", *EVAL[optimizer]]
     return out + ([f"init_from={init_from}"] if init_from else [])
 
