@@ -271,11 +271,13 @@ def _main(argv: list[str] | None = None) -> int:
             return 2
         df = _filter(df, args)
         if args.spectrum:
+            _summary_line(df, total, roots, args)
             code = _spectrum(args, df, roots)
             if code or not (args.plot or args.profile):
                 return code
         if args.plot or args.profile:
-            _summary_line(df, total, roots, args)
+            if not args.spectrum:
+                _summary_line(df, total, roots, args)
             return _plots(args, roots, df)
         if args.best:
             df = _best(df, args)

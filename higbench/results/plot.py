@@ -142,13 +142,13 @@ def _spectrum_panel(ax: plt.Axes, title: str, run: RunSpectrum) -> None:
         ax.plot(run.step, _positive(cutoff), color="C3", linestyle="--", linewidth=0.9, label=f"cutoff ({what})")
     ax.set_yscale("log")
     c = conditioning({"sv_max": run.sv_max, "sv_min_kept": run.sv_min_kept, "sv_dropped": run.sv_dropped})
-    stats = f"kept sv_max/sv_min: median {c['cond_kept_median']:.3g}, max {c['cond_kept_max']:.3g}; "
-    stats += f"dropped {c['sv_dropped_mean']:.3g}/update"
-    ax.set_title(f"{title}\n{stats}", fontsize=9)
+    stats = f"largest/smallest kept: median {c['cond_kept_median']:.2g}, max {c['cond_kept_max']:.2g}"
+    stats += f"; {c['sv_dropped_mean']:.2g} dropped per update"
+    ax.set_title(f"{title}\n{stats}", fontsize=8)
     ax.set_xlabel("update")
     ax.set_ylabel("singular value of J")
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=7, loc="best")
 
 
 def _save(fig: plt.Figure, path: str | Path) -> Path:
