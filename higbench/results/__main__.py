@@ -230,20 +230,21 @@ def _spectrum(args: argparse.Namespace, df: pd.DataFrame, roots: list[Path]) -> 
     """--spectrum: one panel per selected run that recorded a spectrum; exit 2 if none did."""
     from higbench.results.plot import plot_spectrum
     from higbench.results.spectrum import read_spectrum
-    from higbench.runfile.reader import UnreadableRunFile
 
     order = [c for c in ("problem.name", "setting", "path") if c in df]
     spectra = []
     for _, row in (df.sort_values(order) if len(df) else df).iterrows():
         try:
             run = read_spectrum(row["path"])
-        except UnreadableRunFile:  # corrupt, or held by a writer elsewhere: its note is in the table
+        except (OSError, ValueError) as exc:  # corrupt, refused (UnreadableRunFile is an OSError), half-written
+            print(f"note: --spectrum: {row['path']}: left out ({exc})", file=sys.stderr)
             continue
         if run is not None:
             path = _relative(pd.Series([str(row["path"])]), roots).iloc[0]
             spectra.append((f"{row['problem.name']} {row['setting']}: {path}", run))
     if not spectra:
-        why = f"none of the {len(df)} selected runs recorded a spectrum (GN, HIG and LM runs do, from this version on)"
+        why = f"none of the {len(df)} selected runs recorded a spectrum"
+        why += " (GN, HIG and LM runs record one; other optimizers and older files do not)"
         print(f"higbench-results: error: --spectrum {args.spectrum}: {why}", file=sys.stderr)
         return 2
     if len(spectra) > MAX_PANELS:

@@ -87,6 +87,8 @@ def test_read_spectrum_aligns_quantiles_with_evaluations_and_reads_tau(mixed, tm
 
 def test_spectrum_figure_has_one_panel_per_run_with_a_spectrum(mixed, tmp_path, capsys, monkeypatch):
     spectrum_run(mixed / "hig2/run.h5", [1.0, 2.0], [0.5, 0.5], [1, 1])
+    (mixed / "broken").mkdir()
+    (mixed / "broken/run.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)  # truncated
     drawn = []
     real = plot_mod.plot_spectrum
     monkeypatch.setattr(plot_mod, "plot_spectrum", lambda spectra, path: drawn.extend(spectra) or real(spectra, path))
@@ -94,7 +96,8 @@ def test_spectrum_figure_has_one_panel_per_run_with_a_spectrum(mixed, tmp_path, 
     assert results_main([str(mixed), "--spectrum", str(out)]) == 0
     assert out.read_bytes()[:4] == PNG
     assert [title.split(": ")[-1] for title, _ in drawn] == ["hig/run.h5", "hig2/run.h5"]  # adam has none
-    assert f"spectrum: {out}" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert f"spectrum: {out}" in captured.out and "broken/run.h5" in captured.err  # noted, not drawn
 
 
 def test_spectrum_without_any_spectrum_is_one_line_and_exit_2(mixed, tmp_path, capsys):
