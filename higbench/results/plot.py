@@ -134,12 +134,13 @@ def _spectrum_panel(ax: plt.Axes, title: str, run: RunSpectrum) -> None:
             markersize=3,
             label="deciles (0, 0.1, ..., 1)" if i == 0 else None,
         )
-    ax.plot(run.step, _positive(run.sv_max), color="C0", linewidth=1.0, label="largest")
-    ax.plot(run.step, _positive(run.sv_min_kept), color="C1", linewidth=1.0, label="smallest kept")
+    marker = "." if len(run.step) < 50 else None  # a run of one or two updates still shows
+    ax.plot(run.step, _positive(run.sv_max), color="C0", linewidth=1.0, marker=marker, label="largest")
+    ax.plot(run.step, _positive(run.sv_min_kept), color="C1", linewidth=1.0, marker=marker, label="smallest kept")
     cutoff = run.cutoff()
     if cutoff is not None:
         what = f"tau*largest, tau={run.tau:g}" if run.truncation == "relative" else f"tau={run.tau:g}"
-        ax.plot(run.step, _positive(cutoff), color="C3", linestyle="--", linewidth=0.9, label=f"cutoff ({what})")
+        ax.plot(run.step, _positive(cutoff), color="C3", linestyle="--", linewidth=0.9, marker=marker, label=f"cutoff ({what})")
     ax.set_yscale("log")
     c = conditioning({"sv_max": run.sv_max, "sv_min_kept": run.sv_min_kept, "sv_dropped": run.sv_dropped})
     stats = f"largest/smallest kept: median {c['cond_kept_median']:.2g}, max {c['cond_kept_max']:.2g}"
