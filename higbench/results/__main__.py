@@ -6,6 +6,7 @@ higbench-results outputs --best                   # best run per optimizer (tabl
 higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
+higbench-results outputs --optimizer hig --spectrum spectrum.png   # singular values of J over training
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from higbench.results.profile import (
 )
 from higbench.runfile.reader import RUN_FILE_GLOB
 
+CONDITIONING_SHOWN = ("cond_kept_median", "sv_dropped_mean")  # of spectrum.CONDITIONING_COLUMNS
+MAX_PANELS = 24  # --spectrum: more runs are left out with a note (filter with --problem/--optimizer)
 SUMMARY_COLUMNS = [
     "path",
     "problem.name",
@@ -89,6 +92,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--width", type=int, default=60, help="truncate the overrides column to this many characters (0: never)")
     p.add_argument("--plot", metavar="FILE", help="draw test loss against training clock: median and band over seeds per setting")
     p.add_argument("--profile", metavar="FILE", help="print time to target per setting and draw the performance profile")
+    p.add_argument(
+        "--spectrum",
+        metavar="FILE",
+        help=f"draw the singular values of each GN/HIG/LM step against updates, one panel per run (at most {MAX_PANELS})",
+    )
     p.add_argument(
         "--targets",
         nargs="+",
@@ -218,6 +226,33 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     return 0
 
 
+def _spectrum(args: argparse.Namespace, df: pd.DataFrame, roots: list[Path]) -> int:
+    """--spectrum: one panel per selected run that recorded a spectrum; exit 2 if none did."""
+    from higbench.results.plot import plot_spectrum
+    from higbench.results.spectrum import read_spectrum
+
+    order = [c for c in ("problem.name", "setting", "path") if c in df]
+    spectra = []
+    for _, row in (df.sort_values(order) if len(df) else df).iterrows():
+        try:
+            run = read_spectrum(row["path"])
+        except (OSError, ValueError) as exc:  # corrupt, refused (UnreadableRunFile is an OSError), half-written
+            print(f"note: --spectrum: {row['path']}: left out ({exc})", file=sys.stderr)
+            continue
+        if run is not None:
+            path = _relative(pd.Series([str(row["path"])]), roots).iloc[0]
+            spectra.append((f"{row['problem.name']} {row['setting']}: {path}", run))
+    if not spectra:
+        why = f"none of the {len(df)} selected runs recorded a spectrum"
+        why += " (GN, HIG and LM runs record one; other optimizers and older files do not)"
+        print(f"higbench-results: error: --spectrum {args.spectrum}: {why}", file=sys.stderr)
+        return 2
+    if len(spectra) > MAX_PANELS:
+        print(f"note: --spectrum: {len(spectra)} runs; the first {MAX_PANELS} drawn (narrow with --problem/--optimizer)")
+    print(f"spectrum: {plot_spectrum(spectra[:MAX_PANELS], args.spectrum)}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """``higbench-results``; piped into ``head``, it stops quietly when the reader leaves."""
     with quiet_broken_pipe():
@@ -236,8 +271,14 @@ def _main(argv: list[str] | None = None) -> int:
             print(f"higbench-results: error: {error}", file=sys.stderr)
             return 2
         df = _filter(df, args)
-        if args.plot or args.profile:
+        if args.spectrum:
             _summary_line(df, total, roots, args)
+            code = _spectrum(args, df, roots)
+            if code or not (args.plot or args.profile):
+                return code
+        if args.plot or args.profile:
+            if not args.spectrum:
+                _summary_line(df, total, roots, args)
             return _plots(args, roots, df)
         if args.best:
             df = _best(df, args)
@@ -267,7 +308,9 @@ def _summary_line(df: pd.DataFrame, total: int, roots: list[Path], args: argpars
 
 def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) -> None:
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
-    shown = SUMMARY_COLUMNS + times + [c for c in (args.columns or "").split(",") if c]
+    # GN/HIG/LM runs: how ill-conditioned their steps were (shown when some run recorded it)
+    conditioning = [c for c in CONDITIONING_SHOWN if c in df and pd.to_numeric(df[c], errors="coerce").notna().any()]
+    shown = SUMMARY_COLUMNS + times + conditioning + [c for c in (args.columns or "").split(",") if c]
     if args.best and args.metric not in shown:
         shown.insert(shown.index("final_test_loss"), args.metric)
     missing = [c for c in shown if c not in df.columns]

@@ -9,6 +9,8 @@
 clock at the end: evaluations excluded), ``final_test_loss``,
 ``best_test_loss``, ``time_to_<threshold>`` (training clock at the first evaluation whose
 test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
+``cond_kept_median``, ``cond_kept_max``, ``sv_dropped_mean`` (GN/HIG/LM: the steps'
+conditioning, ``higbench.results.spectrum``; NaN for other runs),
 ``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``).
 
 This is the one run index: ``make figures`` finds its runs here too (``one_per_config``,
@@ -32,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
+from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLUMNS, conditioning
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
     RunFileLocked,
@@ -56,7 +59,7 @@ _OWN_COLUMNS = {
     "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
-    "config_id", "parallel_jobs",
+    "config_id", "parallel_jobs", *CONDITIONING_COLUMNS,
 }  # fmt: skip
 
 
@@ -147,7 +150,7 @@ def _mean(values: np.ndarray | None) -> float:
 
 
 _CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss")  # what the row needs (curves=False)
-_UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s")
+_UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
 def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -> tuple[dict, dict[str, np.ndarray] | None]:
@@ -221,12 +224,16 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
         for t in thresholds:
             row[threshold_column(t)] = math.nan
 
-    updates, _ = _cut(run.tables.get("updates", {}))
+    raw = run.tables.get("updates", {})
+    # Spectrum columns cut apart: they may be shorter than the timings (a file from before they
+    # were recorded, resumed by a version that records them), which must not shorten those.
+    updates, _ = _cut({k: v for k, v in raw.items() if k not in UPDATE_SPECTRUM_COLUMNS})
     update_s = updates.get("update_s")
     row["mean_update_s"] = _mean(update_s)
     row["median_update_s"] = float(np.median(update_s)) if update_s is not None and len(update_s) else math.nan
     row["mean_jacobian_s"] = _mean(updates.get("jacobian_s"))
     row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
+    row.update(conditioning(_cut({k: raw[k] for k in UPDATE_SPECTRUM_COLUMNS if k in raw})[0]))  # else NaN
     row.update(run.memory)
     for key, value in run.env.items():
         row[f"env.{key}"] = value

@@ -1,7 +1,9 @@
-"""Plots of your own runs: loss curves over seeds (``--plot``) and performance profiles (``--profile``).
+"""Plots of your own runs: loss curves over seeds (``--plot``), performance profiles
+(``--profile``) and the spectrum of GN/HIG/LM steps over training (``--spectrum``).
 
 ``plot_curves`` takes ``load_runs(root, curves=True)`` with a ``setting`` column
-(``profile.setting_labels``); ``plot_profile`` takes ``profile.performance_profile``'s table.
+(``profile.setting_labels``); ``plot_profile`` takes ``profile.performance_profile``'s table;
+``plot_spectrum`` takes ``spectrum.read_spectrum``'s series, one panel per run.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ matplotlib.use("Agg")  # files only: no display needed
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+
+from higbench.results.spectrum import RunSpectrum, conditioning  # noqa: E402
 
 GRID_POINTS = 200
 
@@ -92,6 +96,60 @@ def plot_profile(rho: pd.DataFrame, path: str | Path, n_pairs: int) -> Path:
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_spectrum(spectra: list[tuple[str, RunSpectrum]], path: str | Path, columns: int = 3) -> Path:
+    """Singular values of each update's J against updates, one panel per (title, run); log y.
+
+    Per update: the largest, the smallest kept and tau's cutoff (where the config has a tau);
+    at each evaluation: the deciles of the whole spectrum of the last update (grey; zeros,
+    e.g. values below round-off on the Gram route, cannot show on the log axis).
+    """
+    rows = -(-len(spectra) // columns)
+    cols = min(columns, len(spectra))
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.6 * rows), squeeze=False)
+    for ax, (title, run) in zip(axes.flat, spectra):
+        _spectrum_panel(ax, title, run)
+    for ax in axes.flat[len(spectra) :]:
+        ax.set_visible(False)
+    fig.text(0.01, 0.01, "grey: deciles of the last update's singular values at each evaluation", fontsize=8, color="0.4")
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    return _save(fig, path)
+
+
+def _positive(values: np.ndarray) -> np.ndarray:
+    """Values a log axis can show (others as NaN: gaps)."""
+    return np.where(values > 0, values, np.nan)
+
+
+def _spectrum_panel(ax: plt.Axes, title: str, run: RunSpectrum) -> None:
+    for i, level in enumerate(run.levels):
+        ax.plot(
+            run.eval_step,
+            _positive(run.quantiles[:, i]),
+            color="0.55",
+            linewidth=1.2 if level == 0.5 else 0.6,
+            linestyle=":" if level in (0.0, 1.0) else "-",
+            marker=".",
+            markersize=3,
+            label="deciles (0, 0.1, ..., 1)" if i == 0 else None,
+        )
+    marker = "." if len(run.step) < 50 else None  # a run of one or two updates still shows
+    ax.plot(run.step, _positive(run.sv_max), color="C0", linewidth=1.0, marker=marker, label="largest")
+    ax.plot(run.step, _positive(run.sv_min_kept), color="C1", linewidth=1.0, marker=marker, label="smallest kept")
+    cutoff = run.cutoff()
+    if cutoff is not None:
+        what = f"tau*largest, tau={run.tau:g}" if run.truncation == "relative" else f"tau={run.tau:g}"
+        ax.plot(run.step, _positive(cutoff), color="C3", linestyle="--", linewidth=0.9, marker=marker, label=f"cutoff ({what})")
+    ax.set_yscale("log")
+    c = conditioning({"sv_max": run.sv_max, "sv_min_kept": run.sv_min_kept, "sv_dropped": run.sv_dropped})
+    stats = f"largest/smallest kept: median {c['cond_kept_median']:.2g}, max {c['cond_kept_max']:.2g}"
+    stats += f"; {c['sv_dropped_mean']:.2g} dropped per update"
+    ax.set_title(f"{title}\n{stats}", fontsize=8)
+    ax.set_xlabel("update")
+    ax.set_ylabel("singular value of J")
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
 
 
 def _save(fig: plt.Figure, path: str | Path) -> Path:
