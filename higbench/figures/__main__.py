@@ -4,6 +4,7 @@
     python -m higbench.figures fig1 fig2b --preset smoke
     python -m higbench.figures all --preset paper --plan     # runs needed/missing, cost; runs nothing
     python -m higbench.figures all --no-run                  # draw from the runs that exist
+    python -m higbench.figures --report-only --out docs/results   # REPORT.md from the data there, no runs
     python -m higbench.figures --list
 
 Runs already under --runs-root with the same resolved config are reused (the results
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from higbench.figures.spec import PRESETS
 
@@ -66,11 +68,25 @@ def main(argv: list[str] | None = None) -> int:
         help="tables 3-5: do not run scripts/bench_step.py; use its existing table or timing runs",
     )
     p.add_argument("--no-report", action="store_true", help="do not rewrite REPORT.md")
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="rewrite --out/REPORT.md from the claim rows stored there (<id>.json), judged by the current rules and "
+        "causes; run and draw nothing",
+    )
     p.add_argument("--list", action="store_true", help="list the figures and exit")
     args = p.parse_args(argv)
 
     from higbench.figures import registry
 
+    if args.report_only:
+        from higbench.figures.report import write_report
+
+        if not Path(args.out).is_dir():
+            print(f"higbench-figures: error: --out {args.out}: no such directory (nothing to report from)", file=sys.stderr)
+            return 2
+        print(f"[figures] {write_report(Path(args.out))}")
+        return 0
     if args.list:
         for fid, f in registry.figures().items():
             print(f"{fid:8s} {f.kind:6s} {f.title}")

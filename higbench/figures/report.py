@@ -1,9 +1,10 @@
-"""figures/REPORT.md: the paper's headline claims against the runs behind the figures.
+"""REPORT.md: the paper's headline claims against the runs behind the figures.
 
-Each claim is checked (``checks.Claim.check``) when its first figure is drawn and the
-result is stored in that figure's sidecar ``<id>.json``; this module collects the
-sidecars in the output directory into one table, in the registry's order, so a partial
-rebuild (``higbench-figures fig1``) keeps the other figures' rows.
+Each claim is checked when its first figure is drawn and its row (the measured values) is
+stored in that figure's data file ``<id>.json``. This module collects those rows from the
+output directory (so a partial rebuild, ``higbench-figures fig1``, keeps the other figures'
+rows) and judges each again by the current gates and causes (``claims.finish``): REPORT.md
+is always the rules of this revision on the measured values committed beside it.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections import Counter
 from pathlib import Path
 
 from higbench.figures import registry
+from higbench.figures.claims import finish, rule_why
 from higbench.figures.data import md_table
 
 HEADER = """# Reproduction report
@@ -57,23 +59,16 @@ def sidecars(out_dir: Path) -> dict[str, dict]:
 
 
 def collect(out_dir: Path) -> list[dict]:
-    rows = {}
-    for info in _json_sidecars(out_dir).values():
-        for c in info.get("claims", []):
-            rows[c["id"]] = c
-    blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-"}
-    return [
-        rows.get(cid)
-        or {
-            "id": cid,
-            "figures": list(c.figures),
-            "statement": c.statement,
-            "paper": c.paper,
-            **blank,
-            "why": f"{c.figures[0]} not drawn yet",
-        }
-        for cid, c in registry.claims().items()
-    ]
+    """Every claim's row, in the registry's order, judged again from its stored values."""
+    rows = {c["id"]: c for info in _json_sidecars(out_dir).values() for c in info.get("claims", [])}
+    out = []
+    for cid, c in registry.claims().items():
+        if cid in rows:
+            out.append(finish(c, {**rows[cid], "why": rule_why(rows[cid]["why"])}))
+        else:
+            blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-", "why": f"{c.figures[0]} not drawn yet"}
+            out.append({"id": cid, "figures": list(c.figures), "statement": c.statement, "paper": c.paper, **blank})
+    return out
 
 
 def _num(v) -> str:
