@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         from higbench.figures.report import write_report
 
         if not Path(args.out).is_dir():
-            print(f"higbench-figures: error: --out {args.out}: no such directory (nothing to report from)", file=sys.stderr)
+            print(f"higbench-figures: error: --out={args.out}: no such directory (nothing to report from)", file=sys.stderr)
             return 2
         print(f"[figures] {write_report(Path(args.out))}")
         return 0
