@@ -88,7 +88,9 @@ class Builder:
             resolve(jobs, self.index)
         per = {s.name: s.budget.describe(self.preset) for s in figure.runs(self.preset)}
         budgets = {"all runs": v[0]} if len(v := sorted(set(per.values()))) == 1 else per
-        data = FigureData(figure, self.preset, self.out_dir, jobs, budgets=budgets or {"all runs": "no runs (benchmark script's table)"})
+        data = FigureData(
+            figure, self.preset, self.out_dir, jobs, budgets=budgets or {"all runs": "no runs (benchmark script's table)"}
+        )
         data.notes = list(figure.notes(self.preset)) if figure.notes is not None else []
         return data
 

@@ -8,8 +8,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.claims import DIPOLE_HIG_HOUR, Cause, below, best, claim, end_time, final, half_way, loss_at, median
-from higbench.figures.claims import require, sci
+from higbench.figures.claims import (
+    DIPOLE_HIG_HOUR,
+    Cause,
+    below,
+    best,
+    claim,
+    end_time,
+    final,
+    half_way,
+    loss_at,
+    median,
+    require,
+    sci,
+)
 from higbench.figures.data import OPTIMIZER_NAMES, FigureData, RunData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid

@@ -11,8 +11,24 @@ import math
 
 import numpy as np
 
-from higbench.figures.claims import OSC_ADAM_HOUR, OSC_HIG_HOUR, Cause, at_update, below, budget_of, claim, crossing_time
-from higbench.figures.claims import end_time, final, half_way, loss_at, median, require, sci, updates_of
+from higbench.figures.claims import (
+    OSC_ADAM_HOUR,
+    OSC_HIG_HOUR,
+    Cause,
+    at_update,
+    below,
+    budget_of,
+    claim,
+    crossing_time,
+    end_time,
+    final,
+    half_way,
+    loss_at,
+    median,
+    require,
+    sci,
+    updates_of,
+)
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, num
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid

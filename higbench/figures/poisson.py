@@ -13,8 +13,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.figures.claims import PAPER, POISSON_HIG_HOUR, Cause, at_update, best, claim, end_time, final, loss_at
-from higbench.figures.claims import require, sci, updates_of
+from higbench.figures.claims import (
+    PAPER,
+    POISSON_HIG_HOUR,
+    Cause,
+    at_update,
+    best,
+    claim,
+    end_time,
+    final,
+    loss_at,
+    require,
+    sci,
+    updates_of,
+)
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Series, legend, new_figure
 from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep

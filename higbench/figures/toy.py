@@ -139,7 +139,9 @@ TOY2_CAUSE = Cause(
     "both stall as the paper says, but below its plateau of {paper_toy_plateau:g}: Adam {adam_final:e} (half-way "
     "{adam_half:e}), GN {gn_final:e} (half-way {gn_half:e})",
     {
-        "both flat over the second half": lambda v: v["adam_final"] >= v["adam_half"] / 1.5 and v["gn_final"] >= v["gn_half"] / 1.5,
+        "both flat over the second half": lambda v: (
+            v["adam_final"] >= v["adam_half"] / 1.5 and v["gn_final"] >= v["gn_half"] / 1.5
+        ),
         "both below the paper's plateau": lambda v: max(v["adam_final"], v["gn_final"]) < v["paper_toy_plateau"] / 2,
     },
 )
