@@ -15,7 +15,7 @@ from pathlib import Path
 from higbench.figures import plot, registry
 from higbench.figures.claims import judge
 from higbench.figures.data import FigureData
-from higbench.figures.runs import Job, RunIndex, expand, job_seconds, launch, resolve
+from higbench.figures.runs import Job, Launcher, RunIndex, expand, job_seconds, launch, resolve
 from higbench.figures.spec import Figure, Preset
 
 
@@ -32,7 +32,16 @@ class BuildResult:
 class Builder:
     """The jobs of the figures at a preset, resolved against the runs root's index."""
 
-    def __init__(self, preset: str, runs_root="outputs", out_dir="figures", *, jobs=None, launcher="auto", log=print):
+    def __init__(
+        self,
+        preset: str,
+        runs_root: str | Path = "outputs",
+        out_dir: str | Path = "figures",
+        *,
+        jobs: int | None = None,
+        launcher: str | Launcher = "auto",
+        log=print,
+    ):
         self.preset = Preset(preset, str(runs_root))
         self.runs_root, self.out_dir = Path(runs_root), Path(out_dir)
         self.n_jobs = jobs or max(1, min(os.cpu_count() or 1, 2))
@@ -138,7 +147,7 @@ def build(
     out_dir: str | Path = "figures",
     *,
     jobs: int | None = None,
-    launcher: str = "auto",
+    launcher: str | Launcher = "auto",
     run: bool = True,
     report: bool = True,
     bench: bool = True,
