@@ -217,8 +217,7 @@ def reference_ratio(tid: str, hig_b: int, adam_b: int) -> dict:
     """The authors' own code's HIG/Adam update-time ratio on this CPU kind (reference.py), if measured."""
     from higbench.figures.reference import UPDATE_SECONDS
 
-    problem = {"table3": "oscillator", "table4": "poisson", "table5": "dipole"}[tid]
-    t = {(r["optimizer"], r["batch_size"]): r["update_s"] for r in UPDATE_SECONDS if r["problem"] == problem}
+    t = {(r["optimizer"], r["batch_size"]): r["update_s"] for r in UPDATE_SECONDS if r["problem"] == PROBLEMS[tid]}
     found = ("hig", hig_b) in t and ("adam", adam_b) in t
     return {"ref_ratio": t[("hig", hig_b)] / t[("adam", adam_b)]} if found else {}
 
