@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from higbench.bench.paper import PAPER_COSTS
 from higbench.figures.reference import TRACE_SECONDS
 from higbench.figures.spec import UPDATES_ONLY
 
@@ -310,15 +311,21 @@ def claim_seeds(datas: dict) -> int:
 
 # -- the numbers a cause may quote besides its runs', and budgets sized by them ---------------
 
+
+def _update_s(problem: str, optimizer: str, b: int) -> float:
+    """The paper's seconds per update (tables 3-5, ``higbench.bench.paper``: the one copy)."""
+    return PAPER_COSTS[(problem, optimizer, b)][1]
+
+
 PAPER = {
     "paper_toy_plateau": 0.2,  # figure 1b
-    "paper_osc_hig_update_s": 0.146,  # table 3, b=128
-    "paper_osc_adam_update_s": 0.081,  # table 3, b=512
-    "paper_poisson_hig_update_s": 13.8,  # table 4, b=64
+    "paper_osc_hig_update_s": _update_s("oscillator", "hig", 128),
+    "paper_osc_adam_update_s": _update_s("oscillator", "adam", 512),
+    "paper_poisson_hig_update_s": _update_s("poisson", "hig", 64),
     "paper_poisson_b": 64,
     "paper_dipole_limit": 1e-6,  # section 3.3
     "float32_floor": 1e-7,  # below this a float32 evaluation of the dipole loss is rounding (±2e-7 per sample)
-    "paper_osc_memory_ratio": 2640 / 169,  # table 3, b=128 / b=32
+    "paper_osc_memory_ratio": PAPER_COSTS[("oscillator", "hig", 128)][0] / PAPER_COSTS[("oscillator", "hig", 32)][0],
     "ref_hig_trace_s": TRACE_SECONDS["hig"],  # the authors' code on this machine kind (reference.py)
 }
 PAPER_HOUR = 3600.0
@@ -344,7 +351,7 @@ def paper_hour_here(paper_update_s: float, here_update_s: float) -> float:
     return float(-(-PAPER_HOUR / paper_update_s * here_update_s // 10) * 10)
 
 
-OSC_HIG_HOUR = paper_hour_here(0.146, 0.030)  # 740 s
-OSC_ADAM_HOUR = paper_hour_here(0.081, 0.0045)  # 200 s
-DIPOLE_HIG_HOUR = paper_hour_here(0.60, 0.0436)  # 270 s
-POISSON_HIG_HOUR = paper_hour_here(13.8, 11.4)  # 2,980 s
+OSC_HIG_HOUR = paper_hour_here(PAPER["paper_osc_hig_update_s"], 0.030)  # 740 s
+OSC_ADAM_HOUR = paper_hour_here(PAPER["paper_osc_adam_update_s"], 0.0045)  # 200 s
+DIPOLE_HIG_HOUR = paper_hour_here(_update_s("dipole", "hig", 16), 0.0436)  # 270 s
+POISSON_HIG_HOUR = paper_hour_here(PAPER["paper_poisson_hig_update_s"], 11.4)  # 2,980 s
