@@ -194,8 +194,15 @@ class RunIndex:
     @classmethod
     def scan(cls, root: Path | None) -> RunIndex:
         index = cls(root)
-        index.find("")
+        index._read()
         return index
+
+    def _read(self) -> None:
+        self._by_id = {}
+        if self.root is not None and self.root.is_dir():
+            runs = one_per_config(load_runs(self.root, figure_runs=True))
+            for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
+                self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
 
     def add(self, path: Path) -> None:
         self._by_id = None  # read again when next asked
@@ -203,11 +210,7 @@ class RunIndex:
     def find(self, identity: str) -> IndexedRun | None:
         """The run the index chooses for this identity (done if any is), or None."""
         if self._by_id is None:
-            self._by_id = {}
-            if self.root is not None and self.root.is_dir():
-                runs = one_per_config(load_runs(self.root, figure_runs=True))
-                for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
-                    self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
+            self._read()
         return self._by_id.get(identity)
 
 
