@@ -26,6 +26,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -157,20 +158,28 @@ def pick_seed(search: list[Job]) -> tuple[int, str]:
     return seed, f"{tally}; best stable seed {seed}"
 
 
-@cache
-def compose(overrides: tuple[str, ...]) -> dict:
-    """The resolved config the CLI composes for these overrides, serialised as in the run file
-    (OmegaConf -> YAML -> dict). Hydra's compose API on the CLI's config dir."""
-    from hydra import compose as hydra_compose
+@contextmanager
+def hydra_conf():
+    """Hydra's compose API on the CLI's config dir, for a batch of compositions (Hydra keeps the
+    parsed YAML files as long); Hydra's global state is cleared before and after."""
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
-    from omegaconf import OmegaConf
 
     from higbench.config import config_dir
 
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3", job_name="higbench"):
-        cfg = hydra_compose("config", overrides=list(overrides))
+        yield
+
+
+@cache
+def compose(overrides: tuple[str, ...]) -> dict:
+    """The resolved config the CLI composes for these overrides (inside ``hydra_conf()``),
+    serialised as in the run file (OmegaConf -> YAML -> dict)."""
+    from hydra import compose as hydra_compose
+    from omegaconf import OmegaConf
+
+    cfg = hydra_compose("config", overrides=list(overrides))
     return yaml.load(OmegaConf.to_yaml(cfg, resolve=True), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
@@ -217,18 +226,19 @@ class RunIndex:
 def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dict] = compose) -> None:
     """Fill in each job's config and identity, and its run file if one is done; a job whose
     parent or seed search is not done yet is "waiting" (declaration order: those come first)."""
-    for job in jobs:
-        if (job.parent is not None and not job.parent.done) or not all(s.done for s in job.search):
-            job.identity, job.path, job.status = None, None, "waiting"
-            continue
-        if job.search:
-            job.seed, job.search_note = pick_seed(job.search)
-            job.overrides["seed"] = job.seed
-        job.config = dict(compose(tuple(job.override_list())))
-        job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
-        run = index.find(job.identity)
-        job.status = run.status if run else "missing"
-        job.path = run.path if run and run.status in DONE_STATUSES else None
+    with hydra_conf():
+        for job in jobs:
+            if (job.parent is not None and not job.parent.done) or not all(s.done for s in job.search):
+                job.identity, job.path, job.status = None, None, "waiting"
+                continue
+            if job.search:
+                job.seed, job.search_note = pick_seed(job.search)
+                job.overrides["seed"] = job.seed
+            job.config = dict(compose(tuple(job.override_list())))
+            job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
+            run = index.find(job.identity)
+            job.status = run.status if run else "missing"
+            job.path = run.path if run and run.status in DONE_STATUSES else None
 
 
 @dataclass(frozen=True)
