@@ -371,3 +371,46 @@ def test_plot_layer_facets_and_lines_record_what_they_draw(tmp_path):
     assert legend == ["κ=1 (diverged at step 3)", "κ=-0.5"]  # largest first, the divergence named once
     assert [r["series"] for r in d.rows[::3]] == ["κ=1", "κ=-0.5"]
     assert d.diverged_marked and "X: last finite evaluation" in d.caption()
+
+
+def _compose_both_ways(override_lists):
+    """(the figures' compose, Hydra composing each list whole) for each override list."""
+    import yaml
+    from hydra import compose as hydra_compose
+    from omegaconf import OmegaConf
+
+    from higbench.figures.runs import compose, hydra_conf
+
+    with hydra_conf():
+        whole = [
+            yaml.safe_load(OmegaConf.to_yaml(hydra_compose("config", overrides=list(o)), resolve=True)) for o in override_lists
+        ]
+        return [compose(tuple(o)) for o in override_lists], whole
+
+
+def _override_lists(presets, one_per_figure):
+    lists = {}
+    for preset in presets:
+        for fig in registry.figures().values():
+            jobs = expand(fig, Preset(preset))
+            for j in jobs[:1] if one_per_figure else jobs:
+                lists.setdefault(tuple(j.override_list()), None)
+    return list(lists)
+
+
+def test_shared_group_composition_gives_hydras_config():
+    """The fast route (one Hydra composition per group choice, value overrides applied after it)
+    against Hydra composing each job whole: one job per figure, a continued run, quoted strings."""
+    lists = _override_lists(["quick"], one_per_figure=True)
+    lists += [("problem=poisson", "optimizer=hig", "optimizer.lr=0.02", "init_from='/a b/run.h5'", "budget.seconds=null")]
+    lists += [("problem=dipole", "optimizer=adam", "eval_unit=updates", "eval_every=10", "problem.test_size=16")]
+    fast, whole = _compose_both_ways(lists)
+    assert all(a == b for a, b in zip(fast, whole)), [o for o, a, b in zip(lists, fast, whole) if a != b][:3]
+    assert fast[-1]["eval_every"] == 10.0 and fast[-2]["init_from"] == "/a b/run.h5"
+
+
+@pytest.mark.slow
+def test_shared_group_composition_gives_hydras_config_for_every_job():
+    lists = _override_lists(list(PRESETS), one_per_figure=False)
+    fast, whole = _compose_both_ways(lists)
+    assert len(lists) > 300 and [o for o, a, b in zip(lists, fast, whole) if a != b] == []
