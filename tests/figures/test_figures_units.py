@@ -414,3 +414,18 @@ def test_shared_group_composition_gives_hydras_config_for_every_job():
     lists = _override_lists(list(PRESETS), one_per_figure=False)
     fast, whole = _compose_both_ways(lists)
     assert len(lists) > 300 and [o for o, a, b in zip(lists, fast, whole) if a != b] == []
+
+
+def test_a_grid_of_facets_without_a_finished_run_still_draws(tmp_path):
+    """fig5 before its runs exist (--no-run): every panel says "no runs" instead of the figure failing."""
+    from higbench.figures.plot import Facets, draw
+    from higbench.figures.spec import Figure
+
+    failed = [(o, 0, {"optimizer": o, "optimizer.lr": lr, "batch_size": 8}, "failed", [1.0, 0.5, 0.1])
+              for o in ("sgd", "adam") for lr in (0.1, 1.0)]  # fmt: skip
+    fig = Figure("figN", "t", [], panels=[Facets(["sgd", "adam"], "optimizer.lr", "batch_size", rows="sweep")])
+    d = _fake_figure_data(fig, failed, tmp_path)
+    for job in d.jobs:
+        job.path = None  # a failed run leaves nothing to draw
+    draw(d)
+    assert d.rows == [] and (tmp_path / "figN.png").stat().st_size > 0
