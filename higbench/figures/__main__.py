@@ -4,6 +4,7 @@
     python -m higbench.figures fig1 fig2b --preset smoke
     python -m higbench.figures all --preset paper --plan     # runs needed/missing, cost; runs nothing
     python -m higbench.figures all --no-run                  # draw from the runs that exist
+    python -m higbench.figures --report-only --out docs/results   # REPORT.md from the data there, no runs
     python -m higbench.figures --list
 
 Runs already under --runs-root with the same resolved config are reused (the results
@@ -18,59 +19,77 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from higbench.figures.spec import PRESETS
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="higbench-figures", description=__doc__.split("\n\n")[0])
-    p.add_argument("ids", nargs="*", default=["all"], help="figure/table ids (fig1 fig2b table2 ...) or 'all'")
-    p.add_argument(
+    arg = p.add_argument
+    arg("ids", nargs="*", default=["all"], help="figure/table ids (fig1 fig2b table2 ...) or 'all'")
+    arg(
         "--preset",
         default="quick",
         choices=PRESETS,
         help="budgets and grids: smoke (minutes, every code path), quick (scaled down), paper; a value a preset does not "
         "set is its fallback's (spec.PRESETS: smoke -> quick -> paper)",
     )
-    p.add_argument("--runs-root", default="outputs", help="where runs are looked for and written (default: outputs)")
-    p.add_argument("--out", default="figures", help="output directory (default: figures)")
-    p.add_argument(
-        "--jobs",
-        type=int,
-        default=None,
-        help="joblib launcher: runs trained at the same time (default: min(cores, 2)); each run uses one torch thread",
+    arg("--runs-root", default="outputs", help="where runs are looked for and written (default: outputs)")
+    arg("--out", default="figures", help="output directory (default: figures)")
+    jobs_help = "joblib launcher: runs trained at the same time (default: min(cores, 2)); each run uses one torch thread"
+    arg("--jobs", type=int, default=None, help=jobs_help)
+    launcher_help = (
+        "Hydra launcher of the missing runs' multiruns (higbench -m): joblib (default; local, --jobs workers), "
+        "basic (one after another), or a hydra/launcher config: slurm, submitit_slurm, submitit_local"
     )
-    p.add_argument(
-        "--launcher",
-        default="joblib",
-        metavar="NAME",
-        help=(
-            "Hydra launcher of the missing runs' multiruns (higbench -m): joblib (default; local, --jobs workers), "
-            "basic (one after another), or a hydra/launcher config: slurm, submitit_slurm, submitit_local"
-        ),
-    )
-    p.add_argument(
-        "--launcher-override",
-        action="append",
-        default=[],
-        metavar="hydra.KEY=VALUE",
-        help="extra Hydra override for every multirun, e.g. hydra.launcher.partition=gpu (repeatable)",
-    )
-    p.add_argument("--no-run", action="store_true", help="run nothing; draw from the runs that exist")
-    p.add_argument(
-        "--plan", action="store_true", help="print runs needed/missing and their training seconds; run and draw nothing"
-    )
-    p.add_argument(
+    arg("--launcher", default="joblib", metavar="NAME", help=launcher_help)
+    override_help = "extra Hydra override for every multirun, e.g. hydra.launcher.partition=gpu (repeatable)"
+    arg("--launcher-override", action="append", default=[], metavar="hydra.KEY=VALUE", help=override_help)
+    arg("--no-run", action="store_true", help="run nothing; draw from the runs that exist")
+    arg("--plan", action="store_true", help="print runs needed/missing and their training seconds; run and draw nothing")
+    arg(
         "--no-bench",
         action="store_true",
         help="tables 3-5: do not run scripts/bench_step.py; use its existing table or timing runs",
     )
-    p.add_argument("--no-report", action="store_true", help="do not rewrite REPORT.md")
-    p.add_argument("--list", action="store_true", help="list the figures and exit")
-    args = p.parse_args(argv)
+    arg("--no-report", action="store_true", help="do not rewrite REPORT.md")
+    report_help = (
+        "rewrite --out/REPORT.md from the claim rows stored there (<id>.json), judged by the current rules and causes; "
+        "run and draw nothing"
+    )
+    arg("--report-only", action="store_true", help=report_help)
+    arg("--list", action="store_true", help="list the figures and exit")
+    return p
 
+
+def print_plan(args: argparse.Namespace) -> None:
+    from higbench.figures.build import plan
+
+    total = 0.0
+    print(f"{'figure':8s} {'runs':>5s} {'missing':>8s} {'train s':>9s}  (preset {args.preset}; shared runs counted once)")
+    for fid, n, miss, secs in plan(args.ids, args.preset, args.runs_root):
+        total += secs
+        print(f"{fid:8s} {n:5d} {miss:8d} {secs:9.0f}")
+    jobs = args.jobs or 2
+    print(
+        f"total training seconds missing: {total:.0f} (~{total / jobs / 60:.0f} min on {jobs} parallel jobs, plus "
+        "start-up and evaluations)"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
     from higbench.figures import registry
 
+    if args.report_only:
+        from higbench.figures.report import write_report
+
+        if not Path(args.out).is_dir():
+            print(f"higbench-figures: error: --out={args.out}: no such directory (nothing to report from)", file=sys.stderr)
+            return 2
+        print(f"[figures] {write_report(Path(args.out))}")
+        return 0
     if args.list:
         for fid, f in registry.figures().items():
             print(f"{fid:8s} {f.kind:6s} {f.title}")
@@ -87,23 +106,13 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"higbench-figures: error: --launcher-override {exc}", file=sys.stderr)
         return 2
-
     if args.plan:
-        from higbench.figures.build import plan
-
-        rows = plan(args.ids, args.preset, args.runs_root)
-        total = 0.0
-        print(f"{'figure':8s} {'runs':>5s} {'missing':>8s} {'train s':>9s}  (preset {args.preset}; shared runs counted once)")
-        for fid, n, miss, secs in rows:
-            total += secs
-            print(f"{fid:8s} {n:5d} {miss:8d} {secs:9.0f}")
-        jobs = args.jobs or 2
-        print(
-            f"total training seconds missing: {total:.0f} (~{total / jobs / 60:.0f} min on {jobs} parallel jobs, plus "
-            "start-up and evaluations)"
-        )
+        print_plan(args)
         return 0
+    return run_build(args, launcher)
 
+
+def run_build(args: argparse.Namespace, launcher) -> int:
     from higbench.figures.build import build
 
     result = build(
@@ -123,11 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     if result.missing:
         print("[figures] runs still missing (failed or not run): " + ", ".join(f"{k}: {v}" for k, v in result.missing.items()))
-    if result.errors:
-        for k, v in result.errors.items():
-            print(f"[figures] {k}: {v}", file=sys.stderr)
-        return 1
-    return 0
+    for k, v in result.errors.items():
+        print(f"[figures] {k}: {v}", file=sys.stderr)
+    return 1 if result.errors else 0
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from higbench.figures.claims import at_update, claim, final, half_way, require, sci, stable, updates_of
+from higbench.figures.claims import Cause, at_update, below, claim, final, half_way, require, sci, stable, updates_of
 from higbench.figures.data import num
 from higbench.figures.oscillator import gn_search, gn_search_summary
 from higbench.figures.plot import Curves, Series
@@ -67,7 +67,18 @@ FIGURES = [
 ]
 
 
-@claim("abl-1", "fig12", "little influence")
+@claim(
+    "abl-1",
+    "fig12",
+    "little influence",
+    min_seconds=120,
+    cause=Cause(
+        "budget",
+        "a negative β scales HIG's step by max(s)^β, a slower start: the spread over β shrinks from {spread_half:.0f}x "
+        "half-way to {spread:.0f}x at the end",
+        {"the spread shrinks": below("spread", "spread_half")},
+    ),
+)
 def beta(datas):
     """Ablation: β has little influence on the outcome. Rule: final losses over β within 10x, none diverged (partly:
     within 100x)"""
@@ -81,7 +92,7 @@ def beta(datas):
     return measured, spread < 10 and len(finite) == len(fin), spread < 100, values
 
 
-@claim("abl-2", "fig12", "orders of magnitude")
+@claim("abl-2", "fig12", "orders of magnitude", min_seconds=30)
 def kappa(datas):
     """Ablation: κ > 0 stagnates early; κ < 0 ends orders of magnitude lower. Rule: best negative-κ run >= 100x below
     the best positive-κ run (partly: >= 10x)"""
@@ -92,7 +103,7 @@ def kappa(datas):
     return f"best κ>0 {sci(min(pos))}, best κ<0 {sci(min(neg))} ({ratio:.0f}x)", ratio >= 100, ratio >= 10
 
 
-@claim("abl-3", "fig13", "GN diverges, HIG stable")
+@claim("abl-3", "fig13", "GN diverges, HIG stable", min_seconds=120)
 def tau(datas):
     """Ablation: GN becomes unstable for small τ (diverges at 1e-9, 1e-10); HIG tolerates τ and ends lower. Rule: at
     equal update counts (the fewest any run made: below τ ~1e-7 the SVD route is slower per update), GN (best stable
@@ -120,7 +131,7 @@ def tau(datas):
     return measured, gn_part and hig_part, gn_part or hig_part, {"n": n}
 
 
-@claim("abl-4", "fig12", "κ=-0.5 best")
+@claim("abl-4", "fig12", "κ=-0.5 best", min_seconds=120)
 def kappa_best(datas):
     """Ablation (fig. 12b): κ=-0.5 is the best κ. Rule: κ=-0.5 ends lowest of the κ sweep (partly: within 2x of the
     lowest)"""

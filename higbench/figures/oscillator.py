@@ -12,7 +12,11 @@ import math
 import numpy as np
 
 from higbench.figures.claims import (
+    OSC_ADAM_HOUR,
+    OSC_HIG_HOUR,
+    Cause,
     at_update,
+    below,
     budget_of,
     claim,
     crossing_time,
@@ -210,7 +214,18 @@ def gn_search_summary(d: FigureData, sweep: str) -> str:
     )
 
 
-@claim("osc-1", "fig2b", "Adam ~1e-4")
+@claim(
+    "osc-1",
+    "fig2b",
+    "Adam ~1e-4",
+    min_seconds=OSC_ADAM_HOUR,
+    cause=Cause(
+        "budget",
+        "Adam {adam:e} after {budget:g} s, still falling ({adam_half:e} half-way); the paper's level is its hour of "
+        "updates at {paper_osc_adam_update_s:g} s each",
+        {"Adam above the paper's level": lambda v: v["adam"] > 1e-3, "Adam still falling": below("adam", "adam_half")},
+    ),
+)
 def adam_best(datas):
     """Oscillators: Adam is the best of the gradient-descent family, final loss ~1e-4. Rule: Adam best of
     SGD/Adagrad/Adadelta/RMSprop/Adam and final loss in [1e-5, 1e-3] (partly: one of the two)"""
@@ -227,7 +242,17 @@ def adam_best(datas):
     )
 
 
-@claim("osc-2", "fig2b", "GN ~1e-6")
+@claim(
+    "osc-2",
+    "fig2b",
+    "GN ~1e-6",
+    min_seconds=OSC_HIG_HOUR,
+    cause=Cause(
+        "budget",
+        "GN {gn:e} after {gn_updates} updates, fewer than the paper's hour ({osc_hig_hour_updates})",
+        {"GN above the paper's level": lambda v: v["gn"] > 1e-5, "fewer updates": below("gn_updates", "osc_hig_hour_updates")},
+    ),
+)
 def gn_level(datas):
     """Oscillators: GN's best stable run reaches ~1e-6. Rule: GN's best stable run (best seed of the search) ends in
     [1e-7, 1e-5] without diverging (partly: below Adam's)"""
@@ -239,7 +264,23 @@ def gn_level(datas):
     return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"], values
 
 
-@claim("osc-3", "fig2b", "HIG ~1e-7")
+@claim(
+    "osc-3",
+    "fig2b",
+    "HIG ~1e-7",
+    min_seconds=OSC_HIG_HOUR,
+    min_seeds=3,
+    cause=Cause(
+        "budget",
+        "HIG {hig:e} after {hig_updates} updates, fewer than the paper's hour ({osc_hig_hour_updates}), and still falling "
+        "({hig_half:e} half-way)",
+        {
+            "HIG above the paper's level": lambda v: v["hig"] > 1e-6,
+            "fewer updates than the paper's hour": below("hig_updates", "osc_hig_hour_updates"),
+            "HIG still falling": below("hig", "hig_half"),
+        },
+    ),
+)
 def hig_best(datas):
     """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven
     and of re-tuned Adam (partly: one of the two)"""
@@ -263,7 +304,23 @@ def hig_best(datas):
     )
 
 
-@claim("osc-4", "fig2b", "~180 s")
+@claim(
+    "osc-4",
+    "fig2b",
+    "~180 s",
+    min_seconds=180,  # past the paper's ~3 minutes
+    min_seeds=3,
+    cause=Cause(
+        "hardware",
+        "HIG stays below Adam from t = {t_cross:.0f} s, before the paper's window: a crossing time is the implementation's "
+        "and the machine's; the paper's clock includes its set-up, and on this machine kind the authors' code spends its "
+        "first {ref_hig_trace_s:.0f} s tracing its graph, before its first HIG update (reference.py)",
+        {
+            "the crossing before the paper's window": lambda v: v["t_cross"] < 60,
+            "the crossing before the authors' code's first HIG update": below("t_cross", "ref_hig_trace_s"),
+        },
+    ),
+)
 def crossing(datas):
     """Oscillators: HIG passes Adam after about three minutes. Rule: HIG stays below Adam from a time in [60, 540] s on
     (partly: from any time on)"""
@@ -279,16 +336,25 @@ def crossing(datas):
     tuned_text = f"; against re-tuned Adam ({len(tuned)} settings): HIG " + ", ".join(parts) if tuned else ""
     if (t := crossing_time(hig[0], adam[0])) is None:
         return "HIG does not pass Adam within the budget" + tuned_text, False, False
-    h, a = hig[0], adam[0]
-    values = {
-        "t_cross": t,
-        "hig_updates_at_cross": int(np.interp(t, h.curves["wall_time"], h.curves["step"])),
-        "hig_adam_here": (end_time(h) / updates_of(h)) / (end_time(a) / updates_of(a)),
-    }
-    return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True, values
+    return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True, {"t_cross": t}
 
 
-@claim("osc-5", "fig2c", "Adam ~b-independent; HIG/GN better at larger b")
+@claim(
+    "osc-5",
+    "fig2c",
+    "Adam ~b-independent; HIG/GN better at larger b",
+    min_seconds=120,
+    cause=Cause(
+        "deviation",
+        "at equal time a smaller batch buys more updates on this CPU: HIG b={b_lo}->{b_hi} {hig_lo:e}->{hig_hi:e}, GN "
+        "{gn_lo:e}->{gn_hi:e}; at equal update counts ({n_eq} updates) HIG {hig_lo_eq:e}->{hig_hi_eq:e}, GN "
+        "{gn_lo_eq:e}->{gn_hi_eq:e}: the paper's trend holds per update",
+        {
+            "a smaller b lower at equal time": lambda v: v["hig_lo"] < v["hig_hi"] or v["gn_lo"] < v["gn_hi"],
+            "a larger b lower per update": lambda v: v["hig_hi_eq"] < v["hig_lo_eq"] and v["gn_hi_eq"] < v["gn_lo_eq"],
+        },
+    ),
+)
 def batch_sizes(datas):
     """Oscillators: Adam's runs converge alike for all b; HIG and GN improve with larger b. Rule: Adam's final losses
     within 3x over b, and HIG and GN lower at the largest b than at the smallest (partly: one of these)"""
@@ -319,7 +385,7 @@ def _per_update(d: FigureData, ends: dict, fin: dict) -> dict:
     return values | {"n_eq": n_eq}
 
 
-@claim("osc-6", "fig5 fig6", "GD family alike over b, unstable at large η")
+@claim("osc-6", "fig5 fig6", "GD family alike over b, unstable at large η", min_seconds=12)  # divergence shows early
 def gd_family(datas):
     """Oscillators (figs 5-6): the gradient-descent family behaves alike over batch sizes and becomes unstable at large
     η. Rule: for every optimizer its largest η ends worst (diverged or highest final loss) at every b, and at its best η

@@ -233,9 +233,9 @@ def draw_facets(d: FigureData, f: Facets) -> None:
             axes[r, c].axis("off")
     # One time axis for all panels: a panel whose runs all diverged at once would otherwise
     # zoom into its first milliseconds (overlapping tick labels).
-    right = max(ax.get_xlim()[1] for ax in axes.ravel() if ax.lines)
-    for ax in axes.ravel():
-        ax.set_xlim(0, right)
+    if ends := [ax.get_xlim()[1] for ax in axes.ravel() if ax.lines]:  # none: no run done yet ("no runs")
+        for ax in axes.ravel():
+            ax.set_xlim(0, max(ends))
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     d.save(fig)
 

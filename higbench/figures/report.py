@@ -1,9 +1,10 @@
-"""figures/REPORT.md: the paper's headline claims against the runs behind the figures.
+"""REPORT.md: the paper's headline claims against the runs behind the figures.
 
-Each claim is checked (``checks.Claim.check``) when its first figure is drawn and the
-result is stored in that figure's sidecar ``<id>.json``; this module collects the
-sidecars in the output directory into one table, in the registry's order, so a partial
-rebuild (``higbench-figures fig1``) keeps the other figures' rows.
+Each claim is checked when its first figure is drawn and its row (the measured values) is
+stored in that figure's data file ``<id>.json``. This module collects those rows from the
+output directory (so a partial rebuild, ``higbench-figures fig1``, keeps the other figures'
+rows) and judges each again by the current gates and causes (``claims.finish``): REPORT.md
+is always the rules of this revision on the measured values committed beside it.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections import Counter
 from pathlib import Path
 
 from higbench.figures import registry
+from higbench.figures.claims import finish, rule_why
 from higbench.figures.data import md_table
 
 HEADER = """# Reproduction report
@@ -30,7 +32,9 @@ seeds per setting than it needs (the median of 3) is at most `partly`. Every `no
 unspecified (a setting the paper does not give), disagreement (with the paper), hardware
 (the paper's GPU or implementation against ours), bug, or seeds. A cause's numbers are read
 from the claim's runs; a cause its runs contradict, or whose values they lack, reads `open`.
-Rules, gates and causes are listed under the table.
+Verdicts and causes are judged when this report is assembled, by the rules of the revision
+that assembles it, from the measured values stored beside it (`<id>.json`). Rules, gates and
+causes are listed under the table.
 """
 
 
@@ -38,7 +42,7 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def _json_sidecars(out_dir: Path) -> dict[str, dict]:
+def sidecars(out_dir: Path) -> dict[str, dict]:
     """Every figure sidecar (<id>.json with an "id") in out_dir, unreadable ones skipped."""
     figs = {}
     for path in sorted(Path(out_dir).glob("*.json")):
@@ -51,38 +55,26 @@ def _json_sidecars(out_dir: Path) -> dict[str, dict]:
     return figs
 
 
-def sidecars(out_dir: Path) -> dict[str, dict]:
-    """Sidecars of drawn figures (those that list their runs)."""
-    return {k: v for k, v in _json_sidecars(out_dir).items() if "runs" in v}
-
-
 def collect(out_dir: Path) -> list[dict]:
-    rows = {}
-    for info in _json_sidecars(out_dir).values():
-        for c in info.get("claims", []):
-            rows[c["id"]] = c
-    blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-"}
-    return [
-        rows.get(cid)
-        or {
-            "id": cid,
-            "figures": list(c.figures),
-            "statement": c.statement,
-            "paper": c.paper,
-            **blank,
-            "why": f"{c.figures[0]} not drawn yet",
-        }
-        for cid, c in registry.claims().items()
-    ]
+    """Every claim's row, in the registry's order, judged again from its stored values."""
+    rows = {c["id"]: c for info in sidecars(out_dir).values() for c in info.get("claims", [])}
+    out = []
+    for cid, c in registry.claims().items():
+        if cid in rows:
+            out.append(finish(c, {**rows[cid], "why": rule_why(rows[cid]["why"])}))
+        else:
+            blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-", "why": f"{c.figures[0]} not drawn yet"}
+            out.append({"id": cid, "figures": list(c.figures), "statement": c.statement, "paper": c.paper, **blank})
+    return out
 
 
 def _num(v) -> str:
     return "-" if v is None else f"{v:.2g}"
 
 
-def reference_section(out_dir: Path) -> list[str]:
+def reference_section(infos: dict[str, dict]) -> list[str]:
     """Beside the authors' TensorFlow code: their loss points and update times next to ours."""
-    info = _json_sidecars(out_dir).get("ref_oscillator", {}).get("reference")
+    info = infos.get("ref_oscillator", {}).get("reference")
     if not info:
         return []
     return [
@@ -157,9 +149,10 @@ def write_report(out_dir: Path) -> Path:
     lines.append(f"Generated {time.strftime('%Y-%m-%d %H:%M:%S')}.\n")
     header = ["claim", "figure", "paper", "measured here", "budget", "verdict", "root cause"]
     lines += md_table(header, map(_claim_row, rows))
-    lines += ["", "## Rules and causes", "", *map(_evidence, rows)] + reference_section(out_dir)
+    infos = sidecars(out_dir)
+    lines += ["", "## Rules and causes", "", *map(_evidence, rows)] + reference_section(infos)
     lines += ["", "## Figures and tables in this directory", ""]
-    drawn = sidecars(out_dir)
+    drawn = {k: v for k, v in infos.items() if "runs" in v}  # drawn figures list their runs
     header = ["id", "preset", "budget per run", "runs done / needed", "made (revision; date; machine; load)", "notes"]
     lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in registry.figures()])
     path = Path(out_dir) / "REPORT.md"

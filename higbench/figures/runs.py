@@ -1,41 +1,37 @@
 """Which runs a figure needs, which of them exist, and running the missing ones.
 
-Identity. A run is identified by its resolved config (what ``higbench`` composes with
-Hydra for the same overrides) minus the keys that do not change its result: the results
-index's ``config_id`` (``higbench.results.index``: ``COSMETIC_KEYS`` dropped, ``init_from``
-replaced by the identity of the run it points at).
+Identity. A run is identified by its resolved config (what ``higbench`` composes with Hydra
+for the same overrides) minus the keys that do not change its result: the results index's
+``config_id`` (``higbench.results.index``: ``COSMETIC_KEYS`` dropped, ``init_from`` replaced
+by the identity of the run it points at).
 
-Reuse. The results index of the runs root (``outputs/`` by default, including runs made by
-hand with ``higbench``, and the figures' own runs) decides which runs exist: one per
-config by its rule (``one_per_config``: the newest done run, else the newest of any
-status), done meaning ``DONE_STATUSES`` (completed or diverged: a diverged run is a
-result). Missing, failed, interrupted and still-running (or killed) runs are (re)run.
+Reuse. The results index of the runs root (``outputs/`` by default, runs made by hand with
+``higbench`` included) decides which runs exist: one per config by its rule
+(``one_per_config``), done meaning ``DONE_STATUSES`` (completed or diverged: a diverged run
+is a result). Missing, failed, interrupted and still-running (or killed) runs are (re)run.
 
-Running. All jobs that can run now (of every figure: a continued run waits for its
-parent's round) form one ``higbench -m`` multirun (``python -m higbench.cli -m``: the same
-Hydra machinery as the CLI) through the job-list sweeper (``hydra/sweeper=joblist``,
-``hydra_plugins/higbench_joblist_sweeper``), longest first, on a Hydra launcher: joblib
-with ``--jobs`` workers locally (the basic launcher for one run or a few seconds of
-training), or any other Hydra launcher (``--launcher slurm``, ``submitit_local``, ...) with
-extra ``hydra.*`` overrides. So no core idles while one figure's slowest run finishes.
+Running. The jobs that can run now (a continued run waits for its parent, a searched seed for
+its search) form one ``higbench -m`` multirun over their list (the job-list sweeper,
+``hydra/sweeper=joblist``), longest first, on a Hydra launcher: joblib with ``--jobs``
+workers locally, or any other (``--launcher slurm``, ...) with extra ``hydra.*`` overrides.
 Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
-
-Interface used by ``build.py``/``data.py``: ``Job``, ``expand``, ``Composer``,
-``RunIndex`` (``scan``/``add``/``find``), ``resolve``, ``launch``, ``job_seconds``.
 """
 
 from __future__ import annotations
 
-import hashlib
+import copy
+import itertools
 import json
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -47,23 +43,14 @@ from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
 
 __all__ = [
-    "COSMETIC_KEYS", "DONE_STATUSES", "Composer", "Job", "Launcher", "RunIndex", "expand", "fmt",
-    "identity_of", "job_seconds", "launch", "pick_seed", "resolve",
+    "COSMETIC_KEYS", "DONE_STATUSES", "Job", "Launcher", "RunIndex", "compose", "expand", "fmt", "identity_of",
+    "job_seconds", "launch", "pick_seed", "resolve",
 ]  # fmt: skip
 
-# Overrides of every figure run that do not change its result. Seam: once the schema marks
-# such keys (a field's metadata), derive this list from it instead of typing it here.
+# Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
 LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
-PARALLEL_SECONDS = 30  # a box with less training than this runs on Hydra's basic launcher (no worker start-up)
+PARALLEL_SECONDS = 30  # a round with less training than this runs on Hydra's basic launcher (no worker start-up)
 PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # the checkout (or site-packages) holding higbench
-
-try:
-    _Loader = yaml.CSafeLoader
-except AttributeError:  # pragma: no cover
-    _Loader = yaml.SafeLoader
-
-
-# -- overrides ------------------------------------------------------------------------------
 
 
 @dataclass
@@ -83,6 +70,7 @@ class Job:
     status: str = "missing"
 
     def override_list(self) -> list[str]:
+        """The job's overrides as ``key=value`` strings (``init_from``: its parent's run file)."""
         items = [f"{k}={fmt(v)}" for k, v in self.overrides.items()]
         if self.parent is not None:
             items.append(f"init_from={fmt(str(self.parent.path)) if self.parent.path else 'PENDING'}")
@@ -98,26 +86,33 @@ class Job:
 
 
 def expand(figure: Figure, preset: Preset) -> list[Job]:
-    """The jobs of a figure at a preset, parents (init_from) resolved within the figure."""
-    sweeps = figure.runs(preset)
+    """The jobs of a figure at a preset, in declaration order (a parent or seed search before its jobs)."""
     by_name: dict[str, list[Job]] = {}
     jobs: list[Job] = []
-    for sweep in sweeps:
+    for sweep in figure.runs(preset):
         mine = _sweep_jobs(figure.id, sweep, preset)
         if sweep.seed_search is not None:
             mine = _with_search(figure.id, sweep, mine, preset, jobs)
         if sweep.init_from is not None:
-            parents = by_name.get(sweep.init_from)
-            if not parents:
-                raise ValueError(
-                    f"{figure.id}: sweep {sweep.name!r} starts from {sweep.init_from!r}, which is not declared before it"
-                )
+            if not (parents := by_name.get(sweep.init_from)):
+                raise ValueError(f"{figure.id}: sweep {sweep.name!r} starts from {sweep.init_from!r}, not declared before it")
             for job in mine:
-                same_seed = [p for p in parents if p.seed == job.seed]
-                job.parent = same_seed[0] if same_seed else parents[0]
+                job.parent = next((p for p in parents if p.seed == job.seed), parents[0])
         by_name[sweep.name] = mine
         jobs.extend(mine)
     return jobs
+
+
+def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
+    """Fixed overrides x grid (cartesian) x seeds, then the budget and the preset's problem overrides."""
+    problem = sweep.fixed.get("problem")
+    extra = preset.problem_overrides(str(problem)) if problem is not None else {}
+    out = []
+    for combo in itertools.product(*sweep.grid.values()):
+        for seed in sweep.seeds:
+            ov = {**sweep.fixed, **dict(zip(sweep.grid, combo)), "seed": seed, **sweep.budget.overrides(preset)}
+            out.append(Job(figure_id, sweep.name, {**ov, **{k: v for k, v in extra.items() if k not in ov}}, seed))
+    return out
 
 
 def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, jobs: list[Job]) -> list[Job]:
@@ -134,10 +129,8 @@ def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, 
         base.update(search.overrides)
         skey = tuple((k, fmt(v)) for k, v in base.items() if k != "seed")
         if skey not in searches:
-            searches[skey] = []
-            for seed in search.seeds:
-                ov = {**base, "seed": seed, **search.budget.overrides(preset)}
-                searches[skey].append(Job(figure_id, f"{sweep.name}/search", ov, seed))
+            budget = search.budget.overrides(preset)
+            searches[skey] = [Job(figure_id, f"{sweep.name}/search", {**base, "seed": s, **budget}, s) for s in search.seeds]
             jobs.extend(searches[skey])
         job.search = searches[skey]
     return list(main.values())
@@ -148,10 +141,8 @@ def pick_seed(search: list[Job]) -> tuple[int, str]:
     its initial one; lowest final loss), else the first seed."""
     from higbench.runfile.reader import load_run
 
-    stable, diverged = {}, 0
+    stable, diverged = {}, sum(job.status == "diverged" for job in search)
     for job in search:
-        if job.status == "diverged":
-            diverged += 1
         if job.status != "completed" or job.path is None:
             continue
         try:
@@ -168,94 +159,59 @@ def pick_seed(search: list[Job]) -> tuple[int, str]:
     return seed, f"{tally}; best stable seed {seed}"
 
 
-def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
-    import itertools
+@contextmanager
+def hydra_conf():
+    """Hydra's compose API on the CLI's config dir, for a batch of compositions (Hydra keeps the
+    parsed YAML files as long); Hydra's global state is cleared before and after."""
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
 
-    problem = sweep.fixed.get("problem")
-    keys = list(sweep.grid)
-    out = []
-    for combo in itertools.product(*(sweep.grid[k] for k in keys)):
-        for seed in sweep.seeds:
-            ov: dict[str, Any] = {}
-            ov.update(sweep.fixed)
-            ov.update(dict(zip(keys, combo)))
-            ov["seed"] = seed
-            ov.update(sweep.budget.overrides(preset))
-            if problem is not None:
-                for k, v in preset.problem_overrides(str(problem)).items():
-                    ov.setdefault(k, v)
-            out.append(Job(figure_id, sweep.name, ov, seed))
-    return out
+    from higbench.config import config_dir
+
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3", job_name="higbench"):
+        yield
 
 
-# -- composing configs ----------------------------------------------------------------------
+def _is_group(key: str) -> bool:
+    from higbench.config import config_dir
+
+    return (Path(config_dir()) / key).is_dir()  # a config group (problem, optimizer), not a value
 
 
-def _conf_fingerprint(conf_dir: Path) -> str:
-    h = hashlib.sha1()
-    for p in sorted(conf_dir.rglob("*.yaml")):
-        h.update(str(p.relative_to(conf_dir)).encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()
+@cache
+def _compose_groups(groups: tuple[str, ...]):
+    """Hydra's composition for the config-group choices alone: the defaults list and its files."""
+    from hydra import compose as hydra_compose
+
+    return hydra_compose("config", overrides=list(groups))
 
 
-class Composer:
-    """Hydra's compose API on the CLI's config dir, with a cache keyed by conf/ contents."""
+@cache
+def compose(overrides: tuple[str, ...]) -> dict:
+    """The resolved config the CLI composes for these overrides (inside ``hydra_conf()``),
+    serialised as in the run file (OmegaConf -> YAML -> dict).
 
-    def __init__(self, cache_file: Path | None):
-        from higbench.config import config_dir
+    Jobs with the same group choices share that composition (most of Hydra's cost); their value
+    overrides are then applied as Hydra applies them after composing (its override grammar,
+    ``OmegaConf.update(..., merge=True)`` in struct mode). Overrides that add or delete keys are
+    composed whole. tests/figures check both routes give the same config for the figures' jobs.
+    """
+    from hydra import compose as hydra_compose
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
 
-        self.conf_dir = Path(config_dir())
-        self.fingerprint = _conf_fingerprint(self.conf_dir)
-        self.cache_file = cache_file
-        self.cache: dict[str, dict] = {}
-        self.dirty = False
-        if cache_file is not None and cache_file.is_file():
-            try:
-                stored = json.loads(cache_file.read_text())
-                if stored.get("fingerprint") == self.fingerprint:
-                    self.cache = stored.get("configs", {})
-            except ValueError:
-                pass
-        self._ctx = None
-
-    def compose(self, overrides: list[str]) -> dict:
-        key = json.dumps(overrides)
-        if key in self.cache:
-            return self.cache[key]
-        from hydra import compose, initialize_config_dir
-        from omegaconf import OmegaConf
-
-        if self._ctx is None:
-            from hydra.core.global_hydra import GlobalHydra
-
-            GlobalHydra.instance().clear()
-            self._ctx = initialize_config_dir(config_dir=str(self.conf_dir), version_base="1.3", job_name="higbench")
-            self._ctx.__enter__()
-        cfg = compose("config", overrides=overrides)
-        # The same serialisation as the run file's config attribute (OmegaConf -> YAML).
-        resolved = yaml.load(OmegaConf.to_yaml(cfg, resolve=True), Loader=_Loader)
-        self.cache[key] = resolved
-        self.dirty = True
-        return resolved
-
-    def close(self) -> None:
-        if self._ctx is not None:
-            self._ctx.__exit__(None, None, None)
-            self._ctx = None
-        if self.dirty and self.cache_file is not None:
-            self.cache_file.parent.mkdir(parents=True, exist_ok=True)
-            tmp = self.cache_file.with_suffix(f".tmp{os.getpid()}")
-            tmp.write_text(json.dumps({"fingerprint": self.fingerprint, "configs": self.cache}))
-            tmp.replace(self.cache_file)
-            self.dirty = False
+    parsed = OverridesParser.create().parse_overrides(list(overrides))
+    if any(o.is_add() or o.is_force_add() or o.is_delete() or o.package is not None for o in parsed):
+        cfg = hydra_compose("config", overrides=list(overrides))
+    else:
+        cfg = copy.deepcopy(_compose_groups(tuple(o.input_line for o in parsed if _is_group(o.key_or_group))))
+        for o in (o for o in parsed if not _is_group(o.key_or_group)):
+            OmegaConf.update(cfg, o.key_or_group, o.value(), merge=True)
+    return yaml.load(OmegaConf.to_yaml(cfg, resolve=True), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
-# -- the runs that exist: the results index -------------------------------------------------
-
-
-@dataclass(frozen=True)
-class IndexedRun:
+class IndexedRun(NamedTuple):
     path: Path
     status: str
 
@@ -280,11 +236,10 @@ class RunIndex:
 
     def _read(self) -> None:
         self._by_id = {}
-        if self.root is None or not self.root.is_dir():
-            return
-        runs = one_per_config(load_runs(self.root, figure_runs=True))
-        for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
-            self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
+        if self.root is not None and self.root.is_dir():
+            runs = one_per_config(load_runs(self.root, figure_runs=True))
+            for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
+                self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
 
     def add(self, path: Path) -> None:
         self._by_id = None  # read again when next asked
@@ -296,38 +251,22 @@ class RunIndex:
         return self._by_id.get(identity)
 
 
-def resolve(jobs: Iterable[Job], composer: Composer, index: RunIndex) -> None:
-    """Fill in each job's config and identity, and its run file if one is done."""
-    for job in jobs:  # parents and search runs come first (expand keeps declaration order)
-        if job.parent is not None and not job.parent.done:
-            job.identity, job.path, job.status = None, None, "waiting"
-            continue
-        if job.search:
-            if not all(s.done for s in job.search):
+def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dict] = compose) -> None:
+    """Fill in each job's config and identity, and its run file if one is done; a job whose
+    parent or seed search is not done yet is "waiting" (declaration order: those come first)."""
+    with hydra_conf():
+        for job in jobs:
+            if (job.parent is not None and not job.parent.done) or not all(s.done for s in job.search):
                 job.identity, job.path, job.status = None, None, "waiting"
                 continue
-            job.seed, job.search_note = pick_seed(job.search)
-            job.overrides["seed"] = job.seed
-        config = dict(composer.compose(job.override_list()))
-        job.config = config
-        job.identity = identity_of(config, job.parent.identity if job.parent else None)
-        run = index.find(job.identity)
-        if run is None:
-            job.path, job.status = None, "missing"
-        else:
-            job.path, job.status = run.path, run.status
-            if run.status not in DONE_STATUSES:
-                job.path = None
-
-
-# -- grouping missing jobs into Hydra multiruns ---------------------------------------------
-
-
-def _job_items(job: Job) -> dict[str, Any]:
-    items = dict(job.overrides)
-    if job.parent is not None:
-        items["init_from"] = str(job.parent.path)
-    return items
+            if job.search:
+                job.seed, job.search_note = pick_seed(job.search)
+                job.overrides["seed"] = job.seed
+            job.config = dict(compose(tuple(job.override_list())))
+            job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
+            run = index.find(job.identity)
+            job.status = run.status if run else "missing"
+            job.path = run.path if run and run.status in DONE_STATUSES else None
 
 
 @dataclass(frozen=True)
@@ -360,11 +299,6 @@ class Launcher:
         return [f"hydra/launcher={name}", *self.overrides]
 
 
-def job_overrides(job: Job) -> list[str]:
-    """The job's overrides as ``key=value`` strings (``init_from`` from its parent's run file)."""
-    return [f"{k}={fmt(v)}" for k, v in _job_items(job).items()]
-
-
 def multirun_command(jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[str]) -> list[str]:
     """``higbench -m`` over the jobs of ``jobs_file`` (job-list sweeper), into ``sweep_dir``."""
     args = [sys.executable, "-m", "higbench.cli", "-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={fmt(str(jobs_file))}"]
@@ -375,30 +309,19 @@ def multirun_command(jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[s
 def job_seconds(job: Job) -> float:
     """Rough training seconds of a job (its budget; updates count as one second each)."""
     s = job.overrides.get("budget.seconds")
-    if s is not None:
-        return float(s)
-    return float(job.overrides.get("budget.max_updates") or 1)
+    return float(s) if s is not None else float(job.overrides.get("budget.max_updates") or 1)
 
 
-def launch(
-    jobs: list[Job],
-    runs_root: Path,
-    *,
-    n_jobs: int,
-    launcher: str | Launcher = "joblib",
-    log=print,
-) -> list[Path]:
+def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print) -> list[Path]:
     """Run the jobs as one ``higbench -m`` multirun over their list, longest first, on the
     Hydra launcher (``Launcher``, or the name of one); returns the run files written. With
     joblib at most ``n_jobs`` training processes at once."""
-    if not isinstance(launcher, Launcher):
-        launcher = Launcher(launcher)
+    launcher = launcher if isinstance(launcher, Launcher) else Launcher(launcher)
     jobs = sorted(jobs, key=job_seconds, reverse=True)  # the longest start first: no idle core at the end
-    stamp = time.strftime("%Y-%m-%d_%H-%M-%S") + f"-{os.getpid()}"
-    sweep_dir = (runs_root / FIGURE_RUNS_DIR / stamp).resolve()
+    sweep_dir = (runs_root / FIGURE_RUNS_DIR / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}-{os.getpid()}").resolve()
     sweep_dir.mkdir(parents=True, exist_ok=False)
     jobs_file = sweep_dir / "jobs.json"
-    jobs_file.write_text(json.dumps([job_overrides(j) for j in jobs], indent=1) + "\n")
+    jobs_file.write_text(json.dumps([j.override_list() for j in jobs], indent=1) + "\n")
     secs = sum(map(job_seconds, jobs))
     extra = launcher.args(len(jobs), n_jobs, secs)
     how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")

@@ -371,3 +371,61 @@ def test_plot_layer_facets_and_lines_record_what_they_draw(tmp_path):
     assert legend == ["κ=1 (diverged at step 3)", "κ=-0.5"]  # largest first, the divergence named once
     assert [r["series"] for r in d.rows[::3]] == ["κ=1", "κ=-0.5"]
     assert d.diverged_marked and "X: last finite evaluation" in d.caption()
+
+
+def _compose_both_ways(override_lists):
+    """(the figures' compose, Hydra composing each list whole) for each override list."""
+    import yaml
+    from hydra import compose as hydra_compose
+    from omegaconf import OmegaConf
+
+    from higbench.figures.runs import compose, hydra_conf
+
+    with hydra_conf():
+        whole = [
+            yaml.safe_load(OmegaConf.to_yaml(hydra_compose("config", overrides=list(o)), resolve=True)) for o in override_lists
+        ]
+        return [compose(tuple(o)) for o in override_lists], whole
+
+
+def _override_lists(presets, one_per_figure):
+    lists = {}
+    for preset in presets:
+        for fig in registry.figures().values():
+            jobs = expand(fig, Preset(preset))
+            for j in jobs[:1] if one_per_figure else jobs:
+                lists.setdefault(tuple(j.override_list()), None)
+    return list(lists)
+
+
+def test_shared_group_composition_gives_hydras_config():
+    """The fast route (one Hydra composition per group choice, value overrides applied after it)
+    against Hydra composing each job whole: one job per figure, a continued run, quoted strings."""
+    lists = _override_lists(["quick"], one_per_figure=True)
+    lists += [("problem=poisson", "optimizer=hig", "optimizer.lr=0.02", "init_from='/a b/run.h5'", "budget.seconds=null")]
+    lists += [("problem=dipole", "optimizer=adam", "eval_unit=updates", "eval_every=10", "problem.test_size=16")]
+    fast, whole = _compose_both_ways(lists)
+    assert all(a == b for a, b in zip(fast, whole)), [o for o, a, b in zip(lists, fast, whole) if a != b][:3]
+    assert fast[-1]["eval_every"] == 10.0 and fast[-2]["init_from"] == "/a b/run.h5"
+
+
+@pytest.mark.slow
+def test_shared_group_composition_gives_hydras_config_for_every_job():
+    lists = _override_lists(list(PRESETS), one_per_figure=False)
+    fast, whole = _compose_both_ways(lists)
+    assert len(lists) > 300 and [o for o, a, b in zip(lists, fast, whole) if a != b] == []
+
+
+def test_a_grid_of_facets_without_a_finished_run_still_draws(tmp_path):
+    """fig5 before its runs exist (--no-run): every panel says "no runs" instead of the figure failing."""
+    from higbench.figures.plot import Facets, draw
+    from higbench.figures.spec import Figure
+
+    failed = [(o, 0, {"optimizer": o, "optimizer.lr": lr, "batch_size": 8}, "failed", [1.0, 0.5, 0.1])
+              for o in ("sgd", "adam") for lr in (0.1, 1.0)]  # fmt: skip
+    fig = Figure("figN", "t", [], panels=[Facets(["sgd", "adam"], "optimizer.lr", "batch_size", rows="sweep")])
+    d = _fake_figure_data(fig, failed, tmp_path)
+    for job in d.jobs:
+        job.path = None  # a failed run leaves nothing to draw
+    draw(d)
+    assert d.rows == [] and (tmp_path / "figN.png").stat().st_size > 0
