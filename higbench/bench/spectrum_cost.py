@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from higbench.bench.step import Config, Runner, compose
+from higbench.runfile.reader import RUN_FILE
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner.sinks import RunFileSink, spectrum_columns, spectrum_quantiles
 
@@ -67,7 +68,7 @@ def write_cost(rows: int, calls: int = 20) -> float:
     """Seconds to append ``rows`` rows of the three spectrum columns to a run file's /updates
     (what a flush writes for them; the flush itself happens at every evaluation anyway)."""
     with tempfile.TemporaryDirectory() as tmp:
-        writer = RunFileWriter(Path(tmp) / "run.h5", "{}", [], env={}, meta={})
+        writer = RunFileWriter(Path(tmp) / RUN_FILE, "{}", [], env={}, meta={})
         columns = {name: np.full(rows, 1.0) for name in ("sv_max", "sv_min_kept", "sv_dropped")}
         try:
             return best_time(lambda: writer.append_rows("updates", columns), calls)
