@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from higbench.errors import override_value
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ("phiflow_noise", "fourier")
 HIG_LRS, ADAM_LRS, PRE_LR = (0.01, 0.02), (1e-4, 3e-4), 1e-4
@@ -43,7 +45,7 @@ def job(data: str, optimizer: str, lr: float, seconds: float, init_from: Path | 
     out = ["problem=poisson", f"problem.data={data}", "problem.hidden=[64,128,64]", "batch_size=64"]
     out += [f"optimizer={optimizer}", f"optimizer.lr={lr:g}"]
     out += [f"budget.seconds={seconds:g}", *EVAL[optimizer]]
-    return out + ([f"init_from={init_from}"] if init_from else [])
+    return out + ([f"init_from={override_value(str(init_from))}"] if init_from else [])
 
 
 def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int) -> None:
@@ -71,7 +73,8 @@ def runs_under(root: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
 def train(root: Path, seconds: float, cont_seconds: float, n_jobs: int) -> None:
     scratch = [job(d, "hig", lr, seconds) for d in DATA for lr in HIG_LRS]
     scratch += [job(d, "adam", lr, seconds) for d in DATA for lr in ADAM_LRS]
-    launch(scratch, root / "scratch", n_jobs)
+    if not (root / "scratch").exists():  # a stage already made is kept and reused
+        launch(scratch, root / "scratch", n_jobs)
     runs, _ = runs_under(root / "scratch")
     pre = runs[(runs["optimizer.name"] == "adam") & np.isclose(runs["optimizer.lr"], PRE_LR)]
     cont = []
