@@ -10,8 +10,10 @@ import math
 import string
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from higbench.bench.paper import PAPER_COSTS
 from higbench.figures.reference import TRACE_SECONDS
@@ -49,12 +51,14 @@ class Cause:
     claim's own measurement returned, its budget and seeds, and the numbers in ``PAPER``); a
     test forbids digits outside the fields. ``facts`` are what the text asserts about those
     values (name -> predicate); a cause whose facts do not hold for the runs it sits beside,
-    or whose values they lack, is printed as "open" with the reason (``render``).
+    or whose values they lack, is printed as "open" with the reason (``render``). ``probe``:
+    more evidence from a committed probe (``probe_values``), its fields prefixed ``probe_``.
     """
 
     category: str
     text: str
     facts: dict[str, Callable[[dict], bool]] = field(default_factory=dict)
+    probe: Callable[[], dict] | None = None
 
     def contradicted(self, evidence: dict) -> list[str]:
         """Names of the facts the evidence contradicts (KeyError: a value is missing)."""
@@ -237,9 +241,26 @@ def judge(c: Claim, datas: dict, preset: str) -> dict:
     return finish(c, row)
 
 
-def evidence(row: dict) -> dict:
-    """What a cause may quote: the paper's numbers, the row's measured values, budget and seeds."""
-    return {**PAPER, **row.get("values", {}), "budget": row.get("seconds"), "seeds": row.get("seeds")}
+def evidence(row: dict, cause: Cause | None = None) -> dict:
+    """What a cause may quote: the paper's numbers, the row's measured values, budget and seeds,
+    and the values of the cause's probe."""
+    probe = cause.probe() if cause is not None and cause.probe is not None else {}
+    return {**PAPER, **row.get("values", {}), "budget": row.get("seconds"), "seeds": row.get("seeds"), **probe}
+
+
+# Probes: committed, re-runnable sweeps (scripts/probe_*.py) whose per-run tables live here.
+PROBES_DIR = Path(__file__).resolve().parents[2] / "docs" / "results" / "probes"
+
+
+def probe_values(file: str, read: Callable[[pd.DataFrame], dict]) -> Callable[[], dict]:
+    """A ``Cause.probe``: ``read`` applied to the probe's CSV, its keys prefixed ``probe_``;
+    nothing when the file is not there (an installed package), so the cause reads "open"."""
+
+    def values() -> dict:
+        path = PROBES_DIR / file
+        return {f"probe_{k}": v for k, v in read(pd.read_csv(path)).items()} if path.is_file() else {}
+
+    return values
 
 
 def finish(c: Claim, row: dict) -> dict:
@@ -263,7 +284,7 @@ def finish(c: Claim, row: dict) -> dict:
         why = f"smoke preset ({row['preset']}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
         verdict = NA
     if verdict in (NOT, PARTLY) and cause is None:
-        cause = c.cause.render(evidence(row)) if c.cause else ("open", "no cause stated for this verdict")
+        cause = c.cause.render(evidence(row, c.cause)) if c.cause else ("open", "no cause stated for this verdict")
     return {**row, "verdict": verdict, "why": why, "cause": list(cause) if cause and verdict not in (REPRODUCED, NA) else None}
 
 
@@ -280,7 +301,7 @@ def contradictions(c: Claim, row: dict) -> list[str]:
     if c.cause is None or row["verdict"] not in (NOT, PARTLY):
         return []
     try:
-        return c.cause.contradicted(evidence(row))
+        return c.cause.contradicted(evidence(row, c.cause))
     except KeyError:
         return []  # evidence missing: rendered as "open", not as a contradiction
 

@@ -81,7 +81,7 @@ SYNTHETIC = [
     ("osc-4", dict(t_cross=8.0), dict(t_cross=150.0)),  # "before the paper's window" for a crossing inside it
     ("osc-3", dict(hig=2.9e-6, hig_half=1e-5, hig_updates=11638), dict(hig_updates=54719)),  # more than the paper's hour
     ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9), dict(hig_b=64)),
-    ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=1.0)),
+    ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=0.5)),
     ("abl-1", dict(spread=36.7, spread_half=300.0), dict(spread_half=10.0)),
     ("toy-2", dict(adam_final=4.4e-3, adam_half=3.7e-3, gn_final=5.7e-2, gn_half=5.7e-2), dict(gn_final=0.25)),
     ("spd-2", dict(ratio=1.2, b_lo=32, b_hi=128), dict(ratio=15.6)),
@@ -226,3 +226,18 @@ def test_path_shares_of_y_space_trajectories():
     assert share == pytest.approx(0.5) and straightness == pytest.approx(1.0)
     along_y1 = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.1]])
     assert path_shares(along_y1)[0] < 0.1
+
+
+def test_a_cause_quotes_its_committed_probe_and_reads_open_without_it(monkeypatch, tmp_path):
+    """poi-2's cause quotes the Poisson data probe (docs/results/probes/poisson_data.csv)."""
+    from higbench.figures import claims
+
+    c = registry.claims()["poi-2"]
+    values = dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier")
+    probe = c.cause.probe()
+    assert {"probe_phiflow_hig", "probe_fourier_adam"} <= set(probe)
+    row = finish(c, _row("poi-2", "not", values))
+    assert row["cause"][0] == "disagreement" and f"{probe['probe_phiflow_hig']:.1e}".replace("e-0", "e-") in row["cause"][1]
+    monkeypatch.setattr(claims, "PROBES_DIR", tmp_path)  # an installed package: no docs/results
+    row = finish(c, _row("poi-2", "not", values))
+    assert row["cause"][0] == "open" and "probe_" in row["cause"][1]
