@@ -196,6 +196,8 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "profile")
     parser.add_argument("--report-only", action="store_true", help="read the runs under --root, train nothing")
     args = parser.parse_args(argv)
+    if args.report_only and not args.root.is_dir():
+        parser.error(f"--root {args.root}: no runs there to report on (train them first: python scripts/performance_profile.py)")
     problems, seeds = tuple(args.problems), tuple(args.seeds)
     if not args.report_only:
         launch(first_stage(problems, seeds), "fixed", args.jobs, args.root)

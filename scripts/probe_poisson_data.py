@@ -136,6 +136,8 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
     parser.add_argument("--report-only", action="store_true")
     args = parser.parse_args(argv)
+    if args.report_only and not args.root.is_dir():
+        parser.error(f"--root {args.root}: no runs there to report on (train them first: python scripts/probe_poisson_data.py)")
     if not args.report_only:
         train(args.root, args.seconds, args.cont_seconds, args.jobs)
     runs, curves = runs_under(args.root)
