@@ -1,4 +1,5 @@
-"""Small synthetic run files written with the real RunFileWriter (no training)."""
+"""Small synthetic run files written with the real RunFileWriter (no training), and
+``short_run``: a few real toy updates trained in this process."""
 
 from __future__ import annotations
 
@@ -68,3 +69,26 @@ def write_run(
     w.f.attrs["wall_time"] = 0.5 * (n - 1)
     w.close(status, "" if status == "completed" else "because", n_updates)
     return path
+
+
+def short_run(tmp_path: Path, optimizer: str, *overrides: str, updates: int = 9, eval_every: int = 3) -> Path:
+    """Train the toy problem for ``updates`` updates in this process (composed as the CLI does);
+    the run file's path. Restores torch's thread count."""
+    import torch
+    from hydra import compose, initialize_config_dir
+
+    from higbench.config import config_dir
+    from higbench.runner import train as train_mod
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        cfg = compose(
+            "config",
+            overrides=["problem=toy", f"optimizer={optimizer}", f"budget.max_updates={updates}", "eval_unit=updates",
+                       f"eval_every={eval_every}", "threads=1", "progress=false", "checkpoint_every=null", *overrides],
+        )  # fmt: skip
+    threads = torch.get_num_threads()
+    try:
+        train_mod.train(cfg, tmp_path / "run.h5")
+    finally:
+        torch.set_num_threads(threads)
+    return tmp_path / "run.h5"

@@ -7,11 +7,8 @@ import math
 
 import numpy as np
 import pytest
-import torch
-from hydra import compose, initialize_config_dir
-from synthetic import write_run
+from synthetic import short_run, write_run
 
-from higbench.config import config_dir
 from higbench.results import load_runs
 from higbench.results import plot as plot_mod
 from higbench.results.__main__ import main as results_main
@@ -109,20 +106,7 @@ def test_spectrum_without_any_spectrum_is_one_line_and_exit_2(mixed, tmp_path, c
 
 
 def _train(tmp_path, *overrides):
-    from higbench.runner import train as train_mod
-
-    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-        cfg = compose(
-            "config",
-            overrides=["problem=toy", "optimizer=hig", "optimizer.tau=0.05", "budget.max_updates=6", "eval_unit=updates",
-                       "eval_every=2", "threads=1", "progress=false", "checkpoint_every=null", *overrides],
-        )  # fmt: skip
-    threads = torch.get_num_threads()
-    try:
-        train_mod.train(cfg, tmp_path / "run.h5")
-    finally:
-        torch.set_num_threads(threads)
-    return tmp_path / "run.h5"
+    return short_run(tmp_path, "hig", "optimizer.tau=0.05", *overrides, updates=6, eval_every=2)
 
 
 def test_a_real_hig_run_has_its_conditioning_and_figure(tmp_path, capsys):

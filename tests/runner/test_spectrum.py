@@ -4,27 +4,13 @@ in /logs/sv_quantiles. First-order runs record none of it."""
 
 import numpy as np
 import pytest
-import torch
-from hydra import compose, initialize_config_dir
+from synthetic import short_run
 
-from higbench import cli
 from higbench.runfile.reader import load_logs, load_run, load_updates
-from higbench.runner import train as train_mod
 
 
 def run(tmp_path, optimizer, *overrides):
-    with initialize_config_dir(config_dir=cli.config_dir(), version_base="1.3"):
-        cfg = compose(
-            "config",
-            overrides=["problem=toy", f"optimizer={optimizer}", "budget.max_updates=9", "eval_unit=updates", "eval_every=3",
-                       "threads=1", "progress=false", "checkpoint_every=null", *overrides],
-        )  # fmt: skip
-    threads = torch.get_num_threads()
-    try:
-        train_mod.train(cfg, tmp_path / "run.h5")
-    finally:
-        torch.set_num_threads(threads)
-    return tmp_path / "run.h5"
+    return short_run(tmp_path, optimizer, *overrides)
 
 
 @pytest.mark.parametrize(
