@@ -9,7 +9,7 @@ IDS ?= all
 OUT ?= figures
 PYTEST_ARGS ?=
 
-.PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench bench-time-to-loss figures clean
+.PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench bench-time-to-loss figures authors-env probe-authors-oscillator clean
 
 # A virtual environment with torch pinned first (CPU build), then higbench (editable) with
 # only what `make run` needs. Re-runs when pyproject.toml changes.
@@ -77,5 +77,25 @@ bench-time-to-loss: install
 figures: install
 	$(BIN)/python -m higbench.figures $(IDS) --preset $(PRESET) --out $(OUT)
 
+# The authors' TensorFlow code (a checkout of tum-pbs/half-inverse-gradients at AUTHORS) beside
+# ours on the oscillator, from the same data and initial weights: their 32 epochs (~20 min on a
+# CPU) in their own environment, then our variants for the paper's hour of updates.
+AUTHORS ?=
+AUTHORS_VENV ?= .venv-authors
+AUTHORS_EXPORT ?= outputs/probes/oscillator_authors.npz
+# TensorFlow 2.15: the newest with Keras 2, whose API their code uses (they ran 2.5, which no
+# longer installs on Python 3.11); matplotlib: their modules import pyplot.
+$(AUTHORS_VENV)/.stamp:
+	$(PYTHON) -m venv $(AUTHORS_VENV)
+	$(AUTHORS_VENV)/bin/python -m pip install --quiet "tensorflow-cpu==2.15.1" matplotlib
+	touch $@
+
+authors-env: $(AUTHORS_VENV)/.stamp
+
+probe-authors-oscillator: install authors-env
+	@test -n "$(AUTHORS)" || { echo "AUTHORS=: give the path of a tum-pbs/half-inverse-gradients checkout"; exit 2; }
+	test -f $(AUTHORS_EXPORT) || $(AUTHORS_VENV)/bin/python scripts/export_authors_oscillator.py --authors $(AUTHORS) --out $(AUTHORS_EXPORT)
+	$(BIN)/python scripts/probe_oscillator_authors.py $(AUTHORS_EXPORT)
+
 clean:
-	rm -rf $(VENV) build dist *.egg-info
+	rm -rf $(VENV) $(AUTHORS_VENV) build dist *.egg-info

@@ -182,6 +182,13 @@ def half_way(runs: list) -> float:
     return median(loss_at(r, 0.5 * end_time(r)) for r in runs)
 
 
+def oscillation(run) -> float:
+    """Median |change of log10 loss| between consecutive evaluations over the run's last half."""
+    y = np.log10(_loss(run))
+    y = y[len(y) // 2 :]
+    return float(np.median(np.abs(np.diff(y)))) if len(y) > 2 else float("nan")
+
+
 def updates_of(r) -> int:
     """Updates the run made (its last evaluation's step)."""
     return int(r.curves["step"].iloc[-1]) if len(r.curves) else 0
@@ -211,6 +218,25 @@ def budget_of(run) -> str:
 
 def stable(r) -> bool:
     return r.status == "completed" and r.final_loss < r.initial_loss
+
+
+def precision_probe(problem: str) -> Callable[[pd.DataFrame], dict]:
+    """The precision probe's runs of ``problem`` (scripts/probe_precision.py): the end loss and
+    status at the smaller and larger τ with the inversion in float32 (as the authors' code) and
+    float64 (ours)."""
+
+    def read(table: pd.DataFrame) -> dict:
+        rows = table[table["problem"] == problem]
+        small, large = rows["tau"].min(), rows["tau"].max()
+        out = {"tau_small": small, "tau_large": large, "updates": int(rows["updates"].max())}
+        for name, tau in (("small", small), ("large", large)):
+            for p in ("float32", "float64"):
+                row = rows[(rows["tau"] == tau) & (rows["precision"] == p)].iloc[0]
+                out[f"{name}_{p}"], out[f"{name}_{p}_status"] = float(row["test_end"]), row["status"]
+            out[f"{name}_single_over_double"] = out[f"{name}_float32"] / out[f"{name}_float64"]
+        return out
+
+    return read
 
 
 # -- a claim's row of the report -------------------------------------------------------------

@@ -19,6 +19,7 @@ import numpy as np
 from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData, kv
 
 TIME = "training time [s] (training clock, evaluations excluded)"
+FACET_TIME = "training time [s]"  # under each column of a grid: the long label overlaps its neighbours
 PALETTE = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple")
 
 
@@ -228,7 +229,8 @@ def draw_facets(d: FigureData, f: Facets) -> None:
                 if runs:
                     curve(d, ax, runs, kv(f.lines, lv), panel=panel, color=PALETTE[i % len(PALETTE)])
             title = f"{f.prefix} {OPTIMIZER_NAMES.get(sweep, sweep) if f.rows == 'sweep' else head} {kv(f.cols, cv)}"
-            style(ax, " ".join(title.split()), TIME if r == len(rows) - 1 else "", "test loss" if c == 0 else "", fontsize=8)
+            xlabel, ylabel = FACET_TIME if r == len(rows) - 1 else "", "test loss" if c == 0 else ""
+            style(ax, " ".join(title.split()), xlabel, ylabel, fontsize=8)
         for c in range(len(cols), ncols):
             axes[r, c].axis("off")
     # One time axis for all panels: a panel whose runs all diverged at once would otherwise

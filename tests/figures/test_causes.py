@@ -54,29 +54,38 @@ def test_committed_report_is_assembled_from_the_committed_rows(tmp_path):
 
 
 def _row(cid, verdict, values, seconds=1e9, seeds=3):
+    """A committed row; a "seeds" entry among ``values`` sets the row's seeds per setting."""
+    values = dict(values)
+    seeds = values.pop("seeds", seeds)
     return {"id": cid, "rule_verdict": verdict, "why": "rule", "values": values, "seconds": seconds, "seeds": seeds}
 
 
 # (claim, values the cause's facts hold for, the same with one value flipped)
 SYNTHETIC = [
-    # osc-5: equal time favours the small b, equal updates the large one
+    # osc-5: equal time favours the small b (more updates); per update HIG prefers the large b, GN does not
     (
         "osc-5",
         dict(
             b_lo=32,
             b_hi=128,
-            hig_lo=2e-6,
-            hig_hi=3e-6,
-            gn_lo=8e-7,
+            hig_lo=6.4e-7,
+            hig_hi=2.2e-6,
+            gn_lo=7.9e-7,
             gn_hi=2.6e-6,
-            n_eq=2000,
-            hig_lo_eq=1.2e-4,
-            hig_hi_eq=3.2e-5,
-            gn_lo_eq=8.5e-5,
-            gn_hi_eq=1.5e-5,
+            n_eq=10654,
+            hig_lo_updates=64530,
+            hig_hi_updates=12122,
+            hig_lo_eq=5.4e-6,
+            hig_hi_eq=2.3e-6,
+            gn_lo_eq=1.3e-6,
+            gn_hi_eq=2.6e-6,
         ),  # fmt: skip
-        dict(gn_hi_eq=9e-5),  # GN b=128 no longer lower per update
+        dict(hig_hi_eq=9e-6),  # HIG b=128 no longer lower per update
     ),
+    ("osc-6", dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, calm_falling=3), dict(calm_falling=2)),
+    ("dip-1", dict(adam_b=16, adam_plateau_s=8.0, adam_plateau_updates=2437, hig_plateau_updates=10, adam_final=2.6e-7,
+                   adam_update_ms=3.3), dict(adam_plateau_updates=15)),  # fmt: skip
+    ("dip-7", dict(n_b=2, slow_b=2, shaky_b=1, seeds=1), dict(slow_b=1)),
     ("dip-4", dict(low=2.3e-8), dict(low=3e-6)),  # "below the float32 floor" with a run at 3e-6
     ("osc-4", dict(t_cross=8.0), dict(t_cross=150.0)),  # "before the paper's window" for a crossing inside it
     ("osc-3", dict(hig=2.9e-6, hig_half=1e-5, hig_updates=11638), dict(hig_updates=54719)),  # more than the paper's hour
