@@ -238,6 +238,9 @@ def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbenc
     pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
     import json
 
+    from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
+
+    register()  # where Hydra's plugin scan does not see the repository's hydra_plugins (an editable install)
     jobs = tmp_path / "jobs.json"
     jobs.write_text(json.dumps([["optimizer=adam"], ["optimizer=sgd"]]))
     args = ["hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
