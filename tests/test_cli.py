@@ -220,8 +220,19 @@ def test_an_unknown_flag_is_one_line_not_argparse_usage(higbench, tmp_path):
     assert list(tmp_path.rglob("*")) == []
 
 
-def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path):
+@pytest.fixture
+def fresh_joblib_workers():
+    """joblib keeps its loky workers for the next sweep of this process, with the working
+    directory and environment they started with: each in-process joblib test gets its own."""
     pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    from joblib.externals.loky import get_reusable_executor
+
+    get_reusable_executor().shutdown(wait=True)
+    yield
+    get_reusable_executor().shutdown(wait=True)
+
+
+def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     from higbench.results import load_runs
 
     code, _, err = higbench("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "seed=1,2,3")
@@ -232,10 +243,9 @@ def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_pat
     assert code == 0 and list(load_runs(tmp_path / "outputs")["parallel_jobs"]).count(1.0) == 1, err
 
 
-def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbench, tmp_path):
+def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     """The figures' launch: the joblist sweeper on joblib. Its jobs come from a file, not the
     command line: two of them on two workers ran together, and both run files say so."""
-    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
     import json
 
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
