@@ -178,10 +178,11 @@ def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: D
 
 
 def parallel_jobs(hydra_cfg: DictConfig) -> int:
-    """How many jobs of this sweep share the machine: a joblib launcher's workers, else one."""
+    """How many jobs of this sweep share the machine: a joblib launcher's workers, capped at
+    the jobs its sweeper launches together (``preflight.launched_together``), else one."""
     launcher = OmegaConf.select(hydra_cfg, "launcher", default=None)
-    if launcher is None or "Joblib" not in str(launcher.get("_target_", "")):
-        return 1
+    if hydra_cfg.mode != RunMode.MULTIRUN or launcher is None or "Joblib" not in str(launcher.get("_target_", "")):
+        return 1  # a single run is alone even with hydra/launcher=joblib given
     n_jobs = int(launcher.get("n_jobs", -1) or -1)
     cores = os.cpu_count() or 1
     workers = max(1, cores + 1 + n_jobs if n_jobs < 0 else n_jobs)  # joblib: -1 is every core

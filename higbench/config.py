@@ -86,6 +86,21 @@ def optimizer_kwargs(opt_cfg: Any) -> dict:
 ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
 
 
+def flat_dirname(name: str) -> str:
+    """A sweep job's directory name from Hydra's ``override_dirname``, one level deep.
+
+    A ``/`` in a value (an ``init_from`` path) would nest directories: it becomes ``%2F``, and
+    ``%`` becomes ``%25``, so two different values never share a name (a sweep run again
+    finds each job's directory by its name). conf/config.yaml's ``hydra.sweep.subdir`` uses it.
+    """
+    return str(name).replace("%", "%25").replace("/", "%2F")
+
+
+# Registered on import, as the schema: the CLI imports this module before Hydra composes, and
+# Hydra hands its resolvers to the launchers' workers with its other global state.
+OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
+
+
 def config_dir() -> str:
     """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
     checkout = Path(__file__).resolve().parent.parent / "conf"

@@ -407,7 +407,11 @@ def check_sweep(config: DictConfig) -> None:
             raise composition_error(exc, job) from None
         tasks.append(_checked_task(job_config))
         _VALIDATED.add(frozenset(job_config.hydra.overrides.task))
-    os.environ["HIGBENCH_SWEEP_JOBS"] = str(len(tasks))  # the jobs (and joblib's workers) read it
+    together = launched_together(config, len(tasks))
+    if together is None:  # not known here: the launcher's workers are the bound (``cli.parallel_jobs``)
+        os.environ.pop("HIGBENCH_SWEEP_JOBS", None)
+    else:
+        os.environ["HIGBENCH_SWEEP_JOBS"] = str(together)  # the jobs (and joblib's workers, spawned after) read it
     sweep_dir = Path(str(config.hydra.sweep.dir))
     check_output_dir(sweep_dir, "hydra.sweep.dir")
     if (sweep_dir / "multirun.yaml").is_symlink():
@@ -425,6 +429,23 @@ def check_sweep(config: DictConfig) -> None:
         if key not in seen:
             seen.add(key)
             preflight(OmegaConf.create(task))
+
+
+def launched_together(config: DictConfig, listed: int) -> int | None:
+    """How many jobs the sweeper hands its launcher at once, so at most this many share the
+    machine: Hydra's basic sweeper all it lists (``listed``; in batches of ``max_batch_size``),
+    the joblist sweeper its whole file (``sweep_jobs`` lists only the command line's job for
+    it); None where unknown before the sweep (Optuna asks for its trials as it goes)."""
+    target = str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
+    if "BasicSweeper" in target:
+        batch = OmegaConf.select(config, "hydra.sweeper.max_batch_size", default=None)
+        return min(listed, int(batch)) if batch else listed
+    if "JobListSweeper" in target:
+        from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import read_jobs
+
+        with contextlib.suppress(OSError, ValueError, TypeError, OmegaConfBaseException):  # the sweeper says why
+            return len(read_jobs(str(OmegaConf.select(config, "hydra.sweeper.jobs_file"))))
+    return None
 
 
 def refuse(exc: BaseException | str, code: int = 2) -> None:

@@ -43,6 +43,26 @@ def test_multirun_writes_one_file_per_job(cli, tmp_path):
     assert sorted(load_run(f)[0]["optimizer"] for f in files) == ["adam", "hig"]
 
 
+def test_an_init_from_path_names_a_flat_sweep_job_directory(higbench, tmp_path):
+    """A path in a value (init_from) must not nest the job's directory; distinct paths stay distinct."""
+    code, _, err = higbench("problem=toy", "optimizer=adam", f"hydra.run.dir={tmp_path / 'first' / 'run'}")
+    assert code == 0, err
+    start = tmp_path / "first" / "run" / "run.h5"
+    code, _, err = higbench("-m", "problem=toy", "optimizer=adam,sgd", f"init_from={start}", f"hydra.sweep.dir={tmp_path / 'sw'}")
+    assert code == 0, err
+    jobs = sorted(p.parent for p in (tmp_path / "sw").rglob("run.h5"))
+    assert [p.parent for p in jobs] == [tmp_path / "sw"] * 2, jobs  # one level below the sweep
+    assert all(f"init_from={str(start).replace('/', '%2F')}," in p.name for p in jobs), jobs
+    assert [load_run(p / "run.h5")[0]["config"]["init_from"] for p in jobs] == [str(start)] * 2
+
+
+def test_flat_dirname_keeps_distinct_values_distinct():
+    from higbench.config import flat_dirname
+
+    assert flat_dirname("init_from=a/b.h5,seed=1") == "init_from=a%2Fb.h5,seed=1"
+    assert flat_dirname("x=a%2Fb") != flat_dirname("x=a/b")
+
+
 @pytest.mark.parametrize(
     "override,key",
     [
@@ -200,8 +220,19 @@ def test_an_unknown_flag_is_one_line_not_argparse_usage(higbench, tmp_path):
     assert list(tmp_path.rglob("*")) == []
 
 
-def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path):
+@pytest.fixture
+def fresh_joblib_workers():
+    """joblib keeps its loky workers for the next sweep of this process, with the working
+    directory and environment they started with: each in-process joblib test gets its own."""
     pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    from joblib.externals.loky import get_reusable_executor
+
+    get_reusable_executor().shutdown(wait=True)
+    yield
+    get_reusable_executor().shutdown(wait=True)
+
+
+def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     from higbench.results import load_runs
 
     code, _, err = higbench("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "seed=1,2,3")
@@ -210,6 +241,25 @@ def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_pat
     assert len(runs) == 3 and list(runs["parallel_jobs"]) == [2.0, 2.0, 2.0]
     code, _, err = higbench("-m", "seed=4")  # the basic launcher: one job at a time
     assert code == 0 and list(load_runs(tmp_path / "outputs")["parallel_jobs"]).count(1.0) == 1, err
+
+
+def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
+    """The figures' launch: the joblist sweeper on joblib. Its jobs come from a file, not the
+    command line: two of them on two workers ran together, and both run files say so."""
+    import json
+
+    from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
+
+    register()  # where Hydra's plugin scan does not see the repository's hydra_plugins (an editable install)
+    jobs = tmp_path / "jobs.json"
+    jobs.write_text(json.dumps([["optimizer=adam"], ["optimizer=sgd"]]))
+    args = ["hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]
+    code, _, err = higbench("-m", "problem=toy", *args)
+    assert code == 0, err
+    envs = [load_run(path)[0]["env"] for path in run_files(tmp_path / "outputs")]
+    assert [env["parallel_jobs"] for env in envs] == [2, 2], envs
+    code, _, err = higbench("problem=toy", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")  # a single run is alone
+    assert code == 0 and sorted(load_run(p)[0]["env"]["parallel_jobs"] for p in run_files(tmp_path / "outputs")) == [1, 2, 2]
 
 
 def test_a_missing_launcher_names_the_extra_that_has_it(monkeypatch):

@@ -149,7 +149,10 @@ class JacobianPower(torch.optim.Optimizer):
         g = grad_y.reshape(-1)
         if route == "gram":
             try:
-                c = gram_coefficients(K, g.to(K.dtype), **self._opts(), overwrite=True, on_spectrum=self._record_spectrum)
+                n_params = J.n_params if isinstance(J, StructuredJacobian) else J.shape[1]
+                c = gram_coefficients(
+                    K, g.to(K.dtype), **self._opts(), overwrite=True, on_spectrum=self._record_spectrum, n_params=n_params
+                )
                 return J.transpose_apply(c) if isinstance(J, StructuredJacobian) else J.T @ c
             except torch.linalg.LinAlgError as exc:
                 # K may be destroyed (overwrite=True); J is intact: retry on the SVD route.
@@ -179,9 +182,12 @@ class JacobianPower(torch.optim.Optimizer):
         if device.type == "cuda":
             torch.cuda.synchronize(device)
 
-    def _refuse(self, reason: str) -> None:
+    def _refuse(self, reason: str, inverted: bool = False) -> None:
+        """Leave the parameters as they are; say why. ``inverted``: the inversion ran, so
+        ``last_spectrum`` is this update's own (kept: it may say why the direction blew up)."""
         self.last_timings, self.last_finite, self.last_reason = {}, False, reason
-        self.last_spectrum = {}
+        if not inverted:
+            self.last_spectrum = {}
 
     def _record_spectrum(self, s: torch.Tensor, keep: torch.Tensor) -> None:
         """What the last inversion saw: largest and smallest kept singular value, how many tau dropped.
@@ -216,7 +222,7 @@ class JacobianPower(torch.optim.Optimizer):
         self._sync()
         t2 = time.perf_counter()
         if not torch.isfinite(d).all():
-            return self._refuse("non-finite update direction")
+            return self._refuse("non-finite update direction", inverted=True)
         self.apply(d)
         self._sync()
         self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}

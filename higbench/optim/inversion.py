@@ -139,6 +139,7 @@ def gram_coefficients(
     method: str = "auto",
     overwrite: bool = False,
     on_spectrum: Callable[[torch.Tensor, torch.Tensor], None] | None = None,
+    n_params: int | None = None,
 ) -> torch.Tensor:
     """Output-space coefficients c with ``J^T c = jacobian_power(J, g, ...)``.
 
@@ -150,6 +151,10 @@ def gram_coefficients(
     SciPy) or ``auto`` (tridiagonal for float64 CPU matrices of 256 rows and more).
     overwrite: K may be destroyed (tridiagonal route; saves a copy of K).
     on_spectrum: called with the singular values s = sqrt(eigenvalues) and the mask of those kept.
+    n_params: the columns of J, where known. A tall J (rows > n_params) has only n_params
+        singular values: the other rows - n_params eigenvalues of K are zeros by structure
+        (round-off in practice), never kept and not passed to ``on_spectrum`` (they are no
+        singular values of J the truncation dropped).
     """
     if K.ndim != 2 or K.shape[0] != K.shape[1] or g.shape != (K.shape[0],):
         raise ValueError(f"expected K (rows, rows) and g (rows,), got {tuple(K.shape)} and {tuple(g.shape)}")
@@ -160,8 +165,11 @@ def gram_coefficients(
         # Eigenvalues below n*eps*max are round-off, whatever tau says.
         floor = K.shape[0] * torch.finfo(K.dtype).eps * lam.abs().max()
         s = torch.where(lam > floor, s, torch.zeros_like(s))
+    structural = max(0, s.numel() - n_params) if n_params is not None else 0
+    if structural:  # the smallest eigenvalues (ascending): rank K <= n_params
+        s = torch.cat([torch.zeros_like(s[:structural]), s[structural:]])
     keep = _keep_mask(s, tau, truncation)
     if on_spectrum is not None:
-        on_spectrum(s, keep)
+        on_spectrum(s[structural:], keep[structural:])
     coeff = _powered(s, keep, kappa - 1.0) * project(g)
     return _prefactor(s, beta) * expand(coeff)

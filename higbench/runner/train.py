@@ -398,15 +398,18 @@ class TrainingRun:
             result = self.update(self.next_batch())
         except torch.linalg.LinAlgError as exc:  # a solver or inversion that failed outright
             self.step += 1
+            self.spectrum = {}  # this step's evaluation row has no spectrum, not the previous step's
             return f"linear algebra failed: {exc}"
         self.step += 1
+        # The spectrum of *this* update, also of one that diverged: the evaluation at its step
+        # logs it (empty: NaN quantiles where it stopped before an inversion).
+        self.spectrum = result.spectrum
         if not result.finite or not math.isfinite(result.loss):
             return result.reason or "non-finite loss"
         self.batch_losses.append(result.loss)
         t = result.timings
         row = {"step": self.step, "wall_time": self.clock(), "loss": result.loss, "update_s": sum(t.values()), **t}
         if self.records_spectrum:
-            self.spectrum = result.spectrum
             row.update(spectrum_columns(result.spectrum))
         self.sinks.on_update(row)
         self.memory.sample()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from higbench.optim import gram_coefficients, jacobian_power
+from higbench.optim import HIG, gram_coefficients, jacobian_power
 from higbench.optim import tridiagonal as tri
 from higbench.optim.inversion import TRIDIAGONAL_MIN_ROWS, resolved_eigen_method
 
@@ -89,3 +89,25 @@ def test_overwrite_gives_the_same_coefficients():
     torch.testing.assert_close(
         gram_coefficients(scratch, g, -0.5, tau=1e-5, method="tridiagonal", overwrite=True), kept, rtol=0, atol=0
     )
+
+
+@pytest.mark.parametrize("rows", [40, 300])  # eigh, and the tridiagonal route (>= TRIDIAGONAL_MIN_ROWS)
+@pytest.mark.parametrize("truncation,tau", [("relative", 1e-6), ("absolute", 1e-10)])
+def test_gram_forced_on_a_tall_jacobian_has_only_its_singular_values(rows, truncation, tau):
+    """``solver=gram`` on a tall J (rows > params): K = J J^T has rows - params zero
+    eigenvalues by structure. J has only min(rows, params) singular values: those are
+    recorded (none of the structural zeros counted as dropped by tau) and inverted, as on
+    the SVD route; round-off in the structural zeros never enters the direction."""
+    gen = torch.Generator().manual_seed(rows)
+    J = 1e3 * torch.randn(rows, 7, dtype=torch.float64, generator=gen)
+    g = torch.randn(rows, dtype=torch.float64, generator=gen)
+    spectra, directions = {}, {}
+    for solver in ("gram", "svd"):
+        opt = HIG([torch.nn.Parameter(torch.zeros(7, dtype=torch.float64))], tau=tau, truncation=truncation, solver=solver)
+        directions[solver], spectra[solver] = opt.direction(J, g), opt.last_spectrum
+    gram, svd = spectra["gram"], spectra["svd"]
+    assert gram["sv_dropped"] == svd["sv_dropped"] == 0, gram["sv_dropped"]
+    np.testing.assert_allclose(np.sort(gram["singular_values"])[::-1], torch.linalg.svdvals(J).numpy(), rtol=1e-9)
+    assert gram["sv_min_kept"] == pytest.approx(svd["sv_min_kept"], rel=1e-9)
+    gap = torch.linalg.norm(directions["gram"] - directions["svd"])
+    assert gap <= 1e-8 * torch.linalg.norm(directions["svd"]), gap

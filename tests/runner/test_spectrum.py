@@ -35,3 +35,49 @@ def test_updates_hold_the_spectrum_of_every_step(optimizer, overrides, tmp_path)
 def test_first_order_runs_record_no_spectrum(tmp_path):
     path = run(tmp_path, "adam")
     assert "sv_max" not in load_updates(path) and "sv_quantiles" not in load_logs(path)
+
+
+def _diverge_at(monkeypatch, step: int, how: str) -> list[np.ndarray]:
+    """HIG's inversion, real, with update ``step`` diverging: ``direction`` (its inversion ran,
+    the direction is NaN) or ``jacobian`` (refused before any inversion). Returns the singular
+    values each inversion saw."""
+    from higbench.optim.hig import JacobianPower
+
+    seen, calls = [], {"n": 0}
+    real_inversion, real_tail = JacobianPower._inversion, JacobianPower._derivative_tail
+
+    def inversion(self, *args):
+        d = real_inversion(self, *args)
+        seen.append(self.last_spectrum["singular_values"].copy())
+        return d * float("nan") if how == "direction" and calls["n"] == step else d
+
+    def tail(self, J):
+        calls["n"] += 1
+        route, J, K = real_tail(self, J)
+        if how == "jacobian" and calls["n"] == step:
+            K = K * float("nan") if K is not None else J * float("nan")
+        return route, J, K
+
+    monkeypatch.setattr(JacobianPower, "_inversion", inversion)
+    monkeypatch.setattr(JacobianPower, "_derivative_tail", tail)
+    return seen
+
+
+@pytest.mark.parametrize("how", ["direction", "jacobian"])
+def test_a_diverged_update_logs_its_own_spectrum_or_none(how, tmp_path, monkeypatch):
+    """The evaluation at the step that diverged (5: evaluations at 0, 3, then 5) logs that
+    update's quantiles where its inversion ran, NaN where it did not: never update 4's."""
+    seen = _diverge_at(monkeypatch, 5, how)
+    path = run(tmp_path, "hig", "optimizer.tau=0.05")
+    meta, curves = load_run(path)
+    assert meta["status"] == "diverged" and list(curves["step"]) == [0, 3, 5], (meta["status_reason"], curves)
+    q = load_logs(path)["sv_quantiles"]
+    assert q.shape == (3, 11)
+    np.testing.assert_allclose(q[1], np.quantile(seen[2], np.linspace(0, 1, 11)))  # update 3's at step 3
+    if how == "direction":
+        assert len(seen) == 5 and "non-finite update direction" in meta["status_reason"]
+        np.testing.assert_allclose(q[-1], np.quantile(seen[4], np.linspace(0, 1, 11)))
+        assert not np.allclose(q[-1], np.quantile(seen[3], np.linspace(0, 1, 11)))
+    else:
+        assert len(seen) == 4 and "non-finite Jacobian" in meta["status_reason"]
+        assert np.isnan(q[-1]).all(), q[-1]
