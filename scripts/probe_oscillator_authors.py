@@ -22,8 +22,8 @@ probe-authors-oscillator`` runs both)::
     python scripts/probe_oscillator_authors.py EXPORT.npz --epochs 772   # the paper's hour of updates
     python scripts/probe_oscillator_authors.py EXPORT.npz --report-only  # redraw from the CSV
 
-Writes ``oscillator_authors.csv`` (variant x epoch), ``oscillator_authors_summary.csv`` and
-``oscillator_authors.png`` to ``--out`` (default docs/results/probes).
+Writes ``NAME.csv`` (variant x epoch), ``NAME_summary.csv`` and ``NAME.png`` to ``--out``
+(default docs/results/probes; ``--name``, default oscillator_authors).
 """
 
 from __future__ import annotations
@@ -205,20 +205,23 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--epochs", type=int, default=772, help="our epochs of 32 updates (default 772: the paper's hour)")
     p.add_argument("--jobs", type=int, default=2, help="variants trained at the same time (one thread each)")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
+    p.add_argument("--variants", nargs="+", choices=[v.name for v in VARIANTS], default=[v.name for v in VARIANTS],
+                   help="which of ours to train (default: all)")  # fmt: skip
+    p.add_argument("--name", default="oscillator_authors", help="stem of the files written to --out")
     p.add_argument("--report-only", action="store_true", help="redraw from --out's CSV, the authors' curve from EXPORT")
     args = p.parse_args(argv)
     if not args.export.is_file():
         p.error(f"export={args.export}: no such file (make it with scripts/export_authors_oscillator.py)")
     if args.epochs < 1 or args.jobs < 1:
         p.error(f"--epochs={args.epochs} --jobs={args.jobs}: both must be at least 1")
-    if args.report_only and not (args.out / "oscillator_authors.csv").is_file():
-        p.error(f"--report-only: no oscillator_authors.csv in {args.out}; run the probe first")
+    if args.report_only and not (args.out / f"{args.name}.csv").is_file():
+        p.error(f"--report-only: no {args.name}.csv in {args.out}; run the probe first")
     return args
 
 
 def main(argv: list[str] | None = None) -> None:
     args = parse(argv)
-    table = args.out / "oscillator_authors.csv"
+    table = args.out / f"{args.name}.csv"
     if args.report_only:  # the authors' rows are taken anew from the export (a longer run of theirs)
         curves = pd.read_csv(table)
         ours = curves[curves["variant"] != AUTHORS]
@@ -226,13 +229,14 @@ def main(argv: list[str] | None = None) -> None:
         curves.to_csv(table, index=False, float_format="%.6g")
     else:
         spawn = multiprocessing.get_context("spawn")  # torch in forked workers is not safe
+        chosen = [v for v in VARIANTS if v.name in args.variants]
         with ProcessPoolExecutor(args.jobs, mp_context=spawn) as pool:
-            ours = list(pool.map(train, VARIANTS, [args.export] * len(VARIANTS), [args.epochs] * len(VARIANTS)))
+            ours = list(pool.map(train, chosen, [args.export] * len(chosen), [args.epochs] * len(chosen)))
         curves = pd.concat([authors_curve(args.export), *ours], ignore_index=True)
         args.out.mkdir(parents=True, exist_ok=True)
         curves.to_csv(table, index=False, float_format="%.6g")
-    summary(curves).to_csv(args.out / "oscillator_authors_summary.csv", index=False, float_format="%.4g")
-    plot(curves, args.out / "oscillator_authors.png")
+    summary(curves).to_csv(args.out / f"{args.name}_summary.csv", index=False, float_format="%.4g")
+    plot(curves, args.out / f"{args.name}.png")
     print(summary(curves).to_string(index=False))
 
 

@@ -43,11 +43,13 @@ def jobs() -> list[list[str]]:
     return out
 
 
-def summarise(runs: pd.DataFrame) -> pd.DataFrame:
+def summarise(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
     cols = {"problem.name": "problem", "optimizer.name": "optimizer", "optimizer.tau": "tau",
             "optimizer.precision": "precision", "seed": "seed", "status": "status", "steps": "updates",
-            "initial_test_loss": "test_start", "final_test_loss": "test_end"}  # fmt: skip
-    table = runs[list(cols)].rename(columns=cols).sort_values(["problem", "tau", "precision"], ascending=[True, False, True])
+            "final_test_loss": "test_end"}  # fmt: skip
+    start = curves.sort_values("step").groupby("path")["test_loss"].first()  # before the first update
+    table = runs[[*cols, "path"]].rename(columns=cols).assign(test_start=lambda t: t["path"].map(start))
+    table = table.drop(columns="path").sort_values(["problem", "tau", "precision"], ascending=[True, False, True])
     return table.assign(end_over_start=table["test_end"] / table["test_start"])
 
 
@@ -62,8 +64,8 @@ def main(argv=None) -> None:
         parser.error(f"--root {args.root}: no runs there to report on (train them first: python scripts/probe_precision.py)")
     if not args.report_only:
         launch(jobs(), args.root, args.jobs)
-    runs, _ = runs_under(args.root)
-    table = summarise(runs)
+    runs, curves = runs_under(args.root)
+    table = summarise(runs, curves)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "precision.csv", index=False, float_format="%.4g")
     print(table.to_string(index=False))

@@ -123,9 +123,9 @@ def kappa(datas):
     min_seconds=120,
     cause=Cause(
         "disagreement",
-        "GN's best stable seed ({gn_seed}) does not diverge at small τ here: at τ={tau_small:g} it is {gn_small_status} "
+        "GN's best stable seed ({gn_seed}) does not diverge at small τ here: at τ={tau_small:e} it is {gn_small_status} "
         "at {gn_small:e} after {n} updates; nor with the inversion in the authors' single precision (precision probe, "
-        "{probe_updates} updates: τ={probe_tau_small:g} {probe_small_float32_status} at {probe_small_float32:e} against "
+        "{probe_updates} updates: τ={probe_tau_small:e} {probe_small_float32_status} at {probe_small_float32:e} against "
         "{probe_small_float64:e} in double): {search_diverged} of {search_seeds} seeds already diverge at the paper's τ "
         "(the seed search), "
         "so GN's instability here is its start, not τ; HIG ends lower ({hig_best:e} against GN's {gn_best:e})",

@@ -233,7 +233,10 @@ def precision_probe(problem: str) -> Callable[[pd.DataFrame], dict]:
             for p in ("float32", "float64"):
                 row = rows[(rows["tau"] == tau) & (rows["precision"] == p)].iloc[0]
                 out[f"{name}_{p}"], out[f"{name}_{p}_status"] = float(row["test_end"]), row["status"]
+                out[f"{name}_{p}_over_start"] = float(row["test_end"] / row["test_start"])
             out[f"{name}_single_over_double"] = out[f"{name}_float32"] / out[f"{name}_float64"]
+        for p in ("float32", "float64"):
+            out[f"{p}_small_over_large"] = out[f"small_{p}"] / out[f"large_{p}"]
         return out
 
     return read

@@ -83,9 +83,36 @@ SYNTHETIC = [
         dict(hig_hi_eq=9e-6),  # HIG b=128 no longer lower per update
     ),
     ("osc-6", dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, calm_falling=3), dict(calm_falling=2)),
-    ("dip-1", dict(adam_b=16, adam_plateau_s=8.0, adam_plateau_updates=2437, hig_plateau_updates=10, adam_final=2.6e-7,
-                   adam_update_ms=3.3), dict(adam_plateau_updates=15)),  # fmt: skip
+    (
+        "dip-1",
+        dict(
+            adam_b=16,
+            adam_plateau_s=8.0,
+            adam_plateau_updates=2437,
+            hig_plateau_updates=10,
+            adam_final=2.6e-7,
+            adam_update_ms=3.3,
+        ),
+        dict(adam_plateau_updates=15),
+    ),  # fmt: skip
     ("dip-7", dict(n_b=2, slow_b=2, shaky_b=1, seeds=1), dict(slow_b=1)),
+    # dip-8 and abl-3 also read the committed precision probe; the flips are of the claims' own runs
+    ("dip-8", dict(tau6=1.4e-7, best_mid=2.4e-7), dict(tau6=1e-5)),
+    (
+        "abl-3",
+        dict(
+            n=485,
+            gn_seed=7,
+            tau_small=1e-10,
+            gn_small=2.5e-4,
+            gn_small_status="completed",
+            gn_best=2.5e-4,
+            hig_best=9e-5,
+            search_seeds=8,
+            search_diverged=7,
+        ),
+        dict(gn_small_status="diverged"),
+    ),  # fmt: skip
     ("dip-4", dict(low=2.3e-8), dict(low=3e-6)),  # "below the float32 floor" with a run at 3e-6
     ("osc-4", dict(t_cross=8.0), dict(t_cross=150.0)),  # "before the paper's window" for a crossing inside it
     ("osc-3", dict(hig=2.9e-6, hig_half=1e-5, hig_updates=11638), dict(hig_updates=54719)),  # more than the paper's hour
