@@ -185,10 +185,11 @@ def plot(curves: pd.DataFrame, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    for i, (name, curve) in enumerate(curves.groupby("variant", sort=False)):
-        color = "k" if name.startswith("authors") else f"C{i}"
-        ax.plot(curve["updates"], curve["test_loss"], color=color, lw=1.6, label=f"{name} (test)")
-        ax.plot(curve["updates"], curve["train_loss"], color=color, lw=0.8, ls="--", alpha=0.7)
+    for i, (name, curve) in enumerate(curves[curves["updates"] > 0].groupby("variant", sort=False)):
+        theirs = name == AUTHORS  # drawn on top, with markers: ours from their weights lies on it
+        style = {"color": "k", "marker": "o", "ms": 3, "zorder": 3} if theirs else {"color": f"C{i}"}
+        ax.plot(curve["updates"], curve["test_loss"], lw=1.6, label=f"{name} (test)", **style)
+        ax.plot(curve["updates"], curve["train_loss"], color=style["color"], lw=0.8, ls="--", alpha=0.7)
     ax.plot([], [], color="grey", ls="--", lw=0.8, label="training loss (dashed)")
     ax.set(xscale="log", yscale="log", xlabel="HIG updates (b = 128)", ylabel="loss (mean over samples)")
     ax.set_title("Oscillator HIG per update: the authors' code and ours from the same data and weights", fontsize=9)

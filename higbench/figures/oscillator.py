@@ -26,6 +26,7 @@ from higbench.figures.claims import (
     loss_at,
     median,
     oscillation,
+    probe_values,
     require,
     sci,
     updates_of,
@@ -265,6 +266,21 @@ def gn_level(datas):
     return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"], values
 
 
+def authors_probe(table) -> dict:
+    """The authors' oscillator probe (scripts/probe_oscillator_authors.py): their code's and ours' test loss after
+    their run's updates, and ours after the paper's hour of updates, per variant."""
+    rows = table.set_index("variant")
+    first, hour = 1024, 24_576
+    out = {"first_updates": first, "hour_updates": hour, "authors_first": rows.loc["authors' TF code", f"test_at_{first}"]}
+    for name, variant in (("same", "float64 inversion"), ("reshuffled", "reshuffled"), ("ours", "ours")):
+        out[f"{name}_first"] = rows.loc[variant, f"test_at_{first}"]
+        out[f"{name}_hour"], out[f"{name}_hour_train"] = (
+            rows.loc[variant, f"test_at_{hour}"],
+            rows.loc[variant, f"train_at_{hour}"],
+        )
+    return {k: float(v) if not isinstance(v, int) else v for k, v in out.items()}
+
+
 @claim(
     "osc-3",
     "fig2b",
@@ -272,14 +288,21 @@ def gn_level(datas):
     min_seconds=OSC_HIG_HOUR,
     min_seeds=3,
     cause=Cause(
-        "budget",
-        "HIG {hig:e} after {hig_updates} updates, fewer than the paper's hour ({osc_hig_hour_updates}), and still falling "
-        "({hig_half:e} half-way)",
+        "unspecified",
+        "the data draw, which the paper does not give: per update our HIG follows the authors' code from their data and "
+        "initial weights (after {probe_first_updates} updates {probe_same_first:e} against their {probe_authors_first:e}) "
+        "and reaches {probe_same_hour:e} after the paper's hour of updates ({probe_hour_updates}), reshuffled "
+        "{probe_reshuffled_hour:e}; from our data draw and initialisation {probe_ours_hour:e}, at a training loss alike "
+        "({probe_ours_hour_train:e} against {probe_same_hour_train:e}): our test set is fitted worse (authors' probe); "
+        "here HIG {hig:e} after {hig_updates} updates",
         {
-            "HIG above the paper's level": lambda v: v["hig"] > 1e-6,
-            "fewer updates than the paper's hour": below("hig_updates", "osc_hig_hour_updates"),
-            "HIG still falling": below("hig", "hig_half"),
+            "ours follows the authors' code per update": lambda v: 0.5 < v["probe_same_first"] / v["probe_authors_first"] < 2,
+            "the authors' draw near the paper's level": lambda v: v["probe_same_hour"] < 3e-7,
+            "our draw far above it": lambda v: v["probe_ours_hour"] >= 3 * v["probe_same_hour"],
+            "training losses alike": lambda v: v["probe_ours_hour_train"] < 2 * v["probe_same_hour_train"],
+            "HIG here above the authors' draw's level": lambda v: v["hig"] > v["probe_same_hour"],
         },
+        probe=probe_values("oscillator_authors_summary.csv", lambda t: authors_probe(t)),
     ),
 )
 def hig_best(datas):
