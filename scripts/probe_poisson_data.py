@@ -22,19 +22,14 @@ and ``poisson_data.png`` to ``--out`` (default docs/results/probes).
 
 from __future__ import annotations
 
-import argparse
-import json
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import probe_runs
 
 from higbench.errors import override_value
 
-ROOT = Path(__file__).resolve().parents[1]
 DATA = ("phiflow_noise", "fourier")
 HIG_LRS, ADAM_LRS, PRE_LR = (0.01, 0.02), (1e-4, 3e-4), 1e-4
 EVAL = {"hig": ["eval_unit=updates", "eval_every=1"], "adam": ["eval_unit=updates", "eval_every=10"]}
@@ -48,24 +43,8 @@ def job(data: str, optimizer: str, lr: float, seconds: float, init_from: Path | 
     return out + ([f"init_from={override_value(str(init_from))}"] if init_from else [])
 
 
-def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int) -> None:
-    """One multirun of ``jobs`` through the job-list sweeper (never into an existing folder)."""
-    if sweep_dir.exists():
-        raise SystemExit(f"{sweep_dir} exists: its runs are kept; use --report-only or another --root")
-    sweep_dir.parent.mkdir(parents=True, exist_ok=True)
-    jobs_file = sweep_dir.with_suffix(".jobs.json")
-    jobs_file.write_text(json.dumps(jobs, indent=1))
-    from higbench.figures.runs import multirun_command  # the figures' job-list multirun, one thread per run
-
-    cmd = multirun_command(jobs_file, sweep_dir, ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"])
-    print(f"{time.strftime('%H:%M:%S')} {len(jobs)} runs -> {sweep_dir}", file=sys.stderr, flush=True)
-    subprocess.run(cmd, cwd=ROOT, check=True)
-
-
 def runs_under(root: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    from higbench.results.index import load_runs
-
-    runs, curves = load_runs(root, curves=True)
+    runs, curves = probe_runs.runs_under(root)
     runs["from"] = np.where(runs["init_from"].notna(), "Adam-pretrained", "scratch")
     return runs, curves
 
@@ -74,14 +53,14 @@ def train(root: Path, seconds: float, cont_seconds: float, n_jobs: int) -> None:
     scratch = [job(d, "hig", lr, seconds) for d in DATA for lr in HIG_LRS]
     scratch += [job(d, "adam", lr, seconds) for d in DATA for lr in ADAM_LRS]
     if not (root / "scratch").exists():  # a stage already made is kept and reused
-        launch(scratch, root / "scratch", n_jobs)
+        probe_runs.launch(scratch, root / "scratch", n_jobs)
     runs, _ = runs_under(root / "scratch")
     pre = runs[(runs["optimizer.name"] == "adam") & np.isclose(runs["optimizer.lr"], PRE_LR)]
     cont = []
     for _, parent in pre.iterrows():
         cont += [job(parent["problem.data"], "hig", lr, cont_seconds, parent["path"]) for lr in HIG_LRS]
         cont.append(job(parent["problem.data"], "adam", PRE_LR, cont_seconds, parent["path"]))
-    launch(cont, root / "continued", n_jobs)
+    probe_runs.launch(cont, root / "continued", n_jobs)
 
 
 def summarise(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
@@ -128,16 +107,10 @@ def plot(runs: pd.DataFrame, curves: pd.DataFrame, path: Path) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description="Poisson data probe (see docstring).")
+    parser = probe_runs.parser("Poisson data probe (see docstring).", "poisson_data")
     parser.add_argument("--seconds", type=float, default=300.0, help="training clock of the from-scratch runs")
     parser.add_argument("--cont-seconds", type=float, default=240.0, help="training clock of the continued runs")
-    parser.add_argument("--jobs", type=int, default=2, help="runs at once, one thread each")
-    parser.add_argument("--root", type=Path, default=ROOT / "outputs" / "probes" / "poisson_data")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
-    parser.add_argument("--report-only", action="store_true")
-    args = parser.parse_args(argv)
-    if args.report_only and not args.root.is_dir():
-        parser.error(f"--root {args.root}: no runs there to report on (train them first: python scripts/probe_poisson_data.py)")
+    args = probe_runs.parse(parser, "probe_poisson_data.py", argv)
     if not args.report_only:
         train(args.root, args.seconds, args.cont_seconds, args.jobs)
     runs, curves = runs_under(args.root)

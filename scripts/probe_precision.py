@@ -18,13 +18,9 @@ Writes ``precision.csv`` (one row per run) to ``--out`` (default docs/results/pr
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
-
 import pandas as pd
-from probe_poisson_data import launch, runs_under
+import probe_runs
 
-ROOT = Path(__file__).resolve().parents[1]
 PRECISIONS = ("float32", "float64")
 SETTINGS = {  # problem, optimizer, fixed overrides, the taus compared, updates
     "oscillator": ("gn", ["seed=7"], (1e-6, 1e-10), 500),
@@ -54,17 +50,12 @@ def summarise(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description="tau and the inversion's precision (see docstring).")
-    parser.add_argument("--jobs", type=int, default=2, help="runs at once, one thread each")
-    parser.add_argument("--root", type=Path, default=ROOT / "outputs" / "probes" / "precision")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
-    parser.add_argument("--report-only", action="store_true")
-    args = parser.parse_args(argv)
-    if args.report_only and not args.root.is_dir():
-        parser.error(f"--root {args.root}: no runs there to report on (train them first: python scripts/probe_precision.py)")
+    args = probe_runs.parse(
+        probe_runs.parser("tau and the inversion's precision (see docstring).", "precision"), "probe_precision.py", argv
+    )
     if not args.report_only:
-        launch(jobs(), args.root, args.jobs)
-    runs, curves = runs_under(args.root)
+        probe_runs.launch(jobs(), args.root, args.jobs)
+    runs, curves = probe_runs.runs_under(args.root)
     table = summarise(runs, curves)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "precision.csv", index=False, float_format="%.4g")
