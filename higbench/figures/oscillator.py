@@ -302,7 +302,7 @@ def authors_probe(table) -> dict:
             "training losses alike": lambda v: v["probe_ours_hour_train"] < 2 * v["probe_same_hour_train"],
             "HIG here above the authors' draw's level": lambda v: v["hig"] > v["probe_same_hour"],
         },
-        probe=probe_values("oscillator_authors_summary.csv", lambda t: authors_probe(t)),
+        probe=probe_values("oscillator_authors_summary.csv", authors_probe),
     ),
 )
 def hig_best(datas):

@@ -80,7 +80,10 @@ class LevenbergMarquardt(JacobianPower):
         except torch.linalg.LinAlgError as exc:
             return self._refuse(f"inversion failed: {exc}")
         floor = ev.numel() * torch.finfo(ev.dtype).eps * ev.max()
-        self._record_spectrum(ev.sqrt(), ev > floor)
+        # J has min(rows, params) singular values: a tall J's K has rows - params more
+        # eigenvalues, zeros by structure, which no truncation dropped (as gram_coefficients).
+        top = torch.topk(ev, min(ev.numel(), sum(q.numel() for q in self.params))).values
+        self._record_spectrum(top.sqrt(), top > floor)
         self._sync()
         t2 = time.perf_counter()
         accepted = self._trials(ev, p, direction, lambda: scale * evaluate())

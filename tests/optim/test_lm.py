@@ -47,6 +47,21 @@ def test_direction_is_the_dense_damped_gauss_newton_step(route, tridiagonal, mon
         torch.testing.assert_close(d, dense, rtol=1e-8, atol=1e-10)
 
 
+@pytest.mark.parametrize("route", ["gram", "svd"])
+def test_a_tall_jacobian_records_only_its_singular_values(route):
+    """b * |y| = 160 rows, 16 parameters: K = J J^T has 144 structural zeros, which are no
+    singular values of J and none that the damping or a truncation dropped."""
+    model, z, target = linear_problem(b=40, n_in=3, n_out=4)
+    opt = LevenbergMarquardt(model.parameters(), solver=route)
+    J = network_jacobian(model, opt.params, z, solver_jacobian(lambda u: u, None, model(z))[1]).matrix()
+    opt.step_structured(model, z, lambda u: u, lambda y: half_squares(y, target), reduction="sum")
+    spectrum = opt.last_spectrum
+    assert spectrum["sv_dropped"] == 0
+    torch.testing.assert_close(
+        torch.as_tensor(sorted(spectrum["singular_values"], reverse=True)), torch.linalg.svdvals(J), rtol=1e-8, atol=1e-10
+    )
+
+
 def test_converges_on_linear_least_squares_in_a_few_steps():
     model, z, target = linear_problem()
     X = torch.cat([z, torch.ones(len(z), 1, dtype=z.dtype)], 1)
