@@ -1,5 +1,6 @@
-"""The one registry of the paper's figures, tables and headline claims: each family module
-(toy, oscillator, poisson, dipole, ablation, tables) declares ``FIGURES`` and its claims (``claims.claim``)."""
+"""The one registry of the paper's figures and tables: each family module (toy, oscillator,
+poisson, dipole, ablation, tables) declares ``FIGURES``. The claims the report judges on them
+are ``higbench.claims.paper``'s (``claims()`` here lists them)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ import importlib
 import re
 from functools import cache
 
-from higbench.figures.claims import CAUSES, CLAIMS, Claim  # noqa: F401 - the registry's vocabulary
+from higbench.claims.paper import claims  # noqa: F401 - the claims on these figures
+from higbench.claims.rules import CAUSES  # noqa: F401 - the registry's vocabulary
 from higbench.figures.spec import Figure
 
 FAMILIES = ("toy", "oscillator", "poisson", "dipole", "ablation", "tables")
@@ -36,13 +38,6 @@ def figures() -> dict[str, Figure]:
     """Every figure and table, in the paper's order."""
     known = _unique([f for m in _families() for f in m.FIGURES], "figure")
     return {k: known[k] for k in sorted(known, key=_order)}
-
-
-def claims() -> dict[str, Claim]:
-    """Every claim, by family in FAMILIES' order (declaration order within a family)."""
-    _families()
-    order = {f"higbench.figures.{name}": i for i, name in enumerate(FAMILIES)}
-    return _unique(sorted(CLAIMS, key=lambda c: order[c.measure.__module__]), "claim")
 
 
 def select(ids: list[str]) -> list[Figure]:
