@@ -31,6 +31,7 @@ from higbench.claims.rules import (
     below,
     best,
     budget_of,
+    by_id,
     claim,
     crossing_time,
     end_time,
@@ -1171,9 +1172,4 @@ def cost_scaling(datas):
 
 def claims() -> dict[str, Claim]:
     """Every claim, in the report's order (declaration order above)."""
-    out = {}
-    for c in CLAIMS:
-        if c.id in out:
-            raise ValueError(f"claim {c.id} registered twice")
-        out[c.id] = c
-    return out
+    return by_id(CLAIMS, "claim")

@@ -15,7 +15,8 @@ from collections import Counter
 from pathlib import Path
 
 from higbench.claims.paper import claims
-from higbench.claims.rules import finish, md_table, rule_why
+from higbench.claims.reference import OSCILLATOR_CURVES, SOURCE, UPDATE_SECONDS
+from higbench.claims.rules import end_time, finish, loss_at, md_table, median, rule_why
 
 HEADER = """# Reproduction report
 
@@ -69,6 +70,27 @@ def collect(out_dir: Path) -> list[dict]:
 
 def _num(v) -> str:
     return "-" if v is None else f"{v:.2g}"
+
+
+def reference_entry(runs_of) -> dict:
+    """A sidecar's ``reference`` entry (figure ref_oscillator): the authors' loss points and
+    update times beside higbench's (``runs_of(optimizer)``: the figure's runs of it) at the
+    same training times (``None``: past a run's budget), as ``reference_section`` shows them."""
+    points = []
+    for opt, ref in OSCILLATOR_CURVES.items():
+        runs = runs_of(opt)
+        for t, loss in ref["points"]:
+            ours = median(loss_at(r, t) for r in runs) if runs and all(t <= end_time(r) for r in runs) else None
+            points.append({"optimizer": opt, "t": t, "reference": loss, "higbench": ours})
+    ours = {
+        o: median(float(r.updates["update_s"].iloc[1:].median()) for r in rs)
+        for o in ("adam", "hig", "gn")
+        if (rs := runs_of(o)) and "update_s" in rs[0].updates
+    }
+    rows = [
+        {**r, "higbench_update_s": ours.get(r["optimizer"]) if r["problem"] == "oscillator" else None} for r in UPDATE_SECONDS
+    ]
+    return {"source": SOURCE, "loss_points": points, "update_seconds": rows}
 
 
 def reference_section(infos: dict[str, dict]) -> list[str]:

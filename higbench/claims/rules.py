@@ -138,6 +138,16 @@ def claim(cid: str, figures: str, paper: str, *, min_seconds: float | None = Non
     return declare
 
 
+def by_id(items: Iterable, what: str) -> dict:
+    """Items (claims, figures) by their ``id``, in order; an id registered twice is an error."""
+    out = {}
+    for item in items:
+        if item.id in out:
+            raise ValueError(f"{what} {item.id} registered twice")
+        out[item.id] = item
+    return out
+
+
 def below(a: str, b: str) -> Callable[[dict], bool]:
     """A cause's fact: value ``a`` below value ``b``."""
     return lambda v: v[a] < v[b]

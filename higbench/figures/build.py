@@ -74,7 +74,7 @@ class Builder:
             result.launched += len(todo)
             result.run_files.extend(written)
             tried.update(todo)
-            self.index.add(self.runs_root)
+            self.index = RunIndex.scan(self.runs_root)
 
     def plan(self, figures: list[Figure]) -> list[tuple[str, int, int, float]]:
         """(figure, runs needed, runs missing, training seconds missing; shared runs counted once)."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import FIG2B_OPTIMIZERS, FIG2C_BATCHES, GD_GRIDS
-from higbench.claims.rules import OPTIMIZER_NAMES, end_time, loss_at, median, sci
+from higbench.claims.rules import OPTIMIZER_NAMES, sci
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid
@@ -88,26 +88,14 @@ def fig2a(d: FigureData, ax) -> None:
 
 def reference(d: FigureData, ax) -> None:
     """The authors' points on the axes; their loss points and update times beside ours in the sidecar."""
-    from higbench.claims.reference import OSCILLATOR_CURVES, SOURCE, UPDATE_SECONDS
+    from higbench.claims.reference import OSCILLATOR_CURVES
+    from higbench.claims.report import reference_entry
 
-    points = []
     for opt, ref in OSCILLATOR_CURVES.items():
         t, y = zip(*ref["points"])
         ax.plot(t, y, "o--", color=COLORS[opt], mfc="none", label=f"authors' TF code {OPTIMIZER_NAMES[opt]} ({ref['note']})")
         d.record("loss", f"reference {opt}", None, "wall_time", t, "test_loss", y)
-        runs = d.runs(opt)
-        for t, loss in ref["points"]:
-            ours = median(loss_at(r, t) for r in runs) if runs and all(t <= end_time(r) for r in runs) else None
-            points.append({"optimizer": opt, "t": t, "reference": loss, "higbench": ours})
-    ours = {
-        o: median(float(r.updates["update_s"].iloc[1:].median()) for r in rs)
-        for o in ("adam", "hig", "gn")
-        if (rs := d.runs(o)) and "update_s" in rs[0].updates
-    }
-    rows = [
-        {**r, "higbench_update_s": ours.get(r["optimizer"]) if r["problem"] == "oscillator" else None} for r in UPDATE_SECONDS
-    ]
-    d.sidecar["reference"] = {"source": SOURCE, "loss_points": points, "update_seconds": rows}
+    d.sidecar["reference"] = reference_entry(d.runs)
 
 
 def _ref_panel() -> Curves:

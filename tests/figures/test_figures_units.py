@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from higbench.figures import registry
-from higbench.figures.runs import COSMETIC_KEYS, Job, Launcher, expand, fmt, identity_of, multirun_command
+from higbench.figures.runs import Job, Launcher, expand, fmt, identity_of, multirun_command
 from higbench.figures.spec import PRESETS, Preset
+from higbench.results.index import COSMETIC_KEYS
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
 EXPERIMENTS_IDS = [
