@@ -672,7 +672,6 @@ def adam_lr_and_slope(datas):
 # -- dipole (figures 4b, 4c, 8-11) ----------------------------------------------------------
 # Paper 3.3, appendix B.4. fig4b, fig4c: sweeps "adam" and "hig"; figs 8-11: the appendix's grids.
 
-
 PLATEAU = (0.4, 0.6)  # "Adam stagnates at a loss value of 0.5"
 LE, HE = "test_low_energy_loss", "test_high_energy_loss"  # figure 4c's curves (figures/dipole.py)
 
