@@ -71,8 +71,9 @@ def _memory_mb(run) -> float:
 
 
 def timing_frame(d) -> pd.DataFrame:
-    """One row per (optimizer, batch size) of table ``d.figure.id``: measured and paper values.
-    ``d``: the table's figure data (its preset and its timing runs, ``d.runs(optimizer, batch_size=b)``)."""
+    """One row per (optimizer, batch size) of table ``d.figure.id``: measured and paper values;
+    ``attrs``: its ``source`` and what its numbers are (``meaning``). ``d``: the table's figure
+    data (its preset and its timing runs, ``d.runs(optimizer, batch_size=b)``)."""
     tid = d.figure.id
     if (bench := bench_file(d.preset.runs_root)).is_file():
         return bench_frame(pd.read_csv(bench), tid, str(bench))
@@ -91,6 +92,10 @@ def timing_frame(d) -> pd.DataFrame:
         rows.append(row | dict(zip(("paper: memory (MB)", "paper: update (s)", "paper: Jacobian (s)"), paper)))
     df = pd.DataFrame(rows).drop_duplicates(subset=["Optimizer", "Batch size"])
     df.attrs["source"] = "timing runs of this tool (run files)"
+    df.attrs["meaning"] = (
+        "memory: growth of the process's resident set during the run (CPU), not GPU memory; durations: median "
+        "over the timed updates, first (warm-up) update left out"
+    )
     return df
 
 
@@ -116,6 +121,10 @@ def bench_frame(raw: pd.DataFrame, tid: str, source: str) -> pd.DataFrame:
     out = pd.concat([out[main], out[~main]]).reset_index(drop=True)  # the paper's rows first, then the naive path
     threads = ", ".join(sorted(set(sub["threads"].astype(str)))) if "threads" in sub else "?"
     out.attrs["source"] = f"{source} (scripts/bench_step.py --paper-tables; threads {threads})"
+    out.attrs["meaning"] = (
+        "memory: extra resident host memory of one update (fresh process), not GPU memory; durations: medians of "
+        "interleaved single updates (see scripts/bench_step.py)"
+    )
     return out
 
 

@@ -73,19 +73,8 @@ def timing_runs(tid: str):
 
 def plot_timing(d: FigureData) -> None:
     df = timing_frame(d)
-    source = df.attrs.get("source", "")
+    d.notes += [f"source: {df.attrs['source']}", df.attrs["meaning"]]
     df["Optimizer"] = df["Optimizer"].map(lambda o: OPTIMIZER_NAMES.get(o, o))
-    d.notes.append(f"source: {source}")
-    if "bench_step" in source:
-        d.notes.append(
-            "memory: extra resident host memory of one update (fresh process), not GPU memory; durations: medians of "
-            "interleaved single updates (see scripts/bench_step.py)"
-        )
-    if "runs" in source:
-        d.notes.append(
-            "memory: growth of the process's resident set during the run (CPU), not GPU memory; durations: median "
-            "over the timed updates, first (warm-up) update left out"
-        )
     d.write_table(df, index=False, title=TITLES[d.figure.id])
 
 
