@@ -12,6 +12,8 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from higbench.bench.tables import ensure_bench
+from higbench.claims.report import write_report
 from higbench.claims.rules import judge
 from higbench.figures import plot, registry
 from higbench.figures.data import FigureData
@@ -158,8 +160,6 @@ def build(
     figures = registry.select(ids)
     result = BuildResult()
     if run and bench and preset not in UPDATES_ONLY and any(f.id in ("table3", "table4", "table5") for f in figures):
-        from higbench.bench.tables import ensure_bench
-
         ensure_bench(runs_root, log)  # before the tables declare their runs
     builder = Builder(preset, runs_root, out_dir, jobs=jobs, launcher=launcher, log=log)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
@@ -170,8 +170,6 @@ def build(
     for f in figures:
         builder.draw(f, result)
     if report:
-        from higbench.claims.report import write_report
-
         write_report(Path(out_dir), list(registry.figures()))
     result.seconds = time.perf_counter() - t0
     return result

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import FIG2B_OPTIMIZERS, FIG2C_BATCHES, GD_GRIDS
+from higbench.claims.reference import OSCILLATOR_CURVES
+from higbench.claims.report import reference_entry
 from higbench.claims.rules import OPTIMIZER_NAMES, sci
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
@@ -88,9 +90,6 @@ def fig2a(d: FigureData, ax) -> None:
 
 def reference(d: FigureData, ax) -> None:
     """The authors' points on the axes; their loss points and update times beside ours in the sidecar."""
-    from higbench.claims.reference import OSCILLATOR_CURVES
-    from higbench.claims.report import reference_entry
-
     for opt, ref in OSCILLATOR_CURVES.items():
         t, y = zip(*ref["points"])
         ax.plot(t, y, "o--", color=COLORS[opt], mfc="none", label=f"authors' TF code {OPTIMIZER_NAMES[opt]} ({ref['note']})")
@@ -99,8 +98,6 @@ def reference(d: FigureData, ax) -> None:
 
 
 def _ref_panel() -> Curves:
-    from higbench.claims.reference import OSCILLATOR_CURVES
-
     title = "oscillators: higbench beside the authors' TensorFlow code (same settings, 2 CPU cores)"
     return Curves(title, [Series(o, label="higbench {label}") for o in OSCILLATOR_CURVES], extra=reference)
 

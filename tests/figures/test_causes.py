@@ -23,6 +23,11 @@ def _fields(template: str) -> set[str]:
     return {name for _, name, _, _ in string.Formatter().parse(template) if name}
 
 
+def test_every_claim_is_declared_in_one_module_apart_from_the_figures():
+    """Rule, evidence and cause of every claim live in higbench.claims.paper (the figures only draw)."""
+    assert {c.measure.__module__ for c in registry.claims().values()} == {"higbench.claims.paper"}
+
+
 @pytest.mark.parametrize("cid", sorted(CAUSE))
 def test_cause_texts_have_no_typed_numbers(cid):
     cause = CAUSE[cid]
