@@ -58,7 +58,6 @@ class Job:
     seed: int
     parent: Job | None = None  # init_from: this job starts from the parent's final weights
     search: list[Job] = field(default_factory=list)  # seed search: the seed is picked from these runs
-    search_note: str = ""  # how the seed was picked
     identity: str | None = None
     config: dict | None = None  # resolved task config (init_from: the parent's path)
     path: Path | None = None  # the run file that satisfies it
@@ -131,12 +130,12 @@ def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, 
     return list(main.values())
 
 
-def pick_seed(search: list[Job]) -> tuple[int, str]:
-    """(seed, note): the best stable search run (completed, final test loss finite and below
-    its initial one; lowest final loss), else the first seed."""
+def pick_seed(search: list[Job]) -> int:
+    """The seed of the best stable search run (completed, final test loss finite and below its
+    initial one; lowest final loss), else the first seed."""
     from higbench.runfile.reader import load_run
 
-    stable, diverged = {}, sum(job.status == "diverged" for job in search)
+    stable = {}
     for job in search:
         if job.status != "completed" or job.path is None:
             continue
@@ -146,12 +145,7 @@ def pick_seed(search: list[Job]) -> tuple[int, str]:
             continue
         if len(loss) >= 2 and loss[-1] == loss[-1] and loss[-1] < loss[0]:
             stable[job.seed] = float(loss[-1])
-    n = len(search)
-    tally = f"{n} seeds searched: {diverged} diverged, {n - diverged - len(stable)} unstable (loss rose), {len(stable)} stable"
-    if not stable:
-        return search[0].seed, f"{tally}; no stable seed, seed {search[0].seed} used"
-    seed = min(stable, key=stable.get)
-    return seed, f"{tally}; best stable seed {seed}"
+    return min(stable, key=stable.get) if stable else search[0].seed
 
 
 @contextmanager
@@ -244,7 +238,7 @@ def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dic
                 job.identity, job.path, job.status = None, None, "waiting"
                 continue
             if job.search:
-                job.seed, job.search_note = pick_seed(job.search)
+                job.seed = pick_seed(job.search)
                 job.overrides["seed"] = job.seed
             job.config = dict(compose(tuple(job.override_list())))
             job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
