@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from higbench.claims.paper import TOY_OPTIMIZERS as OPTIMIZERS
-from higbench.claims.paper import TOY_TUNED_LRS as TUNED_LRS
+from higbench.claims.paper import TOY_OPTIMIZERS, TOY_TUNED_LRS
 from higbench.claims.rules import OPTIMIZER_NAMES
 from higbench.figures.data import COLORS, FigureData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
@@ -23,7 +22,7 @@ SEEDS = PerPreset([0, 1, 2], smoke=[0, 1])
 
 
 def _neurons(d: FigureData, ax, gamma: float, tag: str) -> None:
-    for opt in OPTIMIZERS:
+    for opt in TOY_OPTIMIZERS:
         runs = d.runs("toy", problem__gamma=gamma, optimizer__name=opt)
         if runs and "neuron_mean" in runs[0].logs:
             first, logs = runs[0], runs[0].logs
@@ -42,13 +41,13 @@ def _neurons(d: FigureData, ax, gamma: float, tag: str) -> None:
 
 
 def _trajectories(d: FigureData, ax, gamma: float, tag: str) -> None:
-    for opt in OPTIMIZERS:
+    for opt in TOY_OPTIMIZERS:
         runs = d.runs("toy", problem__gamma=gamma, optimizer__name=opt)
         if runs and "probe_output" in runs[0].logs:
             y, name = runs[0].logs["probe_output"], OPTIMIZER_NAMES[opt]
             ax.plot(y[:, 0], y[:, 1], color=COLORS[opt], marker=".", ms=2, lw=1, label=name)
             d.record(f"trajectory {tag}", name, runs[0], "y1", y[:, 0], "y2", y[:, 1])
-            if (target := runs[0].logs.get("probe_target")) is not None and opt == OPTIMIZERS[-1]:
+            if (target := runs[0].logs.get("probe_target")) is not None and opt == TOY_OPTIMIZERS[-1]:
                 ax.plot(target[-1, 0], target[-1, 1], "k*", ms=10, label="target ŷ")
     ax.set(xlabel=r"$y_1$", ylabel=r"$y_2 = \gamma\, f_2$")  # subscripts: y¹, y² read as powers
     ax.set_title(f"{tag}: trajectory of x=probe in y-space", fontsize=9)
@@ -72,14 +71,14 @@ FIGURES = [
                 "toy",
                 {"problem": "toy"},
                 BUDGET,
-                grid={"problem.gamma": list(GAMMAS), "optimizer": list(OPTIMIZERS)},
+                grid={"problem.gamma": list(GAMMAS), "optimizer": list(TOY_OPTIMIZERS)},
                 seeds=SEEDS,
             ),
             Sweep(
                 "adam_tuned",
                 {"problem": "toy", "optimizer": "adam", "problem.gamma": 0.01},
                 BUDGET,
-                grid={"optimizer.lr": PerPreset(TUNED_LRS, smoke=TUNED_LRS[:1])},
+                grid={"optimizer.lr": PerPreset(TOY_TUNED_LRS, smoke=TOY_TUNED_LRS[:1])},
                 seeds=SEEDS,
             ),
         ],
