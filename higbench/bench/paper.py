@@ -1,7 +1,7 @@
 """The paper's update cost, tables 3-5 (GPU, TensorFlow): the one copy of these numbers.
 
 The benchmark (``higbench.bench.step --paper-tables``) prints them beside its measurements
-and the figures' tables 3-5 (``higbench.figures.tables``) compare against them. Measured
+and tables 3-5 as measured here (``higbench.bench.tables``) compare against them. Measured
 results of the paper, not defaults: the settings behind them are in conf/.
 """
 

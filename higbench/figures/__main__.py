@@ -83,12 +83,12 @@ def main(argv: list[str] | None = None) -> int:
     from higbench.figures import registry
 
     if args.report_only:
-        from higbench.figures.report import write_report
+        from higbench.claims.report import write_report
 
         if not Path(args.out).is_dir():
             print(f"higbench-figures: error: --out={args.out}: no such directory (nothing to report from)", file=sys.stderr)
             return 2
-        print(f"[figures] {write_report(Path(args.out))}")
+        print(f"[figures] {write_report(Path(args.out), list(registry.figures()))}")
         return 0
     if args.list:
         for fid, f in registry.figures().items():

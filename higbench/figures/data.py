@@ -20,19 +20,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from higbench.claims.rules import OPTIMIZER_NAMES, md_table, num
 from higbench.figures.runs import Job
 from higbench.figures.spec import Figure, Preset
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 
-OPTIMIZER_NAMES = {
-    "adam": "Adam",
-    "sgd": "SGD",
-    "adagrad": "Adagrad",
-    "adadelta": "Adadelta",
-    "rmsprop": "RMSprop",
-    "gn": "GN",
-    "hig": "HIG",
-}
 COLORS = {
     "adam": "tab:blue",
     "gn": "tab:red",
@@ -52,18 +44,6 @@ SYMBOLS = {
     "problem.gamma": "γ",
     "seed": "seed",
 }
-
-
-def num(v: Any) -> str:
-    """Compact number for labels: 0.0003 -> 3e-4, 1.0 -> 1, 128 -> 128."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return str(v)
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e5):
-        return str(int(v))
-    if 1e-2 <= abs(v) < 1e3:
-        return f"{v:g}"
-    m, e = f"{v:.0e}".split("e")
-    return f"{m}e{int(e)}"
 
 
 def kv(key: str, value: Any) -> str:
@@ -263,12 +243,6 @@ def _match(value: Any, want: Any) -> bool:
         except (TypeError, ValueError):
             return False
     return value == want
-
-
-def md_table(header: list[str], rows: list) -> list[str]:
-    """The lines of a GitHub table (without the tabulate package)."""
-    lines = ["| " + " | ".join(map(str, r)) + " |" for r in [header, *rows]]
-    return [lines[0], "|" + "---|" * len(header), *lines[1:]]
 
 
 def _markdown(df: pd.DataFrame, index: bool) -> str:

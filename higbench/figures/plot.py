@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from higbench.figures.data import COLORS, OPTIMIZER_NAMES, FigureData, RunData, kv
+from higbench.claims.rules import OPTIMIZER_NAMES
+from higbench.figures.data import COLORS, FigureData, RunData, kv
 
 TIME = "training time [s] (training clock, evaluations excluded)"
 FACET_TIME = "training time [s]"  # under each column of a grid: the long label overlaps its neighbours

@@ -1,5 +1,6 @@
-"""The one registry of the paper's figures, tables and headline claims: each family module
-(toy, oscillator, poisson, dipole, ablation, tables) declares ``FIGURES`` and its claims (``claims.claim``)."""
+"""The one registry of the paper's figures and tables: each family module (toy, oscillator,
+poisson, dipole, ablation, tables) declares ``FIGURES``. The claims the report judges on them
+are ``higbench.claims.paper``'s (``claims()`` here lists them)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,8 @@ import importlib
 import re
 from functools import cache
 
-from higbench.figures.claims import CAUSES, CLAIMS, Claim  # noqa: F401 - the registry's vocabulary
+from higbench.claims.paper import claims  # noqa: F401 - the claims on these figures
+from higbench.claims.rules import CAUSES, by_id  # noqa: F401 - CAUSES: the registry's vocabulary
 from higbench.figures.spec import Figure
 
 FAMILIES = ("toy", "oscillator", "poisson", "dipole", "ablation", "tables")
@@ -18,15 +20,6 @@ def _order(fid: str) -> tuple:
     return (0 if m.group(1) == "fig" else 1, int(m.group(2)), m.group(3)) if m else (2, 0, fid)
 
 
-def _unique(items: list, what: str) -> dict:
-    out = {}
-    for item in items:
-        if item.id in out:
-            raise ValueError(f"{what} {item.id} registered twice")
-        out[item.id] = item
-    return out
-
-
 @cache
 def _families() -> list:
     return [importlib.import_module(f"higbench.figures.{name}") for name in FAMILIES]
@@ -34,15 +27,8 @@ def _families() -> list:
 
 def figures() -> dict[str, Figure]:
     """Every figure and table, in the paper's order."""
-    known = _unique([f for m in _families() for f in m.FIGURES], "figure")
+    known = by_id([f for m in _families() for f in m.FIGURES], "figure")
     return {k: known[k] for k in sorted(known, key=_order)}
-
-
-def claims() -> dict[str, Claim]:
-    """Every claim, by family in FAMILIES' order (declaration order within a family)."""
-    _families()
-    order = {f"higbench.figures.{name}": i for i, name in enumerate(FAMILIES)}
-    return _unique(sorted(CLAIMS, key=lambda c: order[c.measure.__module__]), "claim")
 
 
 def select(ids: list[str]) -> list[Figure]:

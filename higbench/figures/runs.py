@@ -38,14 +38,9 @@ import yaml
 from higbench.errors import dotted_get
 from higbench.errors import override_value as fmt  # the one value-to-override rule
 from higbench.figures.spec import Figure, Preset, Sweep
-from higbench.results.index import COSMETIC_KEYS, DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
+from higbench.results.index import DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
-
-__all__ = [
-    "COSMETIC_KEYS", "DONE_STATUSES", "Job", "Launcher", "RunIndex", "compose", "expand", "fmt", "identity_of",
-    "job_seconds", "launch", "pick_seed", "resolve",
-]  # fmt: skip
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
 LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
@@ -63,7 +58,6 @@ class Job:
     seed: int
     parent: Job | None = None  # init_from: this job starts from the parent's final weights
     search: list[Job] = field(default_factory=list)  # seed search: the seed is picked from these runs
-    search_note: str = ""  # how the seed was picked
     identity: str | None = None
     config: dict | None = None  # resolved task config (init_from: the parent's path)
     path: Path | None = None  # the run file that satisfies it
@@ -136,12 +130,12 @@ def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, 
     return list(main.values())
 
 
-def pick_seed(search: list[Job]) -> tuple[int, str]:
-    """(seed, note): the best stable search run (completed, final test loss finite and below
-    its initial one; lowest final loss), else the first seed."""
+def pick_seed(search: list[Job]) -> int:
+    """The seed of the best stable search run (completed, final test loss finite and below its
+    initial one; lowest final loss), else the first seed."""
     from higbench.runfile.reader import load_run
 
-    stable, diverged = {}, sum(job.status == "diverged" for job in search)
+    stable = {}
     for job in search:
         if job.status != "completed" or job.path is None:
             continue
@@ -151,12 +145,7 @@ def pick_seed(search: list[Job]) -> tuple[int, str]:
             continue
         if len(loss) >= 2 and loss[-1] == loss[-1] and loss[-1] < loss[0]:
             stable[job.seed] = float(loss[-1])
-    n = len(search)
-    tally = f"{n} seeds searched: {diverged} diverged, {n - diverged - len(stable)} unstable (loss rose), {len(stable)} stable"
-    if not stable:
-        return search[0].seed, f"{tally}; no stable seed, seed {search[0].seed} used"
-    seed = min(stable, key=stable.get)
-    return seed, f"{tally}; best stable seed {seed}"
+    return min(stable, key=stable.get) if stable else search[0].seed
 
 
 @contextmanager
@@ -220,34 +209,23 @@ class RunIndex:
     """The results index of a runs root, one run per config (``one_per_config``), by identity.
 
     A view of ``higbench.results.index.load_runs(root, figure_runs=True)``: no status or
-    duplicate rule of its own. ``add`` (after a launch) re-reads the root on the next ``find``,
-    so runs continued from new ones get their parent's identity.
+    duplicate rule of its own. Scanned again after a launch, so that runs continued from new
+    ones get their parent's identity.
     """
 
     def __init__(self, root: Path | None):
-        self.root = None if root is None else Path(root)
-        self._by_id: dict[str, IndexedRun] | None = None
-
-    @classmethod
-    def scan(cls, root: Path | None) -> RunIndex:
-        index = cls(root)
-        index._read()
-        return index
-
-    def _read(self) -> None:
-        self._by_id = {}
-        if self.root is not None and self.root.is_dir():
-            runs = one_per_config(load_runs(self.root, figure_runs=True))
+        self._by_id: dict[str, IndexedRun] = {}
+        if root is not None and Path(root).is_dir():
+            runs = one_per_config(load_runs(Path(root), figure_runs=True))
             for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
                 self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
 
-    def add(self, path: Path) -> None:
-        self._by_id = None  # read again when next asked
+    @classmethod
+    def scan(cls, root: Path | None) -> RunIndex:
+        return cls(root)
 
     def find(self, identity: str) -> IndexedRun | None:
         """The run the index chooses for this identity (done if any is), or None."""
-        if self._by_id is None:
-            self._read()
         return self._by_id.get(identity)
 
 
@@ -260,7 +238,7 @@ def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dic
                 job.identity, job.path, job.status = None, None, "waiting"
                 continue
             if job.search:
-                job.seed, job.search_note = pick_seed(job.search)
+                job.seed = pick_seed(job.search)
                 job.overrides["seed"] = job.seed
             job.config = dict(compose(tuple(job.override_list())))
             job.identity = identity_of(job.config, job.parent.identity if job.parent else None)

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from higbench.claims.report import collect, write_report
+from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence, finish
 from higbench.figures import registry
-from higbench.figures.claims import CAUSES, PAPER, Cause, contradictions, evidence, finish
-from higbench.figures.report import collect, write_report
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 CAUSE = {cid: c.cause for cid, c in registry.claims().items() if c.cause is not None}
@@ -21,6 +21,11 @@ CAUSE = {cid: c.cause for cid, c in registry.claims().items() if c.cause is not 
 
 def _fields(template: str) -> set[str]:
     return {name for _, name, _, _ in string.Formatter().parse(template) if name}
+
+
+def test_every_claim_is_declared_in_one_module_apart_from_the_figures():
+    """Rule, evidence and cause of every claim live in higbench.claims.paper (the figures only draw)."""
+    assert {c.measure.__module__ for c in registry.claims().values()} == {"higbench.claims.paper"}
 
 
 @pytest.mark.parametrize("cid", sorted(CAUSE))
@@ -49,7 +54,7 @@ def test_committed_report_is_assembled_from_the_committed_rows(tmp_path):
     for path in RESULTS.glob("*.json"):
         (tmp_path / path.name).write_text(path.read_text())
     generated = re.compile(r"^Generated .*$", re.M)
-    again = generated.sub("", write_report(tmp_path).read_text())
+    again = generated.sub("", write_report(tmp_path, list(registry.figures())).read_text())
     assert again == generated.sub("", (RESULTS / "REPORT.md").read_text()), "docs/results/REPORT.md is stale"
 
 
@@ -255,7 +260,7 @@ def test_new_claims_on_synthetic_runs():
 def test_path_shares_of_y_space_trajectories():
     import numpy as np
 
-    from higbench.figures.toy import path_shares
+    from higbench.claims.paper import path_shares
 
     straight = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
     share, straightness = path_shares(straight)
@@ -266,7 +271,7 @@ def test_path_shares_of_y_space_trajectories():
 
 def test_a_cause_quotes_its_committed_probe_and_reads_open_without_it(monkeypatch, tmp_path):
     """poi-2's cause quotes the Poisson data probe (docs/results/probes/poisson_data.csv)."""
-    from higbench.figures import claims
+    from higbench.claims import rules
 
     c = registry.claims()["poi-2"]
     values = dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier")
@@ -274,6 +279,6 @@ def test_a_cause_quotes_its_committed_probe_and_reads_open_without_it(monkeypatc
     assert {"probe_phiflow_hig", "probe_fourier_adam"} <= set(probe)
     row = finish(c, _row("poi-2", "not", values))
     assert row["cause"][0] == "disagreement" and f"{probe['probe_phiflow_hig']:.1e}".replace("e-0", "e-") in row["cause"][1]
-    monkeypatch.setattr(claims, "PROBES_DIR", tmp_path)  # an installed package: no docs/results
+    monkeypatch.setattr(rules, "PROBES_DIR", tmp_path)  # an installed package: no docs/results
     row = finish(c, _row("poi-2", "not", values))
     assert row["cause"][0] == "open" and "probe_" in row["cause"][1]

@@ -6,8 +6,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from higbench.claims.rules import claim_budget, claim_seeds
 from higbench.figures import registry, runs
-from higbench.figures.claims import claim_budget, claim_seeds
 from higbench.figures.data import RunData
 from higbench.figures.runs import Job, expand, pick_seed
 from higbench.figures.spec import Budget, Figure, Preset, SeedSearch, Sweep
@@ -37,11 +37,9 @@ def test_pick_seed_takes_the_lowest_stable_run(monkeypatch):
     search = [_job("s", k, statuses[k]) for k in curves]
     fake = {j.path: curves[j.seed] for j in search}
     monkeypatch.setattr("higbench.runfile.reader.load_run", lambda p: ({}, pd.DataFrame(_curves(fake[p]))))
-    seed, note = pick_seed(search)
-    assert seed == 3  # 4 is lower but failed; 1 rose above its start; 0 diverged
-    assert "1 diverged" in note and "2 stable" in note
+    assert pick_seed(search) == 3  # 4 is lower but failed; 1 rose above its start; 0 diverged
     nothing = [_job("s", k, "diverged") for k in (5, 6)]
-    assert pick_seed(nothing)[0] == 5
+    assert pick_seed(nothing) == 5
 
 
 def test_seed_search_jobs_precede_and_gate_the_main_run():
@@ -130,7 +128,7 @@ def test_fig13_rule_compares_tau_at_equal_updates():
 def test_every_published_partly_or_not_names_its_cause():
     """Each committed claim row that is not reproduced says why, as REPORT.md shows it: a cause of
     the registry's vocabulary with its text, or ``open`` with what its runs lack (never empty)."""
-    from higbench.figures.report import collect
+    from higbench.claims.report import collect
 
     rows = collect(Path(__file__).resolve().parents[2] / "docs" / "results")
     for c in rows:
@@ -140,8 +138,8 @@ def test_every_published_partly_or_not_names_its_cause():
 
 
 def test_report_judges_the_stored_rows_again_and_shows_the_reference(tmp_path):
-    from higbench.figures.reference import OSCILLATOR_CURVES, UPDATE_SECONDS
-    from higbench.figures.report import write_report
+    from higbench.claims.reference import OSCILLATOR_CURVES, UPDATE_SECONDS
+    from higbench.claims.report import write_report
 
     claim = {
         "id": "osc-4", "figures": ["fig2b"], "statement": "s", "paper": "p", "measured": "m", "budget": "240 s",
@@ -158,13 +156,13 @@ def test_report_judges_the_stored_rows_again_and_shows_the_reference(tmp_path):
     (tmp_path / "ref_oscillator.json").write_text(
         json.dumps({"id": "ref_oscillator", "preset": "quick", "reference": ref, "runs": []})
     )
-    text = write_report(tmp_path).read_text()
+    text = write_report(tmp_path, list(registry.figures())).read_text()
     assert "| **partly** | hardware |" in text  # the table stays scannable; the cause's text is under it
     assert "- **osc-4** (partly): rule. Cause (hardware): HIG stays below Adam from t = 8 s, before" in text
     assert "older revision" not in text  # the cause is this revision's, rendered from the stored values
     claim |= {"rule_verdict": "reproduced", "seeds": 1}  # the seed gate, applied again
     (tmp_path / "fig2b.json").write_text(json.dumps({"id": "fig2b", "preset": "quick", "claims": [claim], "runs": []}))
-    assert "| **partly** | seeds |" in write_report(tmp_path).read_text()
+    assert "| **partly** | seeds |" in write_report(tmp_path, list(registry.figures())).read_text()
     assert "## Beside the authors' code" in text and "| adam | 60 | 0.0083 | 0.001 |" in text
     assert OSCILLATOR_CURVES["hig"]["points"][-1] == (265.0, 2.1e-3)
 
@@ -178,7 +176,7 @@ def test_gn_runs_of_fig2b_2c_13_use_a_seed_search(preset):
 
 
 def test_budgets_sized_by_the_papers_update_count():
-    from higbench.figures import claims as table
+    from higbench.claims import rules as table
 
     # 3600 s / 0.146 s per paper update = 24,658 updates; at 30 ms each: 739.7 s, rounded up to 10 s.
     assert table.paper_hour_here(0.146, 0.030) == 740.0

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from higbench.figures import registry
-from higbench.figures.runs import COSMETIC_KEYS, Job, Launcher, expand, fmt, identity_of, multirun_command
+from higbench.figures.runs import Job, Launcher, expand, fmt, identity_of, multirun_command
 from higbench.figures.spec import PRESETS, Preset
+from higbench.results.index import COSMETIC_KEYS
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
 EXPERIMENTS_IDS = [
@@ -245,8 +246,8 @@ def _fake_run(t, loss, **cols):
 
 
 def test_claim_helpers_crossing_time_and_plateau():
-    from higbench.figures.claims import crossing_time, final, loss_at
-    from higbench.figures.dipole import energy_ratio, plateau_seconds
+    from higbench.claims.paper import energy_ratio, plateau_seconds
+    from higbench.claims.rules import crossing_time, final, loss_at
 
     adam = _fake_run([0, 100, 200, 300], [1.0, 1e-3, 1e-4, 1e-4])
     hig = _fake_run([0, 100, 200, 300], [1.0, 1e-2, 1e-5, 1e-7])

@@ -84,7 +84,7 @@ def test_paper_tables_files_and_targets(tmp_path):
 
 
 def test_paper_costs_are_one_copy_shared_by_the_benchmark_and_the_tables():
-    from higbench.figures.tables import PAPER_TIMINGS, PROBLEMS
+    from higbench.bench.tables import PAPER_TIMINGS, PROBLEMS
 
     from_tables = {(PROBLEMS[tid], o, b): cost for tid, rows in PAPER_TIMINGS.items() for (o, b), cost in rows.items()}
     assert from_tables == PAPER_COSTS and len(PAPER_COSTS) == 13

@@ -10,7 +10,8 @@ HIG before the first update finishes). Losses are test losses per data point. No
 text of that repository is copied here.
 
 ``higbench.figures.oscillator`` draws higbench's oscillator runs beside these points
-(figure ``ref_oscillator``) and the report compares them.
+(figure ``ref_oscillator``), and the report and the claims (``higbench.claims.paper``)
+compare them.
 """
 
 from __future__ import annotations

@@ -1,8 +1,10 @@
-"""Claims as data. A family module declares each claim in one place (``@claim``): the paper's
-statement and value, the rule and the measurement its verdict is decided on, the budget and
-seeds it needs to show, and its root cause stated from evidence (``Cause``). Here: that
-vocabulary, the verdict of a claim's row (``judge``, ``finish``) and the helpers the
-measurements share (values read from runs)."""
+"""Claims as data: the vocabulary ``higbench.claims.paper`` declares each claim of the paper in
+(``@claim``: the paper's statement and value, the rule and the measurement its verdict is
+decided on, the budget and seeds it needs to show, and its root cause stated from evidence,
+``Cause``), the verdict of a claim's row (``judge``, ``finish``), the helpers the measurements
+share (values read from runs), the paper's numbers a cause may quote (``PAPER``) and the
+budgets sized by them. Runs are read duck-typed: a figure's data answers ``runs(sweep,
+**where)`` with runs that have ``curves``, ``cfg(key)``, ``status``, ``seed``, ``logs``."""
 
 from __future__ import annotations
 
@@ -11,14 +13,23 @@ import string
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from higbench.bench.paper import PAPER_COSTS
-from higbench.figures.reference import TRACE_SECONDS
-from higbench.figures.spec import UPDATES_ONLY
+from higbench.claims.reference import TRACE_SECONDS
 
+OPTIMIZER_NAMES = {
+    "adam": "Adam",
+    "sgd": "SGD",
+    "adagrad": "Adagrad",
+    "adadelta": "Adadelta",
+    "rmsprop": "RMSprop",
+    "gn": "GN",
+    "hig": "HIG",
+}
 REPRODUCED, PARTLY, NOT, NA = "reproduced", "partly", "not", "n/a"
 CAUSES = {
     "budget": "too short a budget (the trend points the paper's way)",
@@ -127,6 +138,16 @@ def claim(cid: str, figures: str, paper: str, *, min_seconds: float | None = Non
     return declare
 
 
+def by_id(items: Iterable, what: str) -> dict:
+    """Items (claims, figures) by their ``id``, in order; an id registered twice is an error."""
+    out = {}
+    for item in items:
+        if item.id in out:
+            raise ValueError(f"{what} {item.id} registered twice")
+        out[item.id] = item
+    return out
+
+
 def below(a: str, b: str) -> Callable[[dict], bool]:
     """A cause's fact: value ``a`` below value ``b``."""
     return lambda v: v[a] < v[b]
@@ -146,6 +167,24 @@ def sci(v: float) -> str:
         return str(v)
     m, x = f"{v:.1e}".split("e")
     return f"{m}e{int(x)}"
+
+
+def num(v: Any) -> str:
+    """Compact number for labels: 0.0003 -> 3e-4, 1.0 -> 1, 128 -> 128."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e5):
+        return str(int(v))
+    if 1e-2 <= abs(v) < 1e3:
+        return f"{v:g}"
+    m, e = f"{v:.0e}".split("e")
+    return f"{m}e{int(e)}"
+
+
+def md_table(header: list[str], rows: list) -> list[str]:
+    """The lines of a GitHub table (without the tabulate package)."""
+    lines = ["| " + " | ".join(map(str, r)) + " |" for r in [header, *rows]]
+    return [lines[0], "|" + "---|" * len(header), *lines[1:]]
 
 
 def median(values: Iterable[float]) -> float:
@@ -245,8 +284,9 @@ def precision_probe(problem: str) -> Callable[[pd.DataFrame], dict]:
 # -- a claim's row of the report -------------------------------------------------------------
 
 
-def judge(c: Claim, datas: dict, preset: str) -> dict:
-    """A claim's row of the report: its rule on the runs, then the budget, seed and smoke gates."""
+def judge(c: Claim, datas: dict, preset: str, smoke: bool = False) -> dict:
+    """A claim's row of the report: its rule on the runs, then the budget, seed and smoke gates
+    (``smoke``: the preset's runs stop after a few updates, code paths only)."""
     try:
         measured, verdict, why, values = c.check(datas)
     except Exception as exc:  # noqa: BLE001 - one broken claim does not stop the others
@@ -264,7 +304,7 @@ def judge(c: Claim, datas: dict, preset: str) -> dict:
         "seconds": claim_budget(datas),
         "seeds": claim_seeds(datas),
         "missing": sum(len(d.missing()) for d in datas.values()),
-        "smoke": preset in UPDATES_ONLY and any(d.jobs for d in datas.values()),
+        "smoke": smoke and any(d.jobs for d in datas.values()),
         "preset": preset,
     }
     return finish(c, row)

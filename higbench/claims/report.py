@@ -3,7 +3,7 @@
 Each claim is checked when its first figure is drawn and its row (the measured values) is
 stored in that figure's data file ``<id>.json``. This module collects those rows from the
 output directory (so a partial rebuild, ``higbench-figures fig1``, keeps the other figures'
-rows) and judges each again by the current gates and causes (``claims.finish``): REPORT.md
+rows) and judges each again by the current gates and causes (``rules.finish``): REPORT.md
 is always the rules of this revision on the measured values committed beside it.
 """
 
@@ -14,9 +14,9 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from higbench.figures import registry
-from higbench.figures.claims import finish, rule_why
-from higbench.figures.data import md_table
+from higbench.claims.paper import claims
+from higbench.claims.reference import OSCILLATOR_CURVES, SOURCE, UPDATE_SECONDS
+from higbench.claims.rules import end_time, finish, loss_at, md_table, median, rule_why
 
 HEADER = """# Reproduction report
 
@@ -59,7 +59,7 @@ def collect(out_dir: Path) -> list[dict]:
     """Every claim's row, in the registry's order, judged again from its stored values."""
     rows = {c["id"]: c for info in sidecars(out_dir).values() for c in info.get("claims", [])}
     out = []
-    for cid, c in registry.claims().items():
+    for cid, c in claims().items():
         if cid in rows:
             out.append(finish(c, {**rows[cid], "why": rule_why(rows[cid]["why"])}))
         else:
@@ -72,6 +72,27 @@ def _num(v) -> str:
     return "-" if v is None else f"{v:.2g}"
 
 
+def reference_entry(runs_of) -> dict:
+    """A sidecar's ``reference`` entry (figure ref_oscillator): the authors' loss points and
+    update times beside higbench's (``runs_of(optimizer)``: the figure's runs of it) at the
+    same training times (``None``: past a run's budget), as ``reference_section`` shows them."""
+    points = []
+    for opt, ref in OSCILLATOR_CURVES.items():
+        runs = runs_of(opt)
+        for t, loss in ref["points"]:
+            ours = median(loss_at(r, t) for r in runs) if runs and all(t <= end_time(r) for r in runs) else None
+            points.append({"optimizer": opt, "t": t, "reference": loss, "higbench": ours})
+    ours = {
+        o: median(float(r.updates["update_s"].iloc[1:].median()) for r in rs)
+        for o in ("adam", "hig", "gn")
+        if (rs := runs_of(o)) and "update_s" in rs[0].updates
+    }
+    rows = [
+        {**r, "higbench_update_s": ours.get(r["optimizer"]) if r["problem"] == "oscillator" else None} for r in UPDATE_SECONDS
+    ]
+    return {"source": SOURCE, "loss_points": points, "update_seconds": rows}
+
+
 def reference_section(infos: dict[str, dict]) -> list[str]:
     """Beside the authors' TensorFlow code: their loss points and update times next to ours."""
     info = infos.get("ref_oscillator", {}).get("reference")
@@ -81,7 +102,7 @@ def reference_section(infos: dict[str, dict]) -> list[str]:
         "",
         "## Beside the authors' code (oscillators, figure ref_oscillator)",
         "",
-        f"Reference numbers: {info['source']} (`higbench/figures/reference.py`).",
+        f"Reference numbers: {info['source']} (`higbench/claims/reference.py`).",
         "higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n",
         *md_table(
             ["optimizer", "training time [s]", "authors' code", "higbench"],
@@ -140,7 +161,9 @@ def _figure_row(fid: str, info: dict | None) -> list[str]:
     return [fid, info["preset"], _cell(budgets), f"{done} / {len(info['runs'])}", _cell(_provenance(info)), _cell(notes)]
 
 
-def write_report(out_dir: Path) -> Path:
+def write_report(out_dir: Path, figure_ids: list[str]) -> Path:
+    """REPORT.md in ``out_dir``: every claim's row, then every figure of ``figure_ids`` (the
+    figures' registry, in the paper's order; a figure not drawn there is listed as such)."""
     rows = collect(out_dir)
     counts = Counter(r["verdict"] for r in rows)
     presets = sorted({r["preset"] for r in rows if r["preset"] != "-"})
@@ -154,7 +177,7 @@ def write_report(out_dir: Path) -> Path:
     lines += ["", "## Figures and tables in this directory", ""]
     drawn = {k: v for k, v in infos.items() if "runs" in v}  # drawn figures list their runs
     header = ["id", "preset", "budget per run", "runs done / needed", "made (revision; date; machine; load)", "notes"]
-    lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in registry.figures()])
+    lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in figure_ids])
     path = Path(out_dir) / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")
     return path

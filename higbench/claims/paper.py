@@ -1,0 +1,1174 @@
+"""Every claim of the paper, in one place: its rule, its evidence (the measurement that
+reads the runs) and its root cause, stated from the measured values (``higbench.claims.rules``
+holds the vocabulary). Grouped by family in the report's order: toy, oscillator, Poisson,
+dipole, ablation, tables. ``claims()`` lists them in that order.
+
+A claim reads the figures' data duck-typed (``datas[figure id].runs(sweep, **where)``); the
+few settings both a figure and its claims need (the optimizers and grids a claim iterates
+over) are defined here, below the figures, which import them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from higbench.bench.tables import PAPER_TIMINGS, PROBLEMS, cell, timing_frame
+from higbench.claims.reference import UPDATE_SECONDS
+from higbench.claims.rules import (
+    CLAIMS,
+    DIPOLE_HIG_HOUR,
+    OPTIMIZER_NAMES,
+    OSC_ADAM_HOUR,
+    OSC_HIG_HOUR,
+    PAPER,
+    POISSON_HIG_HOUR,
+    Cause,
+    Claim,
+    Missing,
+    at_update,
+    below,
+    best,
+    budget_of,
+    by_id,
+    claim,
+    crossing_time,
+    end_time,
+    final,
+    half_way,
+    loss_at,
+    median,
+    num,
+    oscillation,
+    precision_probe,
+    probe_values,
+    require,
+    sci,
+    stable,
+    updates_of,
+)
+
+# -- toy (figure 1) -------------------------------------------------------------------------
+# Paper 2.1, appendix B.1. fig1's sweeps: "toy" (γ x Adam, GN, HIG) and "adam_tuned".
+
+# Settings figures/toy.py sweeps over too.
+TOY_OPTIMIZERS = ("adam", "gn", "hig")
+TOY_TUNED_LRS = [0.003, 0.03]  # fair baseline: Adam's learning rate re-tuned at the same budget (the paper's is 0.3)
+# A tanh neuron whose output hardly varies over the data set and sits near +-1.
+SATURATED_STD, SATURATED_MEAN = 0.1, 0.9
+
+
+def saturated(run) -> int:
+    """Hidden neurons saturated at the last evaluation (|mean| > 0.9 and std < 0.1)."""
+    if "neuron_mean" not in run.logs:
+        return 0
+    mean, std = run.logs["neuron_mean"][-1], run.logs["neuron_std"][-1]
+    return int(np.sum((np.abs(mean) > SATURATED_MEAN) & (std < SATURATED_STD)))
+
+
+def _by_opt(datas, gamma: float, *needed: str) -> dict[str, list]:
+    runs = {o: datas["fig1"].runs("toy", problem__gamma=gamma, optimizer__name=o) for o in TOY_OPTIMIZERS}
+    require(*(runs[o] for o in needed or TOY_OPTIMIZERS), what=f"fig1 gamma={gamma:g}")
+    return runs
+
+
+TOY1_CAUSE = Cause(
+    "disagreement",
+    "at the paper's η Adam ends {adam_decades:.1f} decades below its start, GN {gn_decades:.1f} and HIG {hig_decades:.1f}; "
+    "Adam's loss is flat over the second half ({adam_half:e} half-way, {adam_final:e} at the end): a noise floor of Adam "
+    "at that η, not a budget (experiment toy_lr_grid re-tunes it)",
+    {
+        "Adam short of the rule's level": lambda v: v["adam_decades"] < 2.5,
+        "GN and HIG at it": lambda v: min(v["gn_decades"], v["hig_decades"]) >= 2.5,
+        "Adam flat over the second half": lambda v: v["adam_final"] >= v["adam_half"] / 1.5,
+    },
+)
+
+
+@claim("toy-1", "fig1", "~3 decades", min_seconds=20, cause=TOY1_CAUSE)
+def well_conditioned(datas):
+    """Toy, gamma=1: Adam, GN and HIG all decrease the loss by about three orders of magnitude.
+    Rule: every optimizer >= 2.5 decades below its initial loss (partly: >= 1.5)"""
+    runs = _by_opt(datas, 1.0)
+    orders = {o: median(np.log10(r.initial_loss / r.final_loss) for r in rs) for o, rs in runs.items()}
+    measured = ", ".join(f"{OPTIMIZER_NAMES[o]} {v:.1f}" for o, v in orders.items()) + " decades"
+    values = {f"{o}_decades": v for o, v in orders.items()}
+    if runs.get("adam"):
+        values |= {"adam_final": final(runs["adam"]), "adam_half": half_way(runs["adam"])}
+    return measured, all(x >= 2.5 for x in orders.values()), all(x >= 1.5 for x in orders.values()), values
+
+
+TOY2_CAUSE = Cause(
+    "disagreement",
+    "both stall as the paper says, but below its plateau of {paper_toy_plateau:g}: Adam {adam_final:e} (half-way "
+    "{adam_half:e}), GN {gn_final:e} (half-way {gn_half:e})",
+    {
+        "both flat over the second half": lambda v: (
+            v["adam_final"] >= v["adam_half"] / 1.5 and v["gn_final"] >= v["gn_half"] / 1.5
+        ),
+        "both below the paper's plateau": lambda v: max(v["adam_final"], v["gn_final"]) < v["paper_toy_plateau"] / 2,
+    },
+)
+
+
+@claim("toy-2", "fig1", "plateau ~0.2 (figure 1b)", min_seconds=30, min_seeds=3, cause=TOY2_CAUSE)
+def stall(datas):
+    """Toy, gamma=0.01: Adam and GN stall (loss plateau near 0.2). Rule: both final losses in [0.1, 0.4] and flat over
+    the second half of the run (partly: both flat above 0.05, or both in [0.1, 0.4])"""
+    runs = _by_opt(datas, 0.01, "adam", "gn")
+    fa, fg = final(runs["adam"]), final(runs["gn"])
+    # A stall is a plateau: the final loss no lower than 1/1.5 of the loss at half the run.
+    half = {o: half_way(runs[o]) for o in runs}
+    flat = all(final(runs[o]) >= half[o] / 1.5 for o in ("adam", "gn"))
+    level = all(0.1 <= x <= 0.4 for x in (fa, fg))
+    measured = f"final loss Adam {sci(fa)} (half-way {sci(half['adam'])}), GN {sci(fg)} (half-way {sci(half['gn'])}) (medians)"
+    values = {"adam_final": fa, "gn_final": fg, "adam_half": half["adam"], "gn_half": half["gn"]}
+    return measured, level and flat, (flat and all(x >= 0.05 for x in (fa, fg))) or level, values
+
+
+TOY3_CAUSE = Cause(
+    "budget",
+    "HIG {hig_final:e} against the best Adam {adam_best:e} and GN {gn_final:e}, and HIG still falling ({hig_half:e} half-way)",
+    {"HIG still falling": lambda v: v["hig_final"] < v["hig_half"] / 1.5},
+)
+
+
+@claim("toy-3", "fig1", "HIG lowest", min_seconds=20, min_seeds=3, cause=TOY3_CAUSE)
+def toy_hig_lowest(datas):
+    """Toy, gamma=0.01: HIG reaches a better loss than Adam and GN. Rule: HIG below half of the better of GN and the
+    best Adam (paper η or re-tuned) (partly: below it)"""
+    d, runs = datas["fig1"], _by_opt(datas, 0.01)
+    fh, fa, fg = final(runs["hig"]), final(runs["adam"]), final(runs["gn"])
+    tuned = {lr: final(rs) for lr in TOY_TUNED_LRS if (rs := d.runs("adam_tuned", optimizer__lr=lr))}
+    fa_best = min([fa, *tuned.values()])
+    tuned_text = ", ".join(f"η={lr:g} {sci(v)}" for lr, v in tuned.items())
+    measured = (
+        f"final loss (median of seeds) HIG {sci(fh)} vs Adam η=0.3 (paper) {sci(fa)} ({fa / fh:.1f}x), GN {sci(fg)}; "
+        f"re-tuned Adam: {tuned_text or 'not run'} (HIG's advantage against the best: {fa_best / fh:.1f}x)"
+    )
+    values = {"hig_final": fh, "hig_half": half_way(runs["hig"]), "adam_best": fa_best, "gn_final": fg}
+    return measured, fh < 0.5 * min(fa_best, fg), fh < min(fa_best, fg), values
+
+
+@claim("toy-4", "fig1", "GN saturates, HIG not", min_seconds=20, min_seeds=3)
+def saturation(datas):
+    """Toy, gamma=0.01: GN oversaturates neurons, HIG does not. Rule: GN >= 1 and HIG 0 (partly: GN > HIG), saturated:
+    |mean| > 0.9 and std < 0.1 over the data at the end"""
+    runs = _by_opt(datas, 0.01, "gn", "hig")
+    sg, sh = median(saturated(r) for r in runs["gn"]), median(saturated(r) for r in runs["hig"])
+    sa = median(saturated(r) for r in runs["adam"]) if runs["adam"] else float("nan")
+    return f"saturated neurons (of 7, median over seeds): GN {sg:g}, HIG {sh:g}, Adam {sa:g}", sg >= 1 and sh == 0, sg > sh
+
+
+@claim(
+    "toy-5",
+    "fig1",
+    "all neurons active at γ=1",
+    min_seconds=20,
+    min_seeds=3,
+    cause=Cause(
+        "disagreement",
+        "in the well-conditioned case the median run saturates {adam:g} neuron(s) under Adam (the paper's η) and "
+        "{gn:g} under GN, {hig:g} under HIG, where the paper's figure shows every neuron active for all three",
+        {"Adam or GN saturates a neuron": lambda v: v["adam"] > 0 or v["gn"] > 0},
+    ),
+)
+def all_active(datas):
+    """Toy, gamma=1: with a well-conditioned problem all neurons process information. Rule: no saturated neuron for any
+    optimizer at γ=1 (median over seeds; partly: none for GN and HIG)"""
+    runs = _by_opt(datas, 1.0)
+    sat = {o: median(saturated(r) for r in rs) for o, rs in runs.items()}
+    measured = "saturated neurons at γ=1: " + ", ".join(f"{OPTIMIZER_NAMES[o]} {v:g}" for o, v in sat.items())
+    return measured, all(v == 0 for v in sat.values()), sat["gn"] == 0 and sat["hig"] == 0, sat
+
+
+def path_shares(y: np.ndarray) -> tuple[float, float]:
+    """(share of the path length along y_2, straightness |end - start| / path length) of a y-space trajectory."""
+    steps = np.diff(y[:, :2], axis=0)
+    length = float(np.sum(np.linalg.norm(steps, axis=1)))
+    if length == 0:
+        return float("nan"), float("nan")
+    return float(np.sum(np.abs(steps[:, 1])) / np.sum(np.abs(steps).sum(axis=1))), float(
+        np.linalg.norm(y[-1, :2] - y[0, :2]) / length
+    )
+
+
+@claim(
+    "toy-6",
+    "fig1",
+    "Adam neglects y_2, HIG moves along it, GN straight",
+    min_seconds=20,
+    cause=Cause(
+        "disagreement",
+        "over the whole run Adam's path has {adam_y2_share:.2f} of its length along y_2 against HIG's "
+        "{hig_y2_share:.2f} (not below half), and GN's path is not straight (straightness {gn_straightness:.2f}): "
+        "at the paper's η Adam keeps jumping around the target in both directions, and GN overshoots before it "
+        "reaches it (the figure's y-space trajectories)",
+        {
+            "Adam not below half of HIG": lambda v: v["adam_y2_share"] >= v["hig_y2_share"] / 2,
+            "GN not straight": lambda v: v["gn_straightness"] < 0.9,
+        },
+    ),
+)
+def trajectories(datas):
+    """Toy, gamma=0.01 (appendix A.2): in y-space Adam neglects y_2, HIG moves along it, GN goes straight to the target.
+    Rule: on the probe's trajectory (seed 0), Adam's share of its path along y_2 below half of HIG's, and GN's path
+    straightness (|end - start| / length) >= 0.9 (partly: one of the two)"""
+    runs = _by_opt(datas, 0.01)
+    found = {o: path_shares(rs[0].logs["probe_output"]) for o, rs in runs.items() if rs and "probe_output" in rs[0].logs}
+    require(len(found) == 3, what="fig1 probe trajectories")
+    (sa, _), (sh, _), (_, straight) = found["adam"], found["hig"], found["gn"]
+    measured = f"share of the path along y_2: Adam {sa:.2f}, HIG {sh:.2f}; GN straightness {straight:.2f}"
+    values = {"adam_y2_share": sa, "hig_y2_share": sh, "gn_straightness": straight}
+    return measured, sa < sh / 2 and straight >= 0.9, sa < sh / 2 or straight >= 0.9, values
+
+
+# -- oscillators (figures 2b, 2c, 5, 6) -----------------------------------------------------
+# Paper 3.1, appendix B.2. fig2b: sweeps "best" (table 2's settings) and "adam_tuned"; fig2c, 5, 6:
+# one sweep per optimizer; GN's runs use the best stable seed of a search ("<sweep>/search").
+
+# Settings figures/oscillator.py sweeps over too.
+FIG2B_OPTIMIZERS = ("adadelta", "adagrad", "adam", "gn", "hig", "rmsprop", "sgd")
+GD_FAMILY = ("adadelta", "adagrad", "adam", "rmsprop", "sgd")
+FIG2C_BATCHES = {"adam": [256, 512, 1024], "gn": [32, 64, 128], "hig": [32, 64, 128]}
+GD_GRIDS = {"fig5": ("adadelta", "adagrad", "sgd", "rmsprop"), "fig6": ("adam",)}  # figure -> its optimizers' grids
+
+
+def _finals(d) -> dict[str, float]:
+    return {o: final(rs) for o in FIG2B_OPTIMIZERS if (rs := d.runs("best", optimizer__name=o))}
+
+
+def tuned_adam(d) -> tuple[float, str]:
+    """(final loss, label) of the best re-tuned Adam run of fig2b (median over seeds per setting)."""
+    settings = [(lr, b) for lr in d.values("adam_tuned", "optimizer.lr") for b in d.values("adam_tuned", "batch_size")]
+    found = [
+        (final(rs), f"η={num(lr)} b={b}") for lr, b in settings if (rs := d.runs("adam_tuned", optimizer__lr=lr, batch_size=b))
+    ]
+    return min(found, key=lambda x: x[0], default=(float("inf"), "not run"))
+
+
+def gn_search_summary(d, sweep: str) -> str:
+    """Share of the searched seeds whose GN run diverged (NaN) or ended above its initial loss."""
+    if not (runs := d.runs(sweep)):
+        return "not run"
+    n, diverged = len(runs), sum(r.status == "diverged" for r in runs)
+    rose = sum(r.status == "completed" and not (r.final_loss < r.initial_loss) for r in runs)
+    return (
+        f"{n} seeds x {budget_of(runs[0])}: {diverged}/{n} diverged ({diverged / n:.0%}), {rose} ended above "
+        f"their initial loss, {n - diverged - rose} stable"
+    )
+
+
+@claim(
+    "osc-1",
+    "fig2b",
+    "Adam ~1e-4",
+    min_seconds=OSC_ADAM_HOUR,
+    cause=Cause(
+        "budget",
+        "Adam {adam:e} after {budget:g} s, still falling ({adam_half:e} half-way); the paper's level is its hour of "
+        "updates at {paper_osc_adam_update_s:g} s each",
+        {"Adam above the paper's level": lambda v: v["adam"] > 1e-3, "Adam still falling": below("adam", "adam_half")},
+    ),
+)
+def adam_best(datas):
+    """Oscillators: Adam is the best of the gradient-descent family, final loss ~1e-4. Rule: Adam best of
+    SGD/Adagrad/Adadelta/RMSprop/Adam and final loss in [1e-5, 1e-3] (partly: one of the two)"""
+    gd = {o: v for o, v in _finals(datas["fig2b"]).items() if o in GD_FAMILY}
+    require("adam" in gd, what="fig2b Adam")
+    best = min(gd, key=gd.get)
+    level = 1e-5 <= gd["adam"] <= 1e-3
+    half = half_way(datas["fig2b"].runs("best", optimizer__name="adam"))
+    return (
+        f"Adam {sci(gd['adam'])}; best of the GD family: {OPTIMIZER_NAMES[best]} ({sci(gd[best])})",
+        best == "adam" and level,
+        best == "adam" or level,
+        {"adam": gd["adam"], "adam_half": half},
+    )
+
+
+@claim(
+    "osc-2",
+    "fig2b",
+    "GN ~1e-6",
+    min_seconds=OSC_HIG_HOUR,
+    cause=Cause(
+        "budget",
+        "GN {gn:e} after {gn_updates} updates, fewer than the paper's hour ({osc_hig_hour_updates})",
+        {"GN above the paper's level": lambda v: v["gn"] > 1e-5, "fewer updates": below("gn_updates", "osc_hig_hour_updates")},
+    ),
+)
+def gn_level(datas):
+    """Oscillators: GN's best stable run reaches ~1e-6. Rule: GN's best stable run (best seed of the search) ends in
+    [1e-7, 1e-5] without diverging (partly: below Adam's)"""
+    f, runs = _finals(datas["fig2b"]), datas["fig2b"].runs("best", optimizer__name="gn")
+    require("gn" in f and "adam" in f, what="fig2b GN/Adam")
+    search = gn_search_summary(datas["fig2b"], "best/search")
+    measured = f"GN {sci(f['gn'])} ({runs[0].status}, seed {runs[0].seed}); Adam {sci(f['adam'])}; seed search: {search}"
+    values = {"gn": f["gn"], "gn_updates": updates_of(runs[0])}
+    return measured, 1e-7 <= f["gn"] <= 1e-5 and runs[0].status == "completed", f["gn"] < f["adam"], values
+
+
+def authors_probe(table) -> dict:
+    """The authors' oscillator probe (scripts/probe_oscillator_authors.py): their code's and ours' test loss after
+    their run's updates, and ours after the paper's hour of updates, per variant."""
+    rows = table.set_index("variant")
+    first, hour = 1024, 24_576
+    out = {"first_updates": first, "hour_updates": hour, "authors_first": rows.loc["authors' TF code", f"test_at_{first}"]}
+    for name, variant in (("same", "float64 inversion"), ("reshuffled", "reshuffled"), ("ours", "ours")):
+        out[f"{name}_first"] = rows.loc[variant, f"test_at_{first}"]
+        out[f"{name}_hour"], out[f"{name}_hour_train"] = (
+            rows.loc[variant, f"test_at_{hour}"],
+            rows.loc[variant, f"train_at_{hour}"],
+        )
+    return {k: float(v) if not isinstance(v, int) else v for k, v in out.items()}
+
+
+@claim(
+    "osc-3",
+    "fig2b",
+    "HIG ~1e-7",
+    min_seconds=OSC_HIG_HOUR,
+    min_seeds=3,
+    cause=Cause(
+        "unspecified",
+        "the data draw, which the paper does not give: per update our HIG follows the authors' code from their data and "
+        "initial weights (after {probe_first_updates} updates {probe_same_first:e} against their {probe_authors_first:e}) "
+        "and reaches {probe_same_hour:e} after the paper's hour of updates ({probe_hour_updates}), reshuffled "
+        "{probe_reshuffled_hour:e}; from our data draw and initialisation {probe_ours_hour:e}, at a training loss alike "
+        "({probe_ours_hour_train:e} against {probe_same_hour_train:e}): our test set is fitted worse (authors' probe); "
+        "here HIG {hig:e} after {hig_updates} updates",
+        {
+            "ours follows the authors' code per update": lambda v: 0.5 < v["probe_same_first"] / v["probe_authors_first"] < 2,
+            "the authors' draw near the paper's level": lambda v: v["probe_same_hour"] < 3e-7,
+            "our draw far above it": lambda v: v["probe_ours_hour"] >= 3 * v["probe_same_hour"],
+            "training losses alike": lambda v: v["probe_ours_hour_train"] < 2 * v["probe_same_hour_train"],
+            "HIG here above the authors' draw's level": lambda v: v["hig"] > v["probe_same_hour"],
+        },
+        probe=probe_values("oscillator_authors_summary.csv", authors_probe),
+    ),
+)
+def osc_hig_best(datas):
+    """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven
+    and of re-tuned Adam (partly: one of the two)"""
+    d, f = datas["fig2b"], _finals(datas["fig2b"])
+    require("hig" in f, what="fig2b HIG")
+    ft, tlabel = tuned_adam(d)
+    if ft < float("inf"):
+        f["adam (re-tuned)"] = ft
+    best = min(f, key=f.get)
+    level = 1e-8 <= f["hig"] <= 1e-6
+    adv = f"HIG's advantage: {f['adam'] / f['hig']:.1f}x over Adam (paper setting)" if "adam" in f else ""
+    if ft < float("inf"):
+        adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {sci(ft)})"
+    hig = d.runs("best", optimizer__name="hig")
+    values = {"hig": f["hig"], "hig_half": half_way(hig), "hig_updates": min(map(updates_of, hig))}
+    return (
+        f"HIG {sci(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({sci(f[best])}); {adv}",
+        level and best == "hig",
+        level or best == "hig",
+        values,
+    )
+
+
+@claim(
+    "osc-4",
+    "fig2b",
+    "~180 s",
+    min_seconds=180,  # past the paper's ~3 minutes
+    min_seeds=3,
+    cause=Cause(
+        "hardware",
+        "HIG stays below Adam from t = {t_cross:.0f} s, before the paper's window: a crossing time is the implementation's "
+        "and the machine's; the paper's clock includes its set-up, and on this machine kind the authors' code spends its "
+        "first {ref_hig_trace_s:.0f} s tracing its graph, before its first HIG update (reference.py)",
+        {
+            "the crossing before the paper's window": lambda v: v["t_cross"] < 60,
+            "the crossing before the authors' code's first HIG update": below("t_cross", "ref_hig_trace_s"),
+        },
+    ),
+)
+def crossing(datas):
+    """Oscillators: HIG passes Adam after about three minutes. Rule: HIG stays below Adam from a time in [60, 540] s on
+    (partly: from any time on)"""
+    d = datas["fig2b"]
+    hig, adam, tuned = d.runs("best", optimizer__name="hig"), d.runs("best", optimizer__name="adam"), d.runs("adam_tuned")
+    require(hig, adam, what="fig2b HIG/Adam")
+    t_tuned = [crossing_time(hig[0], r) for r in tuned]
+    late = max((x for x in t_tuned if x is not None), default=None)
+    never = sum(x is None for x in t_tuned)
+    parts = ([f"never passes {never} of them"] if never else []) + (
+        [f"passes {'the others' if never else 'all'} by t = {late:.0f} s"] if late is not None else []
+    )
+    tuned_text = f"; against re-tuned Adam ({len(tuned)} settings): HIG " + ", ".join(parts) if tuned else ""
+    if (t := crossing_time(hig[0], adam[0])) is None:
+        return "HIG does not pass Adam within the budget" + tuned_text, False, False
+    return f"HIG below Adam (paper setting) from t = {t:.0f} s on" + tuned_text, 60 <= t <= 540, True, {"t_cross": t}
+
+
+@claim(
+    "osc-5",
+    "fig2c",
+    "Adam ~b-independent; HIG/GN better at larger b",
+    min_seconds=120,
+    cause=Cause(
+        "hardware",
+        "at equal time a smaller batch buys more updates on this CPU (HIG: {hig_lo_updates} updates at b={b_lo}, "
+        "{hig_hi_updates} at b={b_hi}), so HIG b={b_lo}->{b_hi} ends {hig_lo:e}->{hig_hi:e} and GN {gn_lo:e}->{gn_hi:e}; "
+        "at equal update counts ({n_eq} updates) HIG follows the paper, {hig_lo_eq:e}->{hig_hi_eq:e}, and GN does not, "
+        "{gn_lo_eq:e}->{gn_hi_eq:e} (each b's GN run is the best stable seed of its own search)",
+        {
+            "a smaller b lower at equal time": lambda v: v["hig_lo"] < v["hig_hi"] or v["gn_lo"] < v["gn_hi"],
+            "more updates at the smaller b": below("hig_hi_updates", "hig_lo_updates"),
+            "HIG's larger b lower per update": below("hig_hi_eq", "hig_lo_eq"),
+            "GN's larger b not lower per update": lambda v: v["gn_hi_eq"] >= v["gn_lo_eq"],
+        },
+    ),
+)
+def batch_sizes(datas):
+    """Oscillators: Adam's runs converge alike for all b; HIG and GN improve with larger b. Rule: Adam's final losses
+    within 3x over b, and HIG and GN lower at the largest b than at the smallest (partly: one of these)"""
+    d = datas["fig2c"]
+    fin = {(o, b): final(rs) for o, bs in FIG2C_BATCHES.items() for b in bs if (rs := d.runs(o, batch_size=b))}
+    adam = [fin[("adam", b)] for b in FIG2C_BATCHES["adam"] if ("adam", b) in fin]
+    require(len(adam) >= 2 and any(k[0] == "hig" for k in fin), what="fig2c")
+    spread = max(adam) / min(adam)
+    ends = {o: (bs[0], bs[-1]) for o in ("hig", "gn") if len(bs := [b for b in FIG2C_BATCHES[o] if (o, b) in fin]) >= 2}
+    improves = {o: fin[(o, hi)] < fin[(o, lo)] for o, (lo, hi) in ends.items()}
+    measured = f"Adam max/min over b: {spread:.1f}x; " + ", ".join(
+        f"{OPTIMIZER_NAMES[o]} b={lo}->{hi}: {sci(fin[(o, lo)])}->{sci(fin[(o, hi)])}" for o, (lo, hi) in ends.items()
+    )
+    full = spread < 3 and all(improves.values()) and len(improves) == 2
+    return measured, full, spread < 3 or any(improves.values()), _per_update(d, ends, fin)
+
+
+def _per_update(d, ends: dict, fin: dict) -> dict:
+    """HIG's and GN's final losses at the smallest and largest b, and at an equal update count."""
+    if set(ends) != {"hig", "gn"} or ends["hig"] != ends["gn"]:
+        return {}
+    (lo, hi), values = ends["hig"], {"b_lo": ends["hig"][0], "b_hi": ends["hig"][1]}
+    runs = {(o, b): d.runs(o, batch_size=b) for o in ("hig", "gn") for b in (lo, hi)}
+    n_eq = min(updates_of(rs[0]) for rs in runs.values())
+    for (o, b), rs in runs.items():
+        side = "lo" if b == lo else "hi"
+        values[f"{o}_{side}"], values[f"{o}_{side}_eq"] = fin[(o, b)], median(at_update(r, n_eq) for r in rs)
+        values[f"{o}_{side}_updates"] = min(map(updates_of, rs))
+    return values | {"n_eq": n_eq}
+
+
+@claim(
+    "osc-6",
+    "fig5 fig6",
+    "GD family alike over b, unstable at large η",
+    min_seconds=12,  # divergence shows early
+    cause=Cause(
+        "budget",
+        "over b the five behave alike (best-η spreads {spread_min:.1f}x-{spread_max:.1f}x); at the largest η "
+        "{diverged} of {cells} optimizer-b runs diverge, and {calm_falling} of the {calm} that neither diverge nor "
+        "oscillate most are still falling over the second half of their {budget:g} s, where the paper's grids ran an hour",
+        {
+            "alike over b": lambda v: v["spread_max"] <= 10,
+            "the calm largest-η runs still falling": lambda v: v["calm"] > 0 and v["calm_falling"] == v["calm"],
+        },
+    ),
+)
+def gd_family(datas):
+    """Oscillators (figs 5-6): the gradient-descent family behaves alike over batch sizes and becomes unstable at large
+    η. Rule: at every b each optimizer's largest-η run diverges or oscillates most over its last half (of its η), and
+    at its best η the final losses over b lie within 10x (partly: one of the two)"""
+    unstable, spreads, calm_falling, text = [], [], [], []
+    for fid, opts in GD_GRIDS.items():
+        for opt in opts:
+            require(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
+            bs = sorted({r.cfg("batch_size") for r in runs})
+            shaky = [_largest_lr_unstable([r for r in runs if r.cfg("batch_size") == b]) for b in bs]
+            unstable += shaky
+            largest = max(r.cfg("optimizer.lr") for r in runs)
+            calm_falling += [final([r]) < half_way([r]) for r, u in _at_largest(runs, largest, bs, shaky) if not u]
+            fin = {(r.cfg("optimizer.lr"), r.cfg("batch_size")): final([r]) for r in runs}
+            best_lr = min({k[0] for k in fin}, key=lambda lr: median(fin.get((lr, b), math.inf) for b in bs))
+            at = [fin[(best_lr, b)] for b in bs if (best_lr, b) in fin]
+            spreads.append(max(at) / min(at) if at and min(at) > 0 else math.inf)
+            text.append(
+                f"{OPTIMIZER_NAMES[opt]}: largest η unstable at {sum(map(bool, shaky))}/{len(bs)} b, spread over b at "
+                f"η={num(best_lr)} {spreads[-1]:.1f}x"
+            )
+    diverged = sum(u == "diverged" for u in unstable)
+    values = {"cells": len(unstable), "diverged": diverged, "calm": sum(not u for u in unstable)}
+    values["calm_falling"] = sum(calm_falling)
+    values |= {"spread_min": min(spreads), "spread_max": max(spreads)}
+    alike = all(s <= 10 for s in spreads)
+    return "; ".join(text), all(unstable) and alike, all(unstable) or alike, values
+
+
+def _at_largest(runs: list, lr: float, bs: list, shaky: list) -> list:
+    """(the largest-η run at b, its instability) for each b."""
+    at = {r.cfg("batch_size"): r for r in runs if r.cfg("optimizer.lr") == lr}
+    return [(at[b], u) for b, u in zip(bs, shaky) if b in at]
+
+
+def _largest_lr_unstable(runs: list) -> str:
+    """ "diverged", "oscillates" (most of the η at this b over the last half) or "" (neither)."""
+    runs = sorted(runs, key=lambda r: r.cfg("optimizer.lr"))
+    if runs[-1].status == "diverged" or not math.isfinite(final(runs[-1:])):
+        return "diverged"
+    wobble = [oscillation(r) for r in runs]
+    return "oscillates" if wobble[-1] >= np.nanmax(wobble) else ""  # NaN (too few evaluations): not shown
+
+
+# -- Poisson (figures 3b, 3c, 7) ------------------------------------------------------------
+# Paper 3.2, appendix B.3. fig3b: sweeps "adam" and "hig" over η; fig3c and fig7: the chain of runs
+# continued from Adam's ("adam_pre" -> "adam_cont", "hig_cont" -> "adam_after_hig").
+
+
+@claim(
+    "poi-1",
+    "fig3b",
+    "~3 decades",
+    min_seconds=POISSON_HIG_HOUR,  # or the paper's hour of updates (decisive)
+    cause=Cause(
+        "deviation",
+        "HIG ran at b={hig_b} (the paper: {paper_poisson_b}) and made {hig_updates} updates, no fewer than the paper's hour "
+        "({poisson_hour_updates}), to {hig_decades:.1f} decades: the batch size, not the budget",
+        {
+            "a smaller batch than the paper's": lambda v: v["hig_b"] < v["paper_poisson_b"],
+            "the paper's hour of updates made": lambda v: v["hig_updates"] >= v["poisson_hour_updates"],
+        },
+    ),
+)
+def both_decrease(datas):
+    """Poisson: Adam and HIG both decrease the loss by up to three orders of magnitude. Rule: both optimizers' best runs
+    >= 2.5 decades below the initial loss (partly: >= 1)"""
+    adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
+    require(adam, hig, what="fig3b")
+    dec = {name: max(np.log10(r.initial_loss / best([r])) for r in runs) for name, runs in (("Adam", adam), ("HIG", hig))}
+    measured = ", ".join(f"{k} {v:.1f} decades (best run)" for k, v in dec.items())
+    n = max(map(updates_of, hig))
+    values = {"hig_decades": dec["HIG"], "adam_decades": dec["Adam"], "hig_updates": n, "hig_b": hig[0].cfg("batch_size")}
+    values["decisive"] = n >= PAPER["poisson_hour_updates"]  # the paper's hour of HIG updates made
+    return measured, all(v >= 2.5 for v in dec.values()), all(v >= 1.0 for v in dec.values()), values
+
+
+def continued_from_adam(table, lr: float = 0.01) -> dict:
+    """The data probe's Adam-pretrained rows (scripts/probe_poisson_data.py): start, HIG at ``lr`` and Adam, per data."""
+    rows = table[table["from"] == "Adam-pretrained"]
+    out = {"lr": lr}
+    for data, name in (("phiflow_noise", "phiflow"), ("fourier", "fourier")):
+        mine = rows[rows["data"] == data]
+        hig = mine[(mine["optimizer"] == "hig") & np.isclose(mine["lr"], lr)]
+        adam = mine[mine["optimizer"] == "adam"]
+        out |= {f"{name}_start": float(hig["test_start"].iloc[0]), f"{name}_hig": float(hig["test_end"].iloc[0])}
+        out[f"{name}_adam"] = float(adam["test_end"].iloc[0])
+    return out
+
+
+@claim(
+    "poi-2",
+    "fig3c",
+    "quick drop, HIG below Adam",
+    min_seconds=600,
+    min_seeds=3,
+    cause=Cause(
+        "disagreement",
+        "not the data distribution: in the data probe (the authors' network and batch size, one seed) HIG "
+        "η={probe_lr:g} continued from Adam's weights ends at {probe_phiflow_hig:e} from {probe_phiflow_start:e} "
+        "on the authors' PhiFlow noise and at {probe_fourier_hig:e} from {probe_fourier_start:e} on ours, while Adam "
+        "continued for the same time ends at {probe_phiflow_adam:e} and {probe_fourier_adam:e}; here (b={hig_b}, "
+        "data {data}) HIG {start:e} -> "
+        "{hig_final:e}, Adam {adam_final:e}",
+        {
+            "Adam below HIG here": lambda v: v["adam_final"] < v["hig_final"],
+            "Adam below HIG on the authors' data": lambda v: v["probe_phiflow_adam"] < v["probe_phiflow_hig"],
+            "Adam below HIG on ours": lambda v: v["probe_fourier_adam"] < v["probe_fourier_hig"],
+        },
+        probe=probe_values("poisson_data.csv", continued_from_adam),
+    ),
+)
+def pretrained(datas):
+    """Poisson: HIG after Adam pre-training drops the loss quickly and ends below Adam. Rule: HIG's final loss <= half of
+    the best Adam continued from the same weights, paper η or re-tuned (partly: below it)"""
+    d = datas["fig3c"]
+    hig, adam = d.runs("hig_cont"), d.runs("adam_cont")
+    require(hig, adam, what="fig3c continuations")
+    h = hig[0]
+    drop = h.initial_loss / loss_at(h, 0.25 * end_time(h))
+    fh, fa = final(hig), final(adam)
+    tuned = {r.cfg("optimizer.lr"): final([r]) for r in d.runs("adam_cont_tuned")}
+    fa_best = min([fa, *tuned.values()])
+    measured = (
+        f"start {sci(h.initial_loss)}; HIG after 1/4 of its budget {drop:.1f}x lower, final {sci(fh)} vs Adam continued "
+        f"{sci(fa)} (η=1e-4, paper)"
+        + "".join(f", η={lr:g} {sci(v)}" for lr, v in sorted(tuned.items()))
+        + f"; HIG's advantage {fa / fh:.2g}x (paper η), {fa_best / fh:.2g}x (best Adam)"
+    )
+    values = {"start": h.initial_loss, "hig_final": fh, "adam_final": fa_best, "hig_b": h.cfg("batch_size")}
+    values |= {"data": h.cfg("problem.data", "fourier"), "decisive": fh > h.initial_loss > fa_best}  # rising vs falling
+    return measured, fh <= 0.5 * fa_best, fh < fa_best, values
+
+
+@claim(
+    "poi-3",
+    "fig7",
+    "loss goes back up",
+    min_seconds=300,
+    cause=Cause(
+        "unspecified",
+        "follows from poi-2: HIG ends at {hig_final:e}, above its start {start:e}, so there is no HIG progress for Adam to "
+        "lose (Adam from it ends at {adam_after:e})",
+        {"HIG above its start": lambda v: v["hig_final"] > v["start"]},
+    ),
+)
+def adam_after_hig(datas):
+    """Poisson: Adam started from the HIG run loses HIG's progress. Rule: Adam after HIG ends >= 2x above the HIG run's
+    final loss (partly: above it)"""
+    hig, after = datas["fig7"].runs("hig_cont"), datas["fig7"].runs("adam_after_hig")
+    require(hig, after, what="fig7b")
+    fh, fa, start = final(hig), final(after), hig[0].initial_loss
+    values = {"hig_final": fh, "adam_after": fa, "start": start, "decisive": fh > start}  # no progress to lose
+    return f"HIG ended at {sci(fh)}; Adam continued from it ends at {sci(fa)}", fa >= 2 * fh, fa > fh, values
+
+
+@claim("poi-4", "fig7", "HIG faster per iteration", min_seconds=60, min_seeds=3)
+def per_update(datas):
+    """Poisson: per iteration, HIG converges faster than Adam. Rule: at HIG's last update count HIG's loss <= half of
+    Adam's after as many updates (best runs; partly: below it)"""
+    adam, hig = datas["fig7"].runs("adam"), datas["fig7"].runs("hig")
+    require(adam, hig, what="fig7a")
+    a, h = min(adam, key=lambda r: r.final_loss), min(hig, key=lambda r: r.final_loss)
+    n = min(updates_of(h), updates_of(a))
+    first = int(a.curves["step"].iloc[1]) if len(a.curves) > 1 else n + 1
+    if first > n:  # Adam's curve says nothing about its first n updates (evaluated by time)
+        return f"Adam's first evaluation after {first} updates, HIG's run {n}", None, "needs Adam evaluated by updates"
+    la, lh = at_update(a, n), at_update(h, n)
+    values = {"n": n, "hig": lh, "adam": la}
+    return f"after {n} updates: HIG {sci(lh)} vs Adam {sci(la)} (best runs)", lh <= 0.5 * la, lh < la, values
+
+
+def log_time_slope(run, start: float = 0.5) -> float:
+    """d log10(loss) / d log10(t) over the run's last half (least squares on its evaluations)."""
+    c = run.curves[(run.curves["wall_time"] >= start * end_time(run)) & (run.curves["wall_time"] > 0)]
+    if len(c) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log10(c["wall_time"]), np.log10(c["test_loss"]), 1)[0])
+
+
+# Slopes on a log-time axis need the paper's hour of updates.
+@claim("poi-5", "fig3b", "smallest-η Adam best; HIG steeper on log time", min_seconds=POISSON_HIG_HOUR)
+def adam_lr_and_slope(datas):
+    """Poisson (fig. 3b): the smallest-η Adam run is the best Adam per unit time, and on a log-time axis HIG's slope
+    stays steeper. Rule: the smallest-η Adam run ends lowest of the Adam grid, and the best HIG run's log-log slope
+    over the last half is steeper than the best Adam run's (partly: one of the two)"""
+    adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
+    require(adam, hig, what="fig3b")
+    small = min(adam, key=lambda r: r.cfg("optimizer.lr"))
+    best_adam, best_hig = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
+    sa, sh = log_time_slope(best_adam), log_time_slope(best_hig)
+    measured = f"best Adam: {best_adam.label()}; log-time slope over the last half: HIG {sh:.2f}, Adam {sa:.2f}"
+    values = {"adam_slope": sa, "hig_slope": sh}
+    return measured, small is best_adam and sh < sa, small is best_adam or sh < sa, values
+
+
+# -- dipole (figures 4b, 4c, 8-11) ----------------------------------------------------------
+# Paper 3.3, appendix B.4. fig4b, fig4c: sweeps "adam" and "hig"; figs 8-11: the appendix's grids.
+
+PLATEAU = (0.4, 0.6)  # "Adam stagnates at a loss value of 0.5"
+LE, HE = "test_low_energy_loss", "test_high_energy_loss"  # figure 4c's curves (figures/dipole.py)
+
+
+def plateau_seconds(run, band=PLATEAU, x: str = "wall_time") -> float:
+    """Training seconds (``x="step"``: updates) with the test loss inside ``band`` (piecewise
+    constant between evaluations).
+
+    A duration, not a share of the run: the plateau lasts the same time in a longer run."""
+    t, y = run.curves[x].to_numpy(dtype=float), run.curves["test_loss"].to_numpy(dtype=float)
+    if len(t) < 2:
+        return float("nan")
+    inside = (y[:-1] >= band[0]) & (y[:-1] <= band[1])
+    return float(np.sum(np.diff(t)[inside]))
+
+
+def energy_ratio(run, above: float = PLATEAU[0]) -> float:
+    """Median of high-energy / low-energy loss over the evaluations of the initial stage (after the
+    first, test loss >= ``above``): the paper's claim is about that stage; once Adam has left its
+    plateau both losses fall together. NaN when the run has no evaluation in that stage."""
+    if HE not in run.curves:
+        return float("nan")
+    c = run.curves.iloc[1:]
+    c = c[(c["test_loss"] >= above) & (c[LE] > 0)]
+    return float(np.median(c[HE] / c[LE])) if len(c) else float("nan")
+
+
+def _pair(datas, fid: str):
+    adam, hig = datas[fid].runs("adam"), datas[fid].runs("hig")
+    require(adam, hig, what=fid)
+    return adam, hig
+
+
+@claim(
+    "dip-1",
+    "fig4c",
+    "plateau at 0.5",
+    min_seconds=60,
+    min_seeds=3,
+    cause=Cause(
+        "hardware",
+        "Adam stagnates as the paper says, {adam_plateau_updates:.0f} updates on the plateau against HIG's "
+        "{hig_plateau_updates:.0f}, then ends at {adam_final:e}; but this CPU makes an Adam update (b={adam_b}) in "
+        "{adam_update_ms:.1f} ms, so those updates last {adam_plateau_s:.1f} s, under the rule's ten seconds of the "
+        "paper's clock",
+        {
+            "Adam stagnates longer than HIG, in updates": lambda v: v["adam_plateau_updates"] >= 2 * v["hig_plateau_updates"],
+            "shorter than ten seconds here": lambda v: v["adam_plateau_s"] < 10,
+        },
+    ),
+)
+def plateau(datas):
+    """Dipole: Adam (η=1e-4) first stagnates at a loss of 0.5. Rule: Adam spends >= 10 s of training time near 0.5, at
+    least twice as long as HIG, and ends below it (partly: longer than HIG)"""
+    adam, hig = _pair(datas, "fig4c")
+    ta, th = median(map(plateau_seconds, adam)), median(map(plateau_seconds, hig))
+    measured = f"training time with loss in [{PLATEAU[0]}, {PLATEAU[1]}]: Adam {ta:.0f} s, HIG {th:.0f} s; Adam final "
+    measured += sci(final(adam))
+    values = {"adam_b": adam[0].cfg("batch_size"), "adam_plateau_s": ta, "adam_final": final(adam)}
+    values["adam_plateau_updates"] = median(plateau_seconds(r, x="step") for r in adam)
+    values["hig_plateau_updates"] = median(plateau_seconds(r, x="step") for r in hig)
+    values["adam_update_ms"] = 1e3 * median(end_time(r) / max(updates_of(r), 1) for r in adam)
+    full = ta >= 10 and ta >= 2 * th and final(adam) < PLATEAU[0]  # a stall is one once Adam has left it
+    return measured, full, ta > th, values
+
+
+@claim(
+    "dip-2",
+    "fig4c",
+    "LE before HE for Adam",
+    min_seconds=60,
+    min_seeds=3,
+    cause=Cause(
+        "bug",
+        "Adam's HE/LE ratio in the initial stage is {adam_ratio:.1f}, HIG's {hig_ratio:.1f} from {hig_stage_evals} "
+        "evaluation(s): HIG leaves that stage within a few evaluations of our own interval (the figure now evaluates by "
+        "updates)",
+        {
+            "Adam's ratio at the rule's level": lambda v: v["adam_ratio"] >= 3,
+            "HIG's ratio above a third of Adam's": lambda v: v["hig_ratio"] > v["adam_ratio"] / 3,
+        },
+    ),
+)
+def energy(datas):
+    """Dipole: Adam fits the low-energy component first; HIG minimises both uniformly. Rule: in the initial stage (test
+    loss >= 0.4) Adam's high-energy loss >= 3x its low-energy loss, and HIG's ratio there <= a third of Adam's; HIG
+    has at least three evaluations in that stage (partly: Adam's ratio >= 3, or above HIG's)"""
+    adam, hig = _pair(datas, "fig4c")
+    ra, rh = median(map(energy_ratio, adam)), median(map(energy_ratio, hig))
+    evals = min(stage_evaluations(r) for r in hig)
+    if evals < 3:
+        measured = f"Adam's median HE/LE ratio {ra:.1f}; HIG has {evals} evaluation(s) in the initial stage"
+        return measured, None, "needs >= 3 HIG evaluations while the loss is >= 0.4 (fig4c evaluates HIG by updates)"
+    values = {"adam_ratio": ra, "hig_ratio": rh, "hig_stage_evals": evals}
+    measured = f"median HE/LE loss ratio while the loss is >= {PLATEAU[0]}: Adam {ra:.1f}, HIG {rh:.1f} ({evals} evaluations)"
+    return measured, ra >= 3 and rh <= ra / 3, (ra >= 3 or ra > rh), values
+
+
+def stage_evaluations(run, above: float = PLATEAU[0]) -> int:
+    """Evaluations after the first with the test loss >= ``above`` (the initial stage)."""
+    return int((run.curves["test_loss"].iloc[1:] >= above).sum())
+
+
+@claim("dip-3", "fig4c", "HIG below Adam", min_seconds=60, min_seeds=3)
+def hig_below(datas):
+    """Dipole: HIG minimises the loss faster and to a lower level than Adam. Rule: over fig. 4c's seeds (the paper's
+    settings), HIG's median final loss <= half of Adam's, and HIG below Adam at a tenth of the budget (partly: below
+    it at the end)"""
+    adam, hig = _pair(datas, "fig4c")
+    fa, fh = final(adam), final(hig)
+    t10 = 0.1 * min(end_time(r) for r in adam + hig)
+    ea, eh = median(loss_at(r, t10) for r in adam), median(loss_at(r, t10) for r in hig)
+    measured = f"median over {len(hig)} seeds: final HIG {sci(fh)} vs Adam {sci(fa)} ({fa / fh:.2g}x); at {t10:.0f} s HIG "
+    measured += f"{sci(eh)} vs Adam {sci(ea)}"
+    return measured, fh <= 0.5 * fa and eh < ea, fh < fa, {"hig": fh, "adam": fa}
+
+
+@claim(
+    "dip-4",
+    "fig4b",
+    "~1e-6",
+    min_seconds=DIPOLE_HIG_HOUR,
+    cause=Cause(
+        "hardware",
+        "the best run reaches {low:e}, below {float32_floor:e} (where a float32 evaluation rounds) and far below the "
+        "paper's {paper_dipole_limit:e}: the paper's limit is its solver's precision (the authors' dipole solver is "
+        "complex64 throughout and its norm drifts over an episode; ours computes in float64 inside)",
+        {"the best run below the float32 floor": lambda v: v["low"] < v["float32_floor"]},
+    ),
+)
+def limit(datas):
+    """Dipole: the attainable accuracy (pure physics optimisation) is about 1e-6. Rule: the best run reaches [1e-7,
+    1e-5] (partly: below 1e-7, where the limit is the solver's precision, or (1e-5, 1e-4]); higher means the budget
+    was too short to approach the limit"""
+    require(runs := datas["fig4b"].runs(), what="fig4b")
+    low = min(best([r]) for r in runs)
+    shown = "below 1e-7 (float32 evaluation)" if low < 1e-7 else sci(low)
+    return f"lowest test loss of any fig4b run: {shown}", 1e-7 <= low <= 1e-5, low <= 1e-4, {"low": low, "decisive": low < 1e-7}
+
+
+@claim(
+    "dip-5",
+    "fig4b",
+    "fast start, worst end",
+    min_seconds=60,
+    cause=Cause(
+        "seeds",
+        "the ordering of the η grid rests on {seeds} run per η; Adam's largest η lowest early: {fastest}, worst at the "
+        "end: {worst}",
+        {"one seed per setting": lambda v: v["seeds"] < 3},
+    ),
+)
+def adam_large_lr(datas):
+    """Dipole: the largest-η Adam run drops fastest initially but ends worst. Rule: the largest-η Adam run is the lowest
+    at 10% of the budget and the highest at the end (partly: one of the two)"""
+    adam = datas["fig4b"].runs("adam")
+    require(len(adam) >= 2, what="fig4b Adam")
+    lr = max(adam, key=lambda r: r.cfg("optimizer.lr")).cfg("optimizer.lr")
+    t10 = 0.1 * min(float(r.curves["wall_time"].iloc[-1]) for r in adam)
+    early, late = ({r.cfg("optimizer.lr"): f(r) for r in adam} for f in (lambda r: loss_at(r, t10), lambda r: final([r])))
+    fastest, worst = min(early, key=early.get) == lr, max(late, key=late.get) == lr
+    return (
+        f"Adam η={num(lr)}: lowest at 10% of the budget: {fastest}; worst at the end: {worst}",
+        fastest and worst,
+        fastest or worst,
+        {"fastest": fastest, "worst": worst},
+    )
+
+
+@claim("dip-6", "fig9", "stable 1e-5..1e-3, 1e-2 worse", min_seconds=120)
+def dipole_tau(datas):
+    """Dipole: HIG trains stably for τ from 1e-5 to 1e-3; τ=1e-2 cuts off information. Rule: τ in 1e-5..1e-3 within 10x
+    of the best τ and τ=1e-2 worse than all of them (partly: one of the two)"""
+    require(runs := datas["fig9"].runs("hig"), what="fig9")
+    lr_b = {(r.cfg("optimizer.lr"), r.cfg("batch_size")) for r in runs}
+    key = (0.5, 16) if (0.5, 16) in lr_b else sorted(lr_b)[0]
+    per_tau = {r.cfg("optimizer.tau"): final([r]) for r in runs if (r.cfg("optimizer.lr"), r.cfg("batch_size")) == key}
+    mid = [per_tau[t] for t in (1e-5, 1e-4, 1e-3) if t in per_tau]
+    if not mid or 1e-2 not in per_tau:
+        return "taus run: " + ", ".join(num(t) for t in sorted(per_tau)), None, "needs tau in {1e-5, 1e-4, 1e-3} and 1e-2"
+    stable, cut = max(mid) <= 10 * min(per_tau.values()), per_tau[1e-2] > max(mid)
+    return (
+        f"η={num(key[0])} b={key[1]}: " + ", ".join(f"τ={num(t)}: {sci(v)}" for t, v in sorted(per_tau.items())),
+        stable and cut,
+        stable or cut,
+    )
+
+
+@claim(
+    "cnn-1",
+    "fig10 fig11",
+    "HIG (η=0.7,b=16,τ=1e-4) below Adam (η=2e-4,b=256)",
+    min_seconds=120,
+    min_seeds=3,
+    cause=Cause(
+        "budget",
+        "best HIG {hig:e} against the best Adam {adam:e}, HIG still falling ({hig_half:e} half-way)",
+        {"HIG still falling": below("hig", "hig_half")},
+    ),
+)
+def cnn(datas):
+    """Dipole CNN: the best HIG run beats the best Adam run. Rule: best HIG CNN run's final loss <= half of the best Adam
+    CNN run's (partly: below it)"""
+    adam, hig = datas["fig10"].runs("adam"), datas["fig11"].runs("hig")
+    require(adam, hig, what="fig10/fig11")
+    a, h = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
+    fa, fh = final([a]), final([h])
+    paper = [final([r]) for r in adam if r.cfg("optimizer.lr") == 2e-4 and r.cfg("batch_size") == 256]
+    vs_paper = f"; Adam at the paper's η=2e-4 b=256 {sci(paper[0])} ({paper[0] / fh:.2g}x)" if paper else ""
+    measured = f"best HIG {sci(fh)} ({h.label()}), best Adam of the grid {sci(fa)} ({a.label()}; HIG's advantage {fa / fh:.2g}x)"
+    return measured + vs_paper, fh <= 0.5 * fa, fh < fa, {"hig": fh, "adam": fa, "hig_half": half_way([h])}
+
+
+@claim(
+    "dip-7",
+    "fig8",
+    "Adam: slow convergence or oscillation",
+    min_seconds=20,
+    cause=Cause(
+        "seeds",
+        "at all {slow_b} of {n_b} batch sizes the smallest η is the slowest at a tenth of the budget, as the paper says; "
+        "the largest η oscillates most at {shaky_b} of them and a middle η at the others, each from a single seed per "
+        "setting (a median needs three)",
+        {"the smallest η slow at every b": lambda v: v["slow_b"] == v["n_b"], "one seed": lambda v: v["seeds"] < 3},
+    ),
+)
+def adam_trade_off(datas):
+    """Dipole (fig. 8): Adam trades slow convergence against oscillation. Rule: at every b the smallest-η Adam run is
+    the highest at 10% of the budget (slow) and the largest-η run oscillates most over the last half (partly: at some
+    b)"""
+    require(runs := datas["fig8"].runs("adam"), what="fig8")
+    per_b, slow, shaky, text = [], [], [], []
+    for b in sorted({r.cfg("batch_size") for r in runs}):
+        rs = sorted((r for r in runs if r.cfg("batch_size") == b), key=lambda r: r.cfg("optimizer.lr"))
+        if len(rs) < 2:
+            continue
+        t10 = 0.1 * min(end_time(r) for r in rs)
+        early, wobble = [loss_at(r, t10) for r in rs], [oscillation(r) for r in rs]
+        slow.append(early[0] == max(early))
+        shaky.append(wobble[-1] == max(wobble))
+        per_b.append(slow[-1] and shaky[-1])
+        lo, hi = (num(r.cfg("optimizer.lr")) for r in (rs[0], rs[-1]))
+        text.append(
+            f"b={b}: at 10% of the budget η={lo} {sci(early[0])}, η={hi} {sci(early[-1])} (lowest: "
+            f"η={num(rs[int(np.argmin(early))].cfg('optimizer.lr'))}); oscillation "
+            + ", ".join(f"η={num(r.cfg('optimizer.lr'))} {w:.2g}" for r, w in zip(rs, wobble))
+        )
+    require(per_b, what="fig8 (two η at one b)")
+    values = {"n_b": len(per_b), "slow_b": sum(slow), "shaky_b": sum(shaky)}
+    return "; ".join(text), all(per_b), any(per_b), values
+
+
+@claim(
+    "dip-8",
+    "fig9",
+    "τ above ~1e-6",
+    min_seconds=120,
+    cause=Cause(
+        "hardware",
+        "with our double-precision inversion τ={probe_tau_small:e} trains as well as the stable range ({tau6:e} against "
+        "{best_mid:e}); with the inversion in single precision, as in the authors' code, it ends at "
+        "{probe_small_float32:e} after {probe_updates} updates, {probe_float32_small_over_large:.0f}x above "
+        "τ={probe_tau_large:e} ({probe_large_float32:e}), where in double precision the first ends at "
+        "{probe_float64_small_over_large:.1f} times the second (precision probe): the paper's lower limit on τ is its "
+        "inversion's precision",
+        {
+            "fine in double precision here": lambda v: v["tau6"] <= 2 * v["best_mid"],
+            "far worse in single precision": lambda v: v["probe_float32_small_over_large"] >= 10,
+            "alike in double precision": lambda v: v["probe_float64_small_over_large"] < 3,
+        },
+        probe=probe_values("precision.csv", precision_probe("dipole")),
+    ),
+)
+def tau_floor(datas):
+    """Dipole (fig. 9): τ must be above about 1e-6. Rule: at η=0.5, b=16 the τ=1e-6 run ends >= 2x above the best of
+    τ in 1e-5..1e-3 (partly: above it)"""
+    require(runs := datas["fig9"].runs("hig"), what="fig9")
+    per_tau = {r.cfg("optimizer.tau"): final([r]) for r in runs if (r.cfg("optimizer.lr"), r.cfg("batch_size")) == (0.5, 16)}
+    mid = [per_tau[t] for t in (1e-5, 1e-4, 1e-3) if t in per_tau]
+    require(mid and 1e-6 in per_tau, what="fig9 τ=1e-6 and 1e-5..1e-3 at η=0.5 b=16")
+    low = per_tau[1e-6]
+    values = {"tau6": low, "best_mid": min(mid)}
+    return f"τ=1e-6 {sci(low)} vs best of 1e-5..1e-3 {sci(min(mid))}", low >= 2 * min(mid), low > min(mid), values
+
+
+@claim("cnn-2", "fig11", "stable for τ 1e-5..1e-3", min_seconds=20)
+def cnn_tau(datas):
+    """Dipole CNN (fig. 11): HIG trains stably for τ from 1e-5 to 1e-3. Rule: every HIG CNN run with τ in 1e-5..1e-3
+    completes and ends below its initial loss (partly: all but one)"""
+    runs = [r for r in datas["fig11"].runs("hig") if 1e-5 <= r.cfg("optimizer.tau") <= 1e-3]
+    require(runs, what="fig11 τ in 1e-5..1e-3")
+    bad = [r.label() for r in runs if not (r.status == "completed" and r.final_loss < r.initial_loss)]
+    return f"{len(runs) - len(bad)}/{len(runs)} stable" + (f"; unstable: {', '.join(bad)}" if bad else ""), not bad, len(bad) <= 1
+
+
+# -- ablations (figures 12, 13) -------------------------------------------------------------
+# Paper appendix C. fig12: sweeps "beta" and "kappa"; fig13: "hig" and "gn" over τ.
+
+
+@claim(
+    "abl-1",
+    "fig12",
+    "little influence",
+    min_seconds=120,
+    cause=Cause(
+        "budget",
+        "a negative β scales HIG's step by max(s)^β, a slower start: the spread over β shrinks from {spread_half:.0f}x "
+        "half-way to {spread:.0f}x at the end",
+        {"the spread shrinks": below("spread", "spread_half")},
+    ),
+)
+def beta(datas):
+    """Ablation: β has little influence on the outcome. Rule: final losses over β within 10x, none diverged (partly:
+    within 100x)"""
+    require(len(runs := datas["fig12"].runs("beta")) >= 2, what="fig12a")
+    fin = {r.cfg("optimizer.beta"): final([r]) for r in runs}
+    finite = [v for v in fin.values() if math.isfinite(v)]
+    spread = max(finite) / min(finite) if finite else math.inf
+    measured = ", ".join(f"β={num(b)}: {sci(v)}" for b, v in sorted(fin.items(), reverse=True)) + f" (spread {spread:.1f}x)"
+    halves = [h for r in runs if math.isfinite(h := half_way([r]))]
+    values = {"spread": spread, "spread_half": max(halves) / min(halves) if halves else math.inf}
+    return measured, spread < 10 and len(finite) == len(fin), spread < 100, values
+
+
+@claim("abl-2", "fig12", "orders of magnitude", min_seconds=30)
+def kappa(datas):
+    """Ablation: κ > 0 stagnates early; κ < 0 ends orders of magnitude lower. Rule: best negative-κ run >= 100x below
+    the best positive-κ run (partly: >= 10x)"""
+    runs = datas["fig12"].runs("kappa")
+    pos, neg = ([final([r]) for r in runs if sign * r.cfg("optimizer.kappa") > 0] for sign in (1, -1))
+    require(pos, neg, what="fig12b (needs kappa > 0 and < 0)")
+    ratio = min(pos) / min(neg) if min(neg) > 0 else math.inf
+    return f"best κ>0 {sci(min(pos))}, best κ<0 {sci(min(neg))} ({ratio:.0f}x)", ratio >= 100, ratio >= 10
+
+
+@claim(
+    "abl-3",
+    "fig13",
+    "GN diverges, HIG stable",
+    min_seconds=120,
+    cause=Cause(
+        "disagreement",
+        "GN's best stable seed ({gn_seed}) does not diverge at small τ here: at τ={tau_small:e} it is {gn_small_status} "
+        "at {gn_small:e} after {n} updates; nor with the inversion in the authors' single precision (precision probe, "
+        "{probe_updates} updates: τ={probe_tau_small:e} {probe_small_float32_status} at {probe_small_float32:e} against "
+        "{probe_small_float64:e} in double): {search_diverged} of {search_seeds} seeds already diverge at the paper's τ "
+        "(the seed search), "
+        "so GN's instability here is its start, not τ; HIG ends lower ({hig_best:e} against GN's {gn_best:e})",
+        {
+            "GN completes at the smallest τ": lambda v: v["gn_small_status"] == "completed",
+            "and in single precision": lambda v: v["probe_small_float32_status"] == "completed",
+            "HIG below GN": below("hig_best", "gn_best"),
+            "most seeds diverge at the paper's τ": lambda v: 2 * v["search_diverged"] > v["search_seeds"],
+        },
+        probe=probe_values("precision.csv", precision_probe("oscillator")),
+    ),
+)
+def ablation_tau(datas):
+    """Ablation: GN becomes unstable for small τ (diverges at 1e-9, 1e-10); HIG tolerates τ and ends lower. Rule: at
+    equal update counts (the fewest any run made: below τ ~1e-7 the SVD route is slower per update), GN (best stable
+    seed) stable at τ >= 1e-6 and diverging or >10x worse at τ <= 1e-9, every HIG run stable and HIG's best below
+    GN's (partly: the GN part or the HIG part)"""
+    d = datas["fig13"]
+    hig, gn = d.runs("hig"), d.runs("gn")
+    require(hig, gn, what="fig13")
+    t = {id(r): r.cfg("optimizer.tau") for r in gn + hig}
+    n = min(updates_of(r) for r in gn + hig if r.status != "diverged")
+    at = {id(r): math.inf if r.status == "diverged" else at_update(r, n) for r in gn + hig}
+    large, small = [r for r in gn if t[id(r)] >= 1e-6], [r for r in gn if t[id(r)] <= 1e-9]
+    gn_best = min(at[id(g)] for g in gn)
+    measured = (
+        f"after {n} updates, GN (seed {gn[0].seed}): "
+        + ", ".join(f"τ={num(t[id(r)])} {r.status} {sci(at[id(r)])}" for r in gn)
+        + "; HIG: "
+        + ", ".join(f"τ={num(t[id(r)])} {sci(at[id(r)])}" for r in hig)
+        + f"; GN seed search at τ=1e-6: {gn_search_summary(d, 'gn/search')}"
+    )
+    if not small or not large:
+        return measured, None, "needs GN runs at τ >= 1e-6 and at τ <= 1e-9"
+    gn_part = all(map(stable, large)) and all(r.status == "diverged" or at[id(r)] > 10 * gn_best for r in small)
+    hig_part = all(map(stable, hig)) and min(at[id(r)] for r in hig) < gn_best
+    smallest = min(small, key=lambda r: t[id(r)])
+    values = {"n": n, "gn_seed": smallest.seed, "tau_small": t[id(smallest)], "gn_small": at[id(smallest)]}
+    values |= {"gn_small_status": smallest.status, "gn_best": gn_best, "hig_best": min(at[id(r)] for r in hig)}
+    search = d.runs("gn/search")
+    values |= {"search_seeds": len(search), "search_diverged": sum(r.status == "diverged" for r in search)}
+    return measured, gn_part and hig_part, gn_part or hig_part, values
+
+
+@claim("abl-4", "fig12", "κ=-0.5 best", min_seconds=120)
+def kappa_best(datas):
+    """Ablation (fig. 12b): κ=-0.5 is the best κ. Rule: κ=-0.5 ends lowest of the κ sweep (partly: within 2x of the
+    lowest)"""
+    runs = datas["fig12"].runs("kappa")
+    fin = {r.cfg("optimizer.kappa"): final([r]) for r in runs}
+    require(-0.5 in fin and len(fin) >= 2, what="fig12b κ=-0.5 and others")
+    k_best = min(fin, key=fin.get)
+    return f"κ=-0.5 {sci(fin[-0.5])}; lowest: κ={num(k_best)} {sci(fin[k_best])}", k_best == -0.5, fin[-0.5] <= 2 * fin[k_best]
+
+
+# -- tables 3-5: the cost of an update ------------------------------------------------------
+# Paper 2.3 and tables 3-5, read through ``higbench.bench.tables.timing_frame``.
+
+
+RATIO_RULE = (
+    "measured HIG/Adam update-time ratio within 3x of the paper's ratio (partly: within 10x); paper on a GPU, here on CPU"
+)
+
+
+def reference_ratio(tid: str, hig_b: int, adam_b: int) -> dict:
+    """The authors' own code's HIG/Adam update-time ratio on this CPU kind (reference.py), if measured."""
+    t = {(r["optimizer"], r["batch_size"]): r["update_s"] for r in UPDATE_SECONDS if r["problem"] == PROBLEMS[tid]}
+    found = ("hig", hig_b) in t and ("adam", adam_b) in t
+    return {"ref_ratio": t[("hig", hig_b)] / t[("adam", adam_b)]} if found else {}
+
+
+def ratio(cid: str, tid: str, hig_b: int, adam_b: int, paper: str, statement: str, cause: Cause | None = None) -> None:
+    """Declare a claim on the HIG/Adam update-time ratio of a table."""
+
+    def measure(datas):
+        df = timing_frame(datas[tid])
+        h, a = cell(df, "HIG", hig_b, "Update duration (s)"), cell(df, "Adam", adam_b, "Update duration (s)")
+        if math.isnan(h) or math.isnan(a) or a <= 0:
+            raise Missing(f"{tid} HIG b={hig_b} / Adam b={adam_b}")
+        r, paper = h / a, PAPER_TIMINGS[tid][("hig", hig_b)][1] / PAPER_TIMINGS[tid][("adam", adam_b)][1]
+        off = max(r / paper, paper / r)
+        source = "benchmark script" if "bench_step" in df.attrs.get("source", "") else "timing runs"
+        values = {"ratio": r, "paper_ratio": paper} | reference_ratio(tid, hig_b, adam_b)
+        return f"HIG {h:.3g} s / Adam {a:.3g} s = {r:.3g}x (paper {paper:.3g}x); CPU, {source}", off <= 3, off <= 10, values
+
+    measure.__doc__ = f"{statement} Rule: {RATIO_RULE}"
+    claim(cid, tid, paper, cause=cause)(measure)
+
+
+SPD1_CAUSE = Cause(
+    "hardware",
+    "measured on a CPU ({ratio:.1f}x) against the paper's GPU ({paper_ratio:.1f}x); the authors' own code on this CPU gives "
+    "{ref_ratio:.0f}x (reference.py): the ratio is the hardware's",
+    {
+        "the authors' code off the paper's ratio too": lambda v: (
+            max(v["ref_ratio"], v["paper_ratio"]) / min(v["ref_ratio"], v["paper_ratio"]) > 3
+        )
+    },
+)
+ratio(
+    "spd-1",
+    "table3",
+    128,
+    512,
+    "0.146 s vs 0.081 s",
+    "Oscillators: a HIG update (b=128) costs about 1.8 Adam updates (b=512)",
+    SPD1_CAUSE,
+)
+
+
+@claim(
+    "spd-2",
+    "table3",
+    "169 / 676 / 2640 MB at b=32/64/128",
+    cause=Cause(
+        "hardware",
+        "memory grows {ratio:.1f}x from b={b_lo} to b={b_hi} here against {paper_osc_memory_ratio:.1f}x in the paper, whose "
+        "quadratic growth it attributes to its Jacobian implementation; higbench's structured route never forms J",
+        {"memory grows less than quadratically": lambda v: v["ratio"] < 8},
+    ),
+)
+def memory(datas):
+    """Oscillators: HIG's memory grows about quadratically with the batch size. Rule: memory grows >= 8x from b=32 to
+    128 (about quadratically; paper 15.6x) (partly: >= 2x)"""
+    df = timing_frame(datas["table3"])
+    m32, m128 = cell(df, "HIG", 32, "Memory (MB)"), cell(df, "HIG", 128, "Memory (MB)")
+    if math.isnan(m32) or math.isnan(m128) or m32 <= 0:
+        raise Missing("table3 HIG b=32/128 memory")
+    r = m128 / m32
+    values = {"ratio": r, "b_lo": 32, "b_hi": 128}
+    return f"HIG memory b=128 / b=32 = {r:.1f}x ({m32:.0f} -> {m128:.0f} MB host memory)", r >= 8, r >= 2, values
+
+
+ratio("spd-3", "table4", 64, 64, "13.8 s vs 0.011 s", "Poisson: a HIG update costs about 1250 Adam updates (b=64)")
+ratio("spd-4", "table5", 16, 256, "0.60 s vs 0.40 s", "Dipole: a HIG update (b=16) costs about 1.5 Adam updates (b=256)")
+
+
+@claim("spd-5", "table3", "O(|θ| b² |y|²); Jacobian ~ a backward pass")
+def cost_scaling(datas):
+    """Oscillators (§2.3, tables 3-5): a HIG update costs O(|θ| b² |y|²) and its Jacobian about a backward pass. Rule:
+    HIG's update time grows at most quadratically from b=32 to 128 (<= 16x) and its Jacobian at b=128 takes at most
+    10x Adam's whole update at b=512 (partly: one of the two)"""
+    df = timing_frame(datas["table3"])
+    t32, t128 = cell(df, "HIG", 32, "Update duration (s)"), cell(df, "HIG", 128, "Update duration (s)")
+    jac, adam = cell(df, "HIG", 128, "Jacobian duration (s)"), cell(df, "Adam", 512, "Update duration (s)")
+    if any(math.isnan(x) for x in (t32, t128, jac, adam)) or min(t32, adam) <= 0:
+        raise Missing("table3 HIG b=32/128 update and Jacobian times, Adam b=512")
+    growth, jac_ratio = t128 / t32, jac / adam
+    measured = f"HIG update b=128 / b=32 {growth:.1f}x; Jacobian (b=128) / Adam update (b=512) {jac_ratio:.1f}x"
+    return measured, growth <= 16 and jac_ratio <= 10, growth <= 16 or jac_ratio <= 10, {"growth": growth, "jac": jac_ratio}
+
+
+def claims() -> dict[str, Claim]:
+    """Every claim, in the report's order (declaration order above)."""
+    return by_id(CLAIMS, "claim")
