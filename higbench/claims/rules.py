@@ -421,6 +421,11 @@ PAPER = {
 PAPER_HOUR = 3600.0
 
 
+def float32_loss(v: float) -> str:
+    """A dipole loss as text: below the float32 floor the evaluation is rounding, so the value says nothing."""
+    return f"below {sci(PAPER['float32_floor'])} (float32 evaluation)" if v < PAPER["float32_floor"] else sci(v)
+
+
 def paper_hour_updates(paper_update_s: float) -> int:
     """Updates the paper made in its hour of training."""
     return int(PAPER_HOUR // paper_update_s)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import HE, LE
-from higbench.claims.rules import OPTIMIZER_NAMES, sci
+from higbench.claims.rules import OPTIMIZER_NAMES, float32_loss
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid
@@ -84,7 +84,8 @@ def fig4a(d: FigureData, ax) -> None:
             d.record("probability", f"x={x[k]:.3f}", run, "t", t, "abs_psi_sq", prob[:, k])
         d.record("control", "u", run, "t", tu, "u", uu)
         fin = float(problem.loss(problem.physics(batch.inputs, u), batch.targets)[0])
-        ax.set_title(f"a) dipole: |Ψ|² under the HIG-trained network ({run.label()}); loss of this state {sci(fin)}", fontsize=8)
+        title = f"a) dipole: |Ψ|² under the HIG-trained network ({run.label()})\nloss of this state: {float32_loss(fin)}"
+        ax.set_title(title, fontsize=8)
     else:
         legend(ax)
     ax.set(xlabel="time t", ylabel="x")

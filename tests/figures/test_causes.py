@@ -120,7 +120,11 @@ SYNTHETIC = [
     ),  # fmt: skip
     ("dip-4", dict(low=2.3e-8), dict(low=3e-6)),  # "below the float32 floor" with a run at 3e-6
     ("osc-4", dict(t_cross=8.0), dict(t_cross=150.0)),  # "before the paper's window" for a crossing inside it
-    ("osc-3", dict(hig=2.9e-6, hig_half=1e-5, hig_updates=11638), dict(hig=1e-7)),  # below the authors' draw's level
+    (
+        "osc-3",
+        dict(hig=7.6e-7, hig_half=1e-6, hig_updates=36799, lowest=6.5e-7, lowest_name="GN"),
+        dict(hig=1e-7),  # below the authors' draw's level
+    ),
     ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9), dict(hig_b=64)),
     ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=0.5)),
     ("abl-1", dict(spread=36.7, spread_half=300.0), dict(spread_half=10.0)),
