@@ -148,7 +148,8 @@ def _evidence(r: dict) -> str:
 
 def _provenance(info: dict) -> str:
     made = info.get("made", {})
-    parts = [made.get("revision"), made.get("date") or info.get("generated"), made.get("machine"), made.get("load")]
+    judged = [made.get("revision"), made.get("date") or info.get("generated"), made.get("machine"), made.get("load")]
+    parts = [made.get("runs"), *judged]
     return "; ".join(str(p) for p in parts if p)
 
 
@@ -176,7 +177,14 @@ def write_report(out_dir: Path, figure_ids: list[str]) -> Path:
     lines += ["", "## Rules and causes", "", *map(_evidence, rows)] + reference_section(infos)
     lines += ["", "## Figures and tables in this directory", ""]
     drawn = {k: v for k, v in infos.items() if "runs" in v}  # drawn figures list their runs
-    header = ["id", "preset", "budget per run", "runs done / needed", "made (revision; date; machine; load)", "notes"]
+    header = [
+        "id",
+        "preset",
+        "budget per run",
+        "runs done / needed",
+        "made (runs; drawn: revision, date, machine, load)",
+        "notes",
+    ]
     lines += md_table(header, [_figure_row(fid, drawn.get(fid)) for fid in figure_ids])
     path = Path(out_dir) / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")

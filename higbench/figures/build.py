@@ -120,7 +120,7 @@ class Builder:
         mine = [c for c in registry.claims().values() if c.figures[0] == figure.id]
         smoke = self.preset.name in UPDATES_ONLY
         extra["claims"] = [judge(c, {f: self.figure_data(known[f]) for f in c.figures}, self.preset.name, smoke) for c in mine]
-        extra["made"] = provenance()
+        extra["made"] = provenance() | runs_made(data)
         if miss := len(data.missing()):
             result.missing[figure.id] = miss
         data.write_sidecar(extra)
@@ -141,6 +141,19 @@ def provenance() -> dict:
         "machine": f"{os.cpu_count()} CPU cores ({platform.machine()} {platform.system()})",
         "load": "load {:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else "",
     }
+
+
+def runs_made(data: FigureData) -> dict:
+    """When and at which revisions the figure's runs were made, from their run files: a figure
+    redrawn later records its own date and load (``provenance``), not its runs'."""
+    metas = [r.meta for r in data.runs()]
+    if not metas:
+        return {}
+    start, end = min(m["started"] for m in metas), max(m["finished"] or m["started"] for m in metas)
+    revisions = sorted({str(m["env"].get("git_revision", ""))[:7] for m in metas} - {""})
+    day, hhmm = (lambda t: t[:10]), (lambda t: t[11:16])
+    span = f"{day(start)} {hhmm(start)}-" + ("" if day(end) == day(start) else f"{day(end)} ") + f"{hhmm(end)} UTC"
+    return {"runs": f"runs made {span}" + (f" at {', '.join(revisions)}" if revisions else "")}
 
 
 def build(

@@ -430,3 +430,22 @@ def test_a_grid_of_facets_without_a_finished_run_still_draws(tmp_path):
         job.path = None  # a failed run leaves nothing to draw
     draw(d)
     assert d.rows == [] and (tmp_path / "figN.png").stat().st_size > 0
+
+
+def test_a_figure_records_when_and_at_which_revisions_its_runs_were_made():
+    from types import SimpleNamespace
+
+    from higbench.figures.build import runs_made
+
+    def run(started, finished, rev):
+        return SimpleNamespace(meta={"started": started, "finished": finished, "env": {"git_revision": rev}})
+
+    same_day = [
+        run("2026-11-24T04:53:29+0000", "2026-11-24T05:08:00+0000", "ab5624bdeadbeef"),
+        run("2026-11-24T05:10:00+0000", "", "b5158bd0"),
+    ]
+    data = SimpleNamespace(runs=lambda: same_day)
+    assert runs_made(data) == {"runs": "runs made 2026-11-24 04:53-05:10 UTC at ab5624b, b5158bd"}
+    two_days = [run("2026-11-23T22:20:00+0000", "2026-11-24T01:23:00+0000", "")]
+    assert runs_made(SimpleNamespace(runs=lambda: two_days)) == {"runs": "runs made 2026-11-23 22:20-2026-11-24 01:23 UTC"}
+    assert runs_made(SimpleNamespace(runs=lambda: [])) == {}
