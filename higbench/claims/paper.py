@@ -786,7 +786,10 @@ def hig_below(datas):
     fa, fh = final(adam), final(hig)
     t10 = 0.1 * min(end_time(r) for r in adam + hig)
     ea, eh = median(loss_at(r, t10) for r in adam), median(loss_at(r, t10) for r in hig)
-    measured = f"median over {len(hig)} seeds: final HIG {sci(fh)} vs Adam {sci(fa)} ({fa / fh:.2g}x); at {t10:.0f} s HIG "
+    ratio = f"{fa / fh:.2g}x" if fh >= PAPER["float32_floor"] else f"> {fa / PAPER['float32_floor']:.2g}x"
+    measured = (
+        f"median over {len(hig)} seeds: final HIG {float32_loss(fh)} vs Adam {float32_loss(fa)} ({ratio}); at {t10:.0f} s HIG "
+    )
     measured += f"{sci(eh)} vs Adam {sci(ea)}"
     return measured, fh <= 0.5 * fa and eh < ea, fh < fa, {"hig": fh, "adam": fa}
 
