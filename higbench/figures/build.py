@@ -10,6 +10,7 @@ import os
 import time
 import traceback
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 
 from higbench.bench.tables import ensure_bench
@@ -48,7 +49,7 @@ class Builder:
         self.runs_root, self.out_dir = Path(runs_root), Path(out_dir)
         self.n_jobs = jobs or max(1, min(os.cpu_count() or 1, 2))
         self.launcher, self.log = launcher, log
-        self.index = RunIndex.scan(self.runs_root)
+        self.index = RunIndex(self.runs_root)
         self.jobs: dict[str, list[Job]] = {}
 
     def jobs_of(self, figure: Figure) -> list[Job]:
@@ -76,7 +77,7 @@ class Builder:
             result.launched += len(todo)
             result.run_files.extend(written)
             tried.update(todo)
-            self.index = RunIndex.scan(self.runs_root)
+            self.index = RunIndex(self.runs_root)
 
     def plan(self, figures: list[Figure]) -> list[tuple[str, int, int, float]]:
         """(figure, runs needed, runs missing, training seconds missing; shared runs counted once)."""
@@ -144,16 +145,22 @@ def provenance() -> dict:
 
 
 def runs_made(data: FigureData) -> dict:
-    """When and at which revisions the figure's runs were made, from their run files: a figure
-    redrawn later records its own date and load (``provenance``), not its runs'."""
+    """When (UTC) and at which revisions the figure's runs were made, from their run files: a
+    figure redrawn later records its own date and load (``provenance``), not its runs'."""
     metas = [r.meta for r in data.runs()]
     if not metas:
         return {}
-    start, end = min(m["started"] for m in metas), max(m["finished"] or m["started"] for m in metas)
-    revisions = sorted({str(m["env"].get("git_revision", ""))[:7] for m in metas} - {""})
-    day, hhmm = (lambda t: t[:10]), (lambda t: t[11:16])
-    span = f"{day(start)} {hhmm(start)}-" + ("" if day(end) == day(start) else f"{day(end)} ") + f"{hhmm(end)} UTC"
+    start = min(_utc(m["started"]) for m in metas)
+    end = max(_utc(m.get("finished") or m["started"]) for m in metas)
+    revisions = sorted({str(m.get("env", {}).get("git_revision", ""))[:7] for m in metas} - {""})
+    tail = end.strftime("%H:%M" if end.date() == start.date() else "%Y-%m-%d %H:%M")
+    span = f"{start:%Y-%m-%d %H:%M}-{tail} UTC"
     return {"runs": f"runs made {span}" + (f" at {', '.join(revisions)}" if revisions else "")}
+
+
+def _utc(stamp: str) -> datetime:
+    """A run file's time stamp (local time with its UTC offset, ``%Y-%m-%dT%H:%M:%S%z``) in UTC."""
+    return datetime.strptime(stamp, "%Y-%m-%dT%H:%M:%S%z").astimezone(timezone.utc)
 
 
 def build(

@@ -220,10 +220,6 @@ class RunIndex:
             for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
                 self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
 
-    @classmethod
-    def scan(cls, root: Path | None) -> RunIndex:
-        return cls(root)
-
     def find(self, identity: str) -> IndexedRun | None:
         """The run the index chooses for this identity (done if any is), or None."""
         return self._by_id.get(identity)

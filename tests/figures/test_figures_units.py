@@ -448,4 +448,7 @@ def test_a_figure_records_when_and_at_which_revisions_its_runs_were_made():
     assert runs_made(data) == {"runs": "runs made 2026-11-24 04:53-05:10 UTC at ab5624b, b5158bd"}
     two_days = [run("2026-11-23T22:20:00+0000", "2026-11-24T01:23:00+0000", "")]
     assert runs_made(SimpleNamespace(runs=lambda: two_days)) == {"runs": "runs made 2026-11-23 22:20-2026-11-24 01:23 UTC"}
+    # run files stamp local time with its offset: 00:30 at +0100 is 23:30 UTC the day before
+    zones = [run("2026-11-24T00:30:00+0100", "2026-11-24T00:40:00+0100", "c0ffee0"), run("2026-11-23T23:35:00+0000", "", "")]
+    assert runs_made(SimpleNamespace(runs=lambda: zones)) == {"runs": "runs made 2026-11-23 23:30-23:40 UTC at c0ffee0"}
     assert runs_made(SimpleNamespace(runs=lambda: [])) == {}

@@ -562,7 +562,7 @@ def test_fifo_in_runs_tree_does_not_hang_the_figures_index(tmp_path):
     train_here(compose_here(["problem=toy", "optimizer=sgd", "budget.max_updates=3", *FAST]), src)
     os.mkfifo(tmp_path / "pipe.h5")
     result = {}
-    t = threading.Thread(target=lambda: result.setdefault("index", RunIndex.scan(tmp_path)), daemon=True)
+    t = threading.Thread(target=lambda: result.setdefault("index", RunIndex(tmp_path)), daemon=True)
     t.start()
     t.join(30)
     assert "index" in result, "the figures index hung on a FIFO"
