@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import re
 from importlib import resources
 from pathlib import Path
@@ -92,8 +93,16 @@ def flat_dirname(name: str) -> str:
     A ``/`` in a value (an ``init_from`` path) would nest directories: it becomes ``%2F``, and
     ``%`` becomes ``%25``, so two different values never share a name (a sweep run again
     finds each job's directory by its name). conf/config.yaml's ``hydra.sweep.subdir`` uses it.
+    A name longer than ``DIRNAME_BYTES`` (a long ``init_from`` path; file systems allow 255 bytes
+    with the job number before it) keeps its start and ends in a hash of the whole name.
     """
-    return str(name).replace("%", "%25").replace("/", "%2F")
+    flat = str(name).replace("%", "%25").replace("/", "%2F").encode()
+    if len(flat) <= DIRNAME_BYTES:
+        return flat.decode()
+    return flat[: DIRNAME_BYTES - 17].decode(errors="ignore") + "~" + hashlib.sha256(flat).hexdigest()[:16]
+
+
+DIRNAME_BYTES = 200
 
 
 # Registered on import, as the schema: the CLI imports this module before Hydra composes, and

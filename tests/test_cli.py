@@ -63,6 +63,17 @@ def test_flat_dirname_keeps_distinct_values_distinct():
     assert flat_dirname("x=a%2Fb") != flat_dirname("x=a/b")
 
 
+def test_a_long_init_from_path_makes_a_job_directory_name_the_file_system_takes(tmp_path):
+    from higbench.config import flat_dirname
+
+    deep = "/".join(["a_rather_long_folder_name_of_runs"] * 12) + "/run.h5"  # 407 characters
+    names = {flat_dirname(f"init_from={deep},seed={s}") for s in (0, 1)}
+    assert len(names) == 2 and flat_dirname(f"init_from={deep},seed=0") in names  # distinct, and the same again
+    for name in names:
+        assert len(f"999_{name}".encode()) <= 255
+        (tmp_path / f"999_{name}").mkdir()  # the file system takes it
+
+
 @pytest.mark.parametrize(
     "override,key",
     [

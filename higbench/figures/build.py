@@ -18,7 +18,7 @@ from higbench.claims.report import write_report
 from higbench.claims.rules import judge
 from higbench.figures import plot, registry
 from higbench.figures.data import FigureData
-from higbench.figures.runs import Job, Launcher, RunIndex, expand, job_seconds, launch, resolve
+from higbench.figures.runs import Job, Launcher, expand, job_seconds, launch, resolve, run_index
 from higbench.figures.spec import UPDATES_ONLY, Figure, Preset
 
 
@@ -49,7 +49,7 @@ class Builder:
         self.runs_root, self.out_dir = Path(runs_root), Path(out_dir)
         self.n_jobs = jobs or max(1, min(os.cpu_count() or 1, 2))
         self.launcher, self.log = launcher, log
-        self.index = RunIndex(self.runs_root)
+        self.index = run_index(self.runs_root)
         self.jobs: dict[str, list[Job]] = {}
 
     def jobs_of(self, figure: Figure) -> list[Job]:
@@ -77,7 +77,7 @@ class Builder:
             result.launched += len(todo)
             result.run_files.extend(written)
             tried.update(todo)
-            self.index = RunIndex(self.runs_root)
+            self.index = run_index(self.runs_root)
 
     def plan(self, figures: list[Figure]) -> list[tuple[str, int, int, float]]:
         """(figure, runs needed, runs missing, training seconds missing; shared runs counted once)."""
@@ -88,8 +88,7 @@ class Builder:
             miss = [j for j in jobs if not j.done]
             seconds = 0.0
             for j in miss:
-                key = j.identity or (j.figure, j.sweep, j.seed, tuple(j.override_list()))
-                seconds += 0.0 if key in seen else job_seconds(j)
+                seconds += 0.0 if (key := _same_run(j)) in seen else job_seconds(j)
                 seen.add(key)
             rows.append((f.id, len(jobs), len(miss), seconds))
         return rows
@@ -127,17 +126,20 @@ class Builder:
         data.write_sidecar(extra)
 
 
+def _same_run(job: Job):
+    """What makes two jobs one run: its identity, or, while it waits for its parent, its overrides and its parent's."""
+    return job.identity or (tuple(job.override_list()), job.parent and _same_run(job.parent))
+
+
 def provenance() -> dict:
     """Where and when a figure's runs were judged: git revision, date, machine and load."""
     import platform
-    import subprocess
 
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=5).stdout.strip()
-    except OSError:
-        rev = ""
+    from higbench.runner.environment import git_revision
+
+    rev = git_revision()  # as run files record it: 40 hex digits, '-dirty' if modified
     return {
-        "revision": rev or "unknown",
+        "revision": rev[:7] + rev[40:] or "unknown",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": f"{os.cpu_count()} CPU cores ({platform.machine()} {platform.system()})",
         "load": "load {:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else "",

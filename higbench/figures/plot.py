@@ -257,12 +257,16 @@ def draw_one_panel(d: FigureData, f: Facets, row: tuple, lv: Any) -> None:
 
 
 def draw(d: FigureData) -> None:
-    """Draw a figure's declared panels (one ``Facets``, or one axes per panel in ``size``'s grid)."""
+    """Draw a figure's declared panels (one ``Facets``, or one axes per panel in ``size``'s columns;
+    a ``Curves`` panel none of whose sweeps the preset declares is left out)."""
     f = d.figure
     if len(f.panels) == 1 and isinstance(f.panels[0], Facets):
         return draw_facets(d, f.panels[0])
-    fig, axes = new_figure(*f.size, sharey=f.sharey)
-    for ax, p in zip(axes.ravel(), f.panels):
+    declared = {s.name for s in f.runs(d.preset)}  # a preset may leave a setup out (fig3b: the authors')
+    panels = [p for p in f.panels if not isinstance(p, Curves) or any(s.sweep in declared for s in p.series)]
+    cols, _, width, height = f.size
+    fig, axes = new_figure(cols, -(-len(panels) // cols), width, height, sharey=f.sharey)
+    for ax, p in zip(axes.ravel(), panels):
         draw_curves(d, ax, p) if isinstance(p, Curves) else p.draw(d, ax, **p.kw)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     d.save(fig)

@@ -31,7 +31,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import yaml
 
@@ -200,32 +200,17 @@ def compose(overrides: tuple[str, ...]) -> dict:
     return yaml.load(OmegaConf.to_yaml(cfg, resolve=True), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
-class IndexedRun(NamedTuple):
-    path: Path
-    status: str
+def run_index(root: Path | None) -> dict[str, tuple[Path, str]]:
+    """The results index of a runs root, one run per config (``one_per_config``): identity -> (run
+    file, status). A view of ``load_runs(root, figure_runs=True)``, no status or duplicate rule of
+    its own; read again after a launch, so that runs continued from new ones get their parent's identity."""
+    if root is None or not Path(root).is_dir():
+        return {}
+    runs = one_per_config(load_runs(Path(root), figure_runs=True))
+    return {str(i): (Path(p).resolve(), str(s)) for i, p, s in zip(runs["config_id"], runs["path"], runs["status"])}
 
 
-class RunIndex:
-    """The results index of a runs root, one run per config (``one_per_config``), by identity.
-
-    A view of ``higbench.results.index.load_runs(root, figure_runs=True)``: no status or
-    duplicate rule of its own. Scanned again after a launch, so that runs continued from new
-    ones get their parent's identity.
-    """
-
-    def __init__(self, root: Path | None):
-        self._by_id: dict[str, IndexedRun] = {}
-        if root is not None and Path(root).is_dir():
-            runs = one_per_config(load_runs(Path(root), figure_runs=True))
-            for ident, path, status in zip(runs["config_id"], runs["path"], runs["status"]):
-                self._by_id[str(ident)] = IndexedRun(Path(path).resolve(), str(status))
-
-    def find(self, identity: str) -> IndexedRun | None:
-        """The run the index chooses for this identity (done if any is), or None."""
-        return self._by_id.get(identity)
-
-
-def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dict] = compose) -> None:
+def resolve(jobs: Iterable[Job], index: dict[str, tuple[Path, str]], compose: Callable[[tuple], dict] = compose) -> None:
     """Fill in each job's config and identity, and its run file if one is done; a job whose
     parent or seed search is not done yet is "waiting" (declaration order: those come first)."""
     with hydra_conf():
@@ -238,9 +223,8 @@ def resolve(jobs: Iterable[Job], index: RunIndex, compose: Callable[[tuple], dic
                 job.overrides["seed"] = job.seed
             job.config = dict(compose(tuple(job.override_list())))
             job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
-            run = index.find(job.identity)
-            job.status = run.status if run else "missing"
-            job.path = run.path if run and run.status in DONE_STATUSES else None
+            path, job.status = index.get(job.identity, (None, "missing"))
+            job.path = path if job.status in DONE_STATUSES else None
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from higbench.errors import dotted_get
+
 # Each preset falls back to another for what it does not set. smoke: code paths, tiny budgets;
 # quick: scaled-down budgets (~45 min on 2 cores); standard: quick's grids with budgets sized so
 # that most claims can show (~2 h on 2 cores); paper: the paper's grids and budgets.
@@ -166,24 +168,14 @@ def _conf(rel: str) -> dict:
     return yaml.safe_load((Path(config_dir()) / rel).read_text()) or {}
 
 
-def _scalar(text: str) -> Any:
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text.strip()
-
-
 def paper_grid(experiment: str, key: str) -> list:
-    """A swept key's values in ``conf/experiment/<experiment>.yaml`` (the paper's grid), in order."""
+    """A swept key's values in ``conf/experiment/<experiment>.yaml`` (the paper's grid), in order, as Hydra parses them."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
     params = _conf(f"experiment/{experiment}.yaml")["hydra"]["sweeper"]["params"]
-    return [_scalar(v) for v in str(params[key]).split(",")]
+    return list(OverridesParser.create().parse_override(f"{key}={params[key]}").sweep_iterator())
 
 
 def paper_setting(pair: str, key: str) -> Any:
     """A per-pair default of ``conf/problem_optimizer/<pair>.yaml`` (the paper's table 2), dotted key."""
-    node: Any = _conf(f"problem_optimizer/{pair}.yaml")
-    for part in key.split("."):
-        node = node.get(part) if isinstance(node, dict) else None
-    return node
+    return dotted_get(_conf(f"problem_optimizer/{pair}.yaml"), key)

@@ -194,7 +194,7 @@ class _Run:
     def cfg(self, key, default=None):
         return self._cfg.get(key, default)
 
-    def label(self):
+    def label(self, keys=()):
         return self._label
 
 
@@ -218,6 +218,23 @@ def test_poi4_compares_per_update_and_refuses_a_time_evaluated_adam():
     adam = _Run([300.0, 280.0, 260.0, 20.0], steps=[0, 1, 2, 1000])
     measured, verdict, _, values = _measure("poi-4", {"fig7": _Fig(adam=[adam], hig=[hig])})
     assert values["n"] == 2 and verdict == "reproduced", measured  # 50 vs 260 after two updates each
+
+
+def test_the_authors_setup_claims_read_its_own_sweeps_and_its_best_eta():
+    ours = {"hig_cont": [_Run([1.0, 0.9, 0.5], **{"optimizer.lr": 0.02})]}
+    ours["adam_cont"] = [_Run([1.0, 0.8], **{"optimizer.lr": 1e-4})]
+    _, verdict, why, _ = _measure("poi-2a", {"fig3c": _Fig(**ours)})
+    assert verdict == "n/a" and "authors' setup" in why  # ours alone say nothing about theirs
+    hig = [_Run([1.0, 0.9, 2.0], **{"optimizer.lr": 0.02}), _Run([1.0, 0.5, 0.1], **{"optimizer.lr": 0.01})]
+    adam = [_Run([1.0, 0.8], **{"optimizer.lr": 1e-4}), _Run([1.0, 0.15], **{"optimizer.lr": 3e-4})]
+    measured, verdict, _, values = _measure("poi-2a", {"fig3c": _Fig(hig_cont_authors=hig, adam_cont_authors=adam)})
+    assert values["hig_final"] == 0.1 and values["adam_final"] == 0.15, measured  # HIG's best eta, Adam's best eta
+    assert verdict == "partly"  # 0.1 below 0.15, not half of it
+    parent, other = hig[0], hig[1]
+    parent.path, other.path = Path("/runs/a/run.h5"), Path("/runs/b/run.h5")
+    after = _Run([2.0, 3.0], init_from="/runs/a/run.h5")
+    _, verdict, _, values = _measure("poi-3a", {"fig7": _Fig(hig_cont_authors=[other, parent], adam_after_hig_authors=[after])})
+    assert values["hig_final"] == 2.0 and verdict == "partly"  # read from the run Adam continued, not the other eta
 
 
 def test_dip2_needs_three_hig_evaluations_in_the_initial_stage():

@@ -68,7 +68,7 @@ def test_seed_search_jobs_precede_and_gate_the_main_run():
     def no_compose(overrides):
         raise AssertionError("a waiting job must not be composed")
 
-    runs.resolve(mains, runs.RunIndex(root=None), compose=no_compose)
+    runs.resolve(mains, runs.run_index(None), compose=no_compose)
     assert all(m.status == "waiting" for m in mains)
 
 

@@ -60,6 +60,25 @@ def test_every_figure_expands_at_every_preset(preset, tmp_path):
                 assert s in jobs and jobs.index(s) < jobs.index(j), fid
 
 
+@pytest.mark.parametrize("preset, panels", [("standard", 2), ("long", 4)])
+def test_fig3b_draws_the_authors_setup_where_hig_runs_at_b64(preset, panels, tmp_path, monkeypatch):
+    from higbench.figures import plot
+    from higbench.figures.data import FigureData
+
+    fig, p = registry.figures()["fig3b"], Preset(preset, str(tmp_path))
+    jobs = expand(fig, p)
+    theirs = [j for j in jobs if j.sweep.endswith("_authors")]
+    assert len(theirs) == (4 if preset == "long" else 0)
+    for j in theirs:  # the authors' script: PhiFlow noise, network [64, 128, 64], b = 64
+        assert "problem.data=phiflow_noise" in j.override_list() and "problem.hidden=[64,128,64]" in j.override_list()
+        assert j.overrides.get("batch_size", 64) == 64
+    data, saved = FigureData(fig, p, tmp_path, jobs), []
+    monkeypatch.setattr(data, "save", saved.append)
+    plot.draw(data)
+    titles = [ax.get_title() for ax in saved[0].axes]
+    assert len(titles) == panels and ["authors'" in t for t in titles] == [False, False, True, True][:panels]
+
+
 def test_quick_budgets_are_smaller_than_paper_and_smoke_is_small():
     counts = {}
     for preset in PRESETS:
@@ -187,6 +206,14 @@ def test_cli_lists_figures_and_plans_without_running(tmp_path, capsys):
     out = capsys.readouterr().out
     assert re.search(r"^fig1\s+14\s+14\s", out, re.M), out  # 2 gammas x 3 optimizers x 2 seeds + re-tuned Adam x 2 seeds
     assert not any(Path(tmp_path / "o").rglob("*.h5"))
+
+
+def test_plan_counts_a_run_two_figures_share_once_even_while_it_waits(tmp_path):
+    from higbench.figures.build import plan
+
+    seconds = {fid: s for fid, _, _, s in plan(["fig3c", "fig7"], "long", tmp_path)}
+    assert seconds["fig3c"] == 10 * 3000  # per setup: Adam's pre-training and 4 runs continued from it
+    assert seconds["fig7"] == 10 * 3000  # fig3b's other 8 runs and 2 Adam-after-HIG runs; not fig3c's waiting ones again
 
 
 def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path):

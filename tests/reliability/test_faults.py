@@ -555,17 +555,17 @@ def test_index_notes_ragged_curve_columns(tmp_path):
 
 
 def test_fifo_in_runs_tree_does_not_hang_the_figures_index(tmp_path):
-    from higbench.figures.runs import RunIndex
+    from higbench.figures.runs import run_index
     from higbench.results.index import one_per_config
 
     src = tmp_path / "a" / "run.h5"
     train_here(compose_here(["problem=toy", "optimizer=sgd", "budget.max_updates=3", *FAST]), src)
     os.mkfifo(tmp_path / "pipe.h5")
     result = {}
-    t = threading.Thread(target=lambda: result.setdefault("index", RunIndex(tmp_path)), daemon=True)
+    t = threading.Thread(target=lambda: result.setdefault("index", run_index(tmp_path)), daemon=True)
     t.start()
     t.join(30)
     assert "index" in result, "the figures index hung on a FIFO"
     runs = one_per_config(load_runs(tmp_path))  # the index the figures read
     assert runs["path"].tolist() == [str(src)]
-    assert result["index"].find(runs["config_id"].iloc[0]).path == src.resolve()
+    assert result["index"][runs["config_id"].iloc[0]][0] == src.resolve()
