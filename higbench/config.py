@@ -87,6 +87,9 @@ def optimizer_kwargs(opt_cfg: Any) -> dict:
 ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
 
 
+DIRNAME_BYTES = 200  # a job directory's name at most (file systems: 255, with the job number before it)
+
+
 def flat_dirname(name: str) -> str:
     """A sweep job's directory name from Hydra's ``override_dirname``, one level deep.
 
@@ -100,9 +103,6 @@ def flat_dirname(name: str) -> str:
     if len(flat) <= DIRNAME_BYTES:
         return flat.decode()
     return flat[: DIRNAME_BYTES - 17].decode(errors="ignore") + "~" + hashlib.sha256(flat).hexdigest()[:16]
-
-
-DIRNAME_BYTES = 200
 
 
 # Registered on import, as the schema: the CLI imports this module before Hydra composes, and

@@ -29,7 +29,7 @@ FIGURES = [
     Figure(
         "fig12",
         "Oscillator ablation: a) beta from 0 to -0.5, b) kappa from 1 to -1",
-        size=(2, 1, 4.8, 3.8),
+        size=(2, 4.8, 3.8),
         sweeps=[
             sweep("beta", "hig", "optimizer.beta", PerPreset(BETAS, [0.0, -0.25, -0.5], [0.0, -0.5])),
             sweep("kappa", "hig", "optimizer.kappa", PerPreset(KAPPAS, [1.0, 0.5, 0.0, -0.5, -1.0], [1.0, -0.5])),
@@ -43,7 +43,7 @@ FIGURES = [
     Figure(
         "fig13",
         "Oscillator ablation: tau from 1e-5 to 1e-10, HIG and GN",
-        size=(2, 1, 4.8, 3.8),
+        size=(2, 4.8, 3.8),
         sharey=True,
         sweeps=[
             sweep(

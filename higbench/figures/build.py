@@ -11,6 +11,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
+from functools import cache
 from pathlib import Path
 
 from higbench.bench.tables import ensure_bench
@@ -131,15 +132,21 @@ def _same_run(job: Job):
     return job.identity or (tuple(job.override_list()), job.parent and _same_run(job.parent))
 
 
+@cache
+def _revision() -> str:
+    """The checkout's short revision as run files record it ('-dirty' if modified): once per process."""
+    from higbench.runner.environment import git_revision
+
+    rev = git_revision()  # 40 hex digits, then '-dirty' if modified
+    return rev[:7] + rev[40:] or "unknown"
+
+
 def provenance() -> dict:
     """Where and when a figure's runs were judged: git revision, date, machine and load."""
     import platform
 
-    from higbench.runner.environment import git_revision
-
-    rev = git_revision()  # as run files record it: 40 hex digits, '-dirty' if modified
     return {
-        "revision": rev[:7] + rev[40:] or "unknown",
+        "revision": _revision(),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": f"{os.cpu_count()} CPU cores ({platform.machine()} {platform.system()})",
         "load": "load {:.1f} {:.1f} {:.1f}".format(*os.getloadavg()) if hasattr(os, "getloadavg") else "",

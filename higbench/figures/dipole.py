@@ -111,7 +111,7 @@ FIGURES = [
         "Dipole: |Psi(t,x)|^2 under a HIG-trained network, control behind it",
         [dip("hig")],
         panels=[Custom(fig4a)],
-        size=(1, 1, 6.6, 4.4),
+        size=(1, 6.6, 4.4),
     ),
     Figure(
         "fig4b",
@@ -129,13 +129,13 @@ FIGURES = [
                 ],
             )
         ],
-        size=(1, 1, 6.2, 4.0),
+        size=(1, 6.2, 4.0),
     ),
     Figure(
         "fig4c",
         "Dipole: low- and high-energy losses, Adam (eta=1e-4) vs HIG (eta=0.5)",
         FIG4C,
-        size=(1, 1, 6.2, 4.0),
+        size=(1, 6.2, 4.0),
         panels=[
             Curves(
                 "c) dipole: low- and high-energy losses",

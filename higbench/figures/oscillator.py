@@ -108,7 +108,7 @@ FIGURES = [
         "Oscillators: time evolution under a HIG-trained network, control signal behind it",
         [osc("hig", "hig")],
         panels=[Custom(fig2a)],
-        size=(1, 1, 6.5, 3.6),
+        size=(1, 6.5, 3.6),
     ),
     Figure(
         "fig2b",

@@ -264,7 +264,7 @@ def draw(d: FigureData) -> None:
         return draw_facets(d, f.panels[0])
     declared = {s.name for s in f.runs(d.preset)}  # a preset may leave a setup out (fig3b: the authors')
     panels = [p for p in f.panels if not isinstance(p, Curves) or any(s.sweep in declared for s in p.series)]
-    cols, _, width, height = f.size
+    cols, width, height = f.size
     fig, axes = new_figure(cols, -(-len(panels) // cols), width, height, sharey=f.sharey)
     for ax, p in zip(axes.ravel(), panels):
         draw_curves(d, ax, p) if isinstance(p, Curves) else p.draw(d, ax, **p.kw)

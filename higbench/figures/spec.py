@@ -147,7 +147,7 @@ class Figure:
     sweeps: list[Sweep] | Callable[[Preset], list[Sweep]]
     plot: Callable[..., None] | None = None
     panels: list = field(default_factory=list)
-    size: tuple = (1, 1, 6.4, 4.2)  # columns, rows, width and height of one panel (inches)
+    size: tuple = (1, 6.4, 4.2)  # columns, and width and height of one panel (inches); rows: as many as the panels fill
     kind: str = "figure"
     notes: Callable[[Preset], list[str]] | None = None  # deviations from the paper at a preset
     sharey: bool = False

@@ -83,6 +83,6 @@ FIGURES = [
             ),
         ],
         panels=[*_row(0, GAMMAS[0]), *_row(1, GAMMAS[1])],
-        size=(3, 2, 4.3, 3.1),
+        size=(3, 4.3, 3.1),
     )
 ]

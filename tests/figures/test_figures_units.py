@@ -432,9 +432,12 @@ def test_shared_group_composition_gives_hydras_config():
     lists = _override_lists(["quick"], one_per_figure=True)
     lists += [("problem=poisson", "optimizer=hig", "optimizer.lr=0.02", "init_from='/a b/run.h5'", "budget.seconds=null")]
     lists += [("problem=dipole", "optimizer=adam", "eval_unit=updates", "eval_every=10", "problem.test_size=16")]
+    authors = next(j for j in expand(registry.figures()["fig3b"], Preset("long")) if j.sweep == "hig_authors")
+    lists += [tuple(authors.override_list())]  # a list value: the authors' network replaces ours
     fast, whole = _compose_both_ways(lists)
     assert all(a == b for a, b in zip(fast, whole)), [o for o, a, b in zip(lists, fast, whole) if a != b][:3]
-    assert fast[-1]["eval_every"] == 10.0 and fast[-2]["init_from"] == "/a b/run.h5"
+    assert fast[-2]["eval_every"] == 10.0 and fast[-3]["init_from"] == "/a b/run.h5"
+    assert fast[-1]["problem"]["hidden"] == [64, 128, 64] and fast[-1]["problem"]["data"] == "phiflow_noise"
 
 
 @pytest.mark.slow
