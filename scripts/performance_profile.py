@@ -90,7 +90,7 @@ def launch(jobs: list[list[str]], stage: str, n_jobs: int, root: Path) -> None:
     jobs_file = root / f"{run_dir.name}.jobs.json"
     jobs_file.parent.mkdir(parents=True, exist_ok=True)
     jobs_file.write_text(json.dumps(todo, indent=1))
-    from higbench.figures.runs import multirun_command  # the figures' job-list multirun, one thread per run
+    from higbench.jobs import multirun_command  # the figures' job-list multirun, one thread per run
 
     subprocess.run(
         multirun_command(jobs_file, run_dir, ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"]), cwd=ROOT, check=True

@@ -41,7 +41,7 @@ def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int) -> None:
     sweep_dir.parent.mkdir(parents=True, exist_ok=True)
     jobs_file = sweep_dir.with_suffix(".jobs.json")
     jobs_file.write_text(json.dumps(jobs, indent=1))
-    from higbench.figures.runs import multirun_command  # the figures' job-list multirun, one thread per run
+    from higbench.jobs import multirun_command  # the figures' job-list multirun, one thread per run
 
     cmd = multirun_command(jobs_file, sweep_dir, ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"])
     print(f"{time.strftime('%H:%M:%S')} {len(jobs)} runs -> {sweep_dir}", file=sys.stderr, flush=True)

@@ -289,7 +289,7 @@ def test_the_key_lists_are_derived_from_the_schema():
     import yaml
 
     from higbench import config
-    from higbench.figures.runs import LAUNCH_OVERRIDES
+    from higbench.jobs import LAUNCH_OVERRIDES
     from higbench.results import index
     from higbench.runner import checkpoint
 

@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyError as exc:
         print(f"higbench-figures: error: {exc.args[0]}", file=sys.stderr)
         return 2
-    from higbench.figures.runs import Launcher
+    from higbench.jobs import Launcher
 
     try:
         launcher = Launcher(args.launcher, tuple(args.launcher_override))

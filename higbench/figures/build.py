@@ -19,8 +19,8 @@ from higbench.claims.report import write_report
 from higbench.claims.rules import judge
 from higbench.figures import plot, registry
 from higbench.figures.data import FigureData
-from higbench.figures.runs import Job, Launcher, expand, job_seconds, launch, resolve, run_index
-from higbench.figures.spec import UPDATES_ONLY, Figure, Preset
+from higbench.figures.spec import UPDATES_ONLY, Figure, Preset, expand
+from higbench.jobs import Job, Launcher, job_seconds, launch, resolve, run_index
 
 
 @dataclass
@@ -135,7 +135,7 @@ def _same_run(job: Job):
 @cache
 def _revision() -> str:
     """The checkout's short revision as run files record it ('-dirty' if modified): once per process."""
-    from higbench.runner.environment import git_revision
+    from higbench.runner.revision import git_revision
 
     rev = git_revision()  # 40 hex digits, then '-dirty' if modified
     return rev[:7] + rev[40:] or "unknown"

@@ -21,8 +21,8 @@ import numpy as np
 import pandas as pd
 
 from higbench.claims.rules import OPTIMIZER_NAMES, md_table, num
-from higbench.figures.runs import Job
 from higbench.figures.spec import Figure, Preset
+from higbench.jobs import Job
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 
 COLORS = {

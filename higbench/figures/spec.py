@@ -11,6 +11,7 @@ wants different from its fallback (``Budget(seconds={..., "standard": 600})``,
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -18,6 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from higbench.errors import dotted_get
+from higbench.errors import override_value as fmt
+from higbench.jobs import Job
 
 # Each preset falls back to another for what it does not set. smoke: code paths, tiny budgets;
 # quick: scaled-down budgets (~45 min on 2 cores); standard: quick's grids with budgets sized so
@@ -160,6 +163,58 @@ class Figure:
 
 
 @cache
+# -- the jobs a figure needs at a preset --------------------------------------------------
+def expand(figure: Figure, preset: Preset) -> list[Job]:
+    """The jobs of a figure at a preset, in declaration order (a parent or seed search before its jobs)."""
+    by_name: dict[str, list[Job]] = {}
+    jobs: list[Job] = []
+    for sweep in figure.runs(preset):
+        mine = _sweep_jobs(figure.id, sweep, preset)
+        if sweep.seed_search is not None:
+            mine = _with_search(figure.id, sweep, mine, preset, jobs)
+        if sweep.init_from is not None:
+            if not (parents := by_name.get(sweep.init_from)):
+                raise ValueError(f"{figure.id}: sweep {sweep.name!r} starts from {sweep.init_from!r}, not declared before it")
+            for job in mine:
+                job.parent = next((p for p in parents if p.seed == job.seed), parents[0])
+        by_name[sweep.name] = mine
+        jobs.extend(mine)
+    return jobs
+
+
+def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
+    """Fixed overrides x grid (cartesian) x seeds, then the budget and the preset's problem overrides."""
+    problem = sweep.fixed.get("problem")
+    extra = preset.problem_overrides(str(problem)) if problem is not None else {}
+    out = []
+    for combo in itertools.product(*sweep.grid.values()):
+        for seed in sweep.seeds:
+            ov = {**sweep.fixed, **dict(zip(sweep.grid, combo)), "seed": seed, **sweep.budget.overrides(preset)}
+            out.append(Job(figure_id, sweep.name, {**ov, **{k: v for k, v in extra.items() if k not in ov}}, seed))
+    return out
+
+
+def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, jobs: list[Job]) -> list[Job]:
+    """One main job per grid point (seed to be picked) after its seed-search jobs (added to ``jobs``)."""
+    search = sweep.seed_search
+    main: dict[tuple, Job] = {}
+    searches: dict[tuple, list[Job]] = {}  # grid points with the same search share its runs
+    for job in mine:
+        key = tuple((k, fmt(v)) for k, v in job.overrides.items() if k != "seed")
+        if key in main:
+            continue
+        main[key] = job
+        base = {k: v for k, v in job.overrides.items() if not k.startswith("budget.") and k not in ("eval_unit", "eval_every")}
+        base.update(search.overrides)
+        skey = tuple((k, fmt(v)) for k, v in base.items() if k != "seed")
+        if skey not in searches:
+            budget = search.budget.overrides(preset)
+            searches[skey] = [Job(figure_id, f"{sweep.name}/search", {**base, "seed": s, **budget}, s) for s in search.seeds]
+            jobs.extend(searches[skey])
+        job.search = searches[skey]
+    return list(main.values())
+
+
 def _conf(rel: str) -> dict:
     import yaml
 

@@ -309,7 +309,7 @@ _RENAMED = {"wall_time": "train_time_s"}
 # (`problem.name`, `optimizer.name`; `final_step` is `steps` except for a run stopped between
 # evaluations, where `status_step` and the curves tell).
 _DROPPED = ("problem", "optimizer", "final_step")
-FIGURE_RUNS_DIR = "figures-runs"  # where `make figures` puts its runs (higbench/figures/runs.py)
+FIGURE_RUNS_DIR = "figures-runs"  # where `make figures` puts its runs (higbench/jobs.py)
 
 
 def _number(text: str) -> int | float:

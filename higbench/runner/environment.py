@@ -5,9 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import socket
-import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import psutil
@@ -15,21 +13,7 @@ import torch
 
 import higbench
 from higbench.runfile.writer import H5PY_VERSION
-
-
-def git_revision() -> str:
-    """The checkout's revision (with '-dirty' if modified), or '' when not in a git checkout."""
-    root = Path(higbench.__file__).resolve().parent.parent
-    try:
-        rev = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5)
-        if rev.returncode != 0:
-            return ""
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True, timeout=5
-        )
-        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.SubprocessError):
-        return ""
+from higbench.runner.revision import git_revision
 
 
 def resolve_device(name: str) -> torch.device:

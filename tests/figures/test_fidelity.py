@@ -6,11 +6,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from higbench import jobs as runs
 from higbench.claims.rules import claim_budget, claim_seeds
-from higbench.figures import registry, runs
+from higbench.figures import registry
 from higbench.figures.data import RunData
-from higbench.figures.runs import Job, expand, pick_seed
-from higbench.figures.spec import Budget, Figure, Preset, SeedSearch, Sweep
+from higbench.figures.spec import Budget, Figure, Preset, SeedSearch, Sweep, expand
+from higbench.jobs import Job, pick_seed
 
 
 def _job(sweep, seed, status="completed", **config):

@@ -202,8 +202,7 @@ def test_whole_smoke_preset(tmp_path):
 def test_a_run_made_by_hand_with_the_cli_is_reused(tmp_path):
     """A plain `higbench` run with the same resolved config counts (threads/progress do not matter)."""
     from higbench.figures import registry
-    from higbench.figures.runs import expand
-    from higbench.figures.spec import Preset
+    from higbench.figures.spec import Preset, expand
 
     job = next(j for j in expand(registry.figures()["fig4c"], Preset("smoke")) if j.overrides["optimizer"] == "hig")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])]))

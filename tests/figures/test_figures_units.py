@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from higbench.figures import registry
-from higbench.figures.runs import Job, Launcher, expand, fmt, identity_of, multirun_command
-from higbench.figures.spec import PRESETS, Preset
+from higbench.figures.spec import PRESETS, Preset, expand
+from higbench.jobs import Job, Launcher, fmt, identity_of, multirun_command
 from higbench.results.index import COSMETIC_KEYS
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
@@ -133,7 +133,7 @@ def test_a_round_is_one_job_list_multirun_on_a_hydra_launcher(tmp_path):
 
 
 def test_launch_sends_every_job_in_one_multirun_longest_first(tmp_path, monkeypatch):
-    from higbench.figures import runs
+    from higbench import jobs as runs
 
     calls = []
 
@@ -180,7 +180,7 @@ def test_joblist_sweeper_runs_a_job_list(tmp_path):
 def test_missing_runs_go_out_as_one_multirun_longest_first(tmp_path, monkeypatch):
     """The figures schedule nothing themselves: a round of missing runs is one ``higbench -m``
     over a job list (Hydra's launcher runs it), longest first, joblib capped at --jobs."""
-    from higbench.figures import runs
+    from higbench import jobs as runs
 
     calls = []
     monkeypatch.setattr(runs.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or SimpleNamespace(returncode=0))
@@ -407,7 +407,7 @@ def _compose_both_ways(override_lists):
     from hydra import compose as hydra_compose
     from omegaconf import OmegaConf
 
-    from higbench.figures.runs import compose, hydra_conf
+    from higbench.jobs import compose, hydra_conf
 
     with hydra_conf():
         whole = [

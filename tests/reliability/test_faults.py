@@ -555,7 +555,7 @@ def test_index_notes_ragged_curve_columns(tmp_path):
 
 
 def test_fifo_in_runs_tree_does_not_hang_the_figures_index(tmp_path):
-    from higbench.figures.runs import run_index
+    from higbench.jobs import run_index
     from higbench.results.index import one_per_config
 
     src = tmp_path / "a" / "run.h5"

@@ -1,4 +1,8 @@
-"""Which runs a figure needs, which of them exist, and running the missing ones.
+"""Runs wanted as jobs: which of them exist, and running the missing ones as one multirun.
+
+A job is a list of Hydra overrides (the figures declare theirs: ``higbench.figures.spec``;
+the probe scripts write their own), perhaps continued from another job's run or with its
+seed picked from a seed search.
 
 Identity. A run is identified by its resolved config (what ``higbench`` composes with Hydra
 for the same overrides) minus the keys that do not change its result: the results index's
@@ -20,7 +24,6 @@ Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
 from __future__ import annotations
 
 import copy
-import itertools
 import json
 import os
 import subprocess
@@ -37,7 +40,6 @@ import yaml
 
 from higbench.errors import dotted_get
 from higbench.errors import override_value as fmt  # the one value-to-override rule
-from higbench.figures.spec import Figure, Preset, Sweep
 from higbench.results.index import DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
@@ -77,57 +79,6 @@ class Job:
     def value(self, key: str, default: Any = None) -> Any:
         """A resolved config value by dotted key (``optimizer.lr``)."""
         return dotted_get(self.config or {}, key, default)
-
-
-def expand(figure: Figure, preset: Preset) -> list[Job]:
-    """The jobs of a figure at a preset, in declaration order (a parent or seed search before its jobs)."""
-    by_name: dict[str, list[Job]] = {}
-    jobs: list[Job] = []
-    for sweep in figure.runs(preset):
-        mine = _sweep_jobs(figure.id, sweep, preset)
-        if sweep.seed_search is not None:
-            mine = _with_search(figure.id, sweep, mine, preset, jobs)
-        if sweep.init_from is not None:
-            if not (parents := by_name.get(sweep.init_from)):
-                raise ValueError(f"{figure.id}: sweep {sweep.name!r} starts from {sweep.init_from!r}, not declared before it")
-            for job in mine:
-                job.parent = next((p for p in parents if p.seed == job.seed), parents[0])
-        by_name[sweep.name] = mine
-        jobs.extend(mine)
-    return jobs
-
-
-def _sweep_jobs(figure_id: str, sweep: Sweep, preset: Preset) -> list[Job]:
-    """Fixed overrides x grid (cartesian) x seeds, then the budget and the preset's problem overrides."""
-    problem = sweep.fixed.get("problem")
-    extra = preset.problem_overrides(str(problem)) if problem is not None else {}
-    out = []
-    for combo in itertools.product(*sweep.grid.values()):
-        for seed in sweep.seeds:
-            ov = {**sweep.fixed, **dict(zip(sweep.grid, combo)), "seed": seed, **sweep.budget.overrides(preset)}
-            out.append(Job(figure_id, sweep.name, {**ov, **{k: v for k, v in extra.items() if k not in ov}}, seed))
-    return out
-
-
-def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, jobs: list[Job]) -> list[Job]:
-    """One main job per grid point (seed to be picked) after its seed-search jobs (added to ``jobs``)."""
-    search = sweep.seed_search
-    main: dict[tuple, Job] = {}
-    searches: dict[tuple, list[Job]] = {}  # grid points with the same search share its runs
-    for job in mine:
-        key = tuple((k, fmt(v)) for k, v in job.overrides.items() if k != "seed")
-        if key in main:
-            continue
-        main[key] = job
-        base = {k: v for k, v in job.overrides.items() if not k.startswith("budget.") and k not in ("eval_unit", "eval_every")}
-        base.update(search.overrides)
-        skey = tuple((k, fmt(v)) for k, v in base.items() if k != "seed")
-        if skey not in searches:
-            budget = search.budget.overrides(preset)
-            searches[skey] = [Job(figure_id, f"{sweep.name}/search", {**base, "seed": s, **budget}, s) for s in search.seeds]
-            jobs.extend(searches[skey])
-        job.search = searches[skey]
-    return list(main.values())
 
 
 def pick_seed(search: list[Job]) -> int:
