@@ -24,7 +24,7 @@ def test_single_run_writes_a_complete_run_file(cli, tmp_path):
     assert {"step", "epoch", "wall_time", "train_loss", "test_loss"} <= set(curves.columns)
     assert list(curves["step"]) == [0, 1, 2, 3]
     assert curves["wall_time"].is_monotonic_increasing
-    for key in ("torch_version", "python_version", "hostname", "torch_threads", "device", "git_revision"):
+    for key in ("torch_version", "python_version", "hostname", "torch_threads", "device", "git_revision", "cpu_share"):
         assert key in meta["env"]
     updates = load_updates(files[0])
     assert len(updates) == 3 and (updates[["jacobian_s", "inversion_s", "apply_s"]] > 0).all().all()

@@ -64,19 +64,31 @@ class Cause:
     values (name -> predicate); a cause whose facts do not hold for the runs it sits beside,
     or whose values they lack, is printed as "open" with the reason (``render``). ``probe``:
     more evidence from a committed probe (``probe_values``), its fields prefixed ``probe_``.
+    ``otherwise``: the cause stated when this one's facts do not hold (a claim judged at two
+    settings, e.g. Poisson's HIG at b=16 and at the paper's b=64, has a cause for each).
     """
 
     category: str
     text: str
     facts: dict[str, Callable[[dict], bool]] = field(default_factory=dict)
     probe: Callable[[], dict] | None = None
+    otherwise: Cause | None = None
+
+    def chain(self) -> list[Cause]:
+        """This cause and its alternatives, in the order they are tried."""
+        return [self, *(self.otherwise.chain() if self.otherwise else [])]
 
     def contradicted(self, evidence: dict) -> list[str]:
-        """Names of the facts the evidence contradicts (KeyError: a value is missing)."""
-        return [name for name, holds in self.facts.items() if not holds(evidence)]
+        """Names of the facts the evidence contradicts, of the last alternative where none
+        holds (KeyError: a value is missing)."""
+        wrong = [name for name, holds in self.facts.items() if not holds(evidence)]
+        return self.otherwise.contradicted(evidence) if wrong and self.otherwise else wrong
 
     def render(self, evidence: dict) -> tuple[str, str]:
-        """(category, text) filled from the evidence; ("open", why) if a value is missing or a fact fails."""
+        """(category, text) filled from the evidence, of the first alternative that holds;
+        ("open", why) if a value is missing or a fact fails."""
+        if self.otherwise is not None and self._holds(evidence) is False:
+            return self.otherwise.render(evidence)
         absent = sorted({name for _, name, _, _ in string.Formatter().parse(self.text) if name and name not in evidence})
         try:
             wrong = [] if absent else self.contradicted(evidence)
@@ -87,6 +99,13 @@ class Cause:
         if wrong:
             return "open", f"the stated cause ({self.category}) is contradicted by these runs: not {'; not '.join(wrong)}"
         return self.category, _Numbers().vformat(self.text, (), evidence)
+
+    def _holds(self, evidence: dict) -> bool | None:
+        """Whether every fact holds (None: a value is missing)."""
+        try:
+            return all(holds(evidence) for holds in self.facts.values())
+        except KeyError:
+            return None
 
 
 @dataclass
@@ -313,7 +332,7 @@ def judge(c: Claim, datas: dict, preset: str, smoke: bool = False) -> dict:
 def evidence(row: dict, cause: Cause | None = None) -> dict:
     """What a cause may quote: the paper's numbers, the row's measured values, budget and seeds,
     and the values of the cause's probe."""
-    probe = cause.probe() if cause is not None and cause.probe is not None else {}
+    probe = {k: v for c in (cause.chain() if cause else []) if c.probe is not None for k, v in c.probe().items()}
     return {**PAPER, **row.get("values", {}), "budget": row.get("seconds"), "seeds": row.get("seeds"), **probe}
 
 

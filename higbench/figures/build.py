@@ -164,7 +164,16 @@ def runs_made(data: FigureData) -> dict:
     revisions = sorted({str(m.get("env", {}).get("git_revision", ""))[:7] for m in metas} - {""})
     tail = end.strftime("%H:%M" if end.date() == start.date() else "%Y-%m-%d %H:%M")
     span = f"{start:%Y-%m-%d %H:%M}-{tail} UTC"
-    return {"runs": f"runs made {span}" + (f" at {', '.join(revisions)}" if revisions else "")}
+    return {"runs": f"runs made {span}" + (f" at {', '.join(revisions)}" if revisions else "") + _cpu_use(metas)}
+
+
+def _cpu_use(metas: list[dict]) -> str:
+    """The range of the runs' CPU shares and 1-minute loads at their ends (run files since
+    they record them; "" for older ones)."""
+    share = [float(e["cpu_share"]) for m in metas if "cpu_share" in (e := m.get("env", {}))]
+    load = [float(str(e["load_at_finish"]).split()[0]) for m in metas if (e := m.get("env", {})).get("load_at_finish")]
+    parts = [f"{what} {min(v):.2f}-{max(v):.2f}" for what, v in (("CPU share", share), ("load at the end", load)) if v]
+    return f"; {len(share)} of {len(metas)} runs: " + ", ".join(parts) if parts else ""
 
 
 def _utc(stamp: str) -> datetime:

@@ -6,6 +6,7 @@ import os
 import platform
 import socket
 import sys
+import time
 
 import numpy as np
 import psutil
@@ -47,6 +48,27 @@ def environment(device: torch.device) -> dict:
 
 
 _PROCESS = psutil.Process()
+
+
+class CpuUse:
+    """How much of its cores a run had since it started: the process's CPU seconds over wall
+    seconds times its threads (about 1 alone on its cores; lower when other work shared them),
+    and the machine's load averages when it finished. A timing is only as good as these."""
+
+    def __init__(self, threads: int):
+        self.threads = max(1, threads)
+        self.cpu0, self.wall0 = _cpu_seconds(), time.perf_counter()
+
+    def summary(self) -> dict:
+        wall = time.perf_counter() - self.wall0
+        share = (_cpu_seconds() - self.cpu0) / (wall * self.threads) if wall > 0 else float("nan")
+        load = " ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else ""
+        return {"cpu_share": round(share, 3), "load_at_finish": load}
+
+
+def _cpu_seconds() -> float:
+    t = _PROCESS.cpu_times()
+    return t.user + t.system
 
 
 def current_rss_mb() -> float:

@@ -53,7 +53,7 @@ from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint
-from higbench.runner.environment import MemoryMonitor, environment, resolve_device
+from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
 from higbench.runner.threads import fit_to_work, resolve_threads
@@ -292,6 +292,7 @@ class TrainingRun:
         self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
         self.test = problem.test_set()
         self.memory = MemoryMonitor(device)
+        self.cpu = CpuUse(torch.get_num_threads())
         self.shuffle = torch.Generator().manual_seed(cfg.seed)
         self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
         self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
@@ -452,6 +453,7 @@ class TrainingRun:
         """Final weights and attributes, then the file closed with its status."""
         writer = self.file.writer
         writer.set_attrs("memory", self.memory.summary())
+        writer.set_attrs("env", self.cpu.summary())  # what the run had of its cores
         writer.write_weights({k: v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}, self.step)
         writer.f.attrs["steps"] = self.step
         writer.f.attrs["wall_time"] = self.clock()

@@ -5,6 +5,7 @@ REPORT.md assembled from them) and on synthetic measurements where the values ar
 No training.
 """
 
+import dataclasses
 import re
 import string
 from pathlib import Path
@@ -16,7 +17,13 @@ from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence
 from higbench.figures import registry
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
-CAUSE = {cid: c.cause for cid, c in registry.claims().items() if c.cause is not None}
+# Every cause a claim may state: its first, then its alternatives (``otherwise``) as "poi-1/1", ...
+CAUSE = {
+    cid + (f"/{i}" if i else ""): cause
+    for cid, c in registry.claims().items()
+    if c.cause is not None
+    for i, cause in enumerate(c.cause.chain())
+}
 
 
 def _fields(template: str) -> set[str]:
@@ -173,6 +180,18 @@ def test_render_formats_numbers_from_the_values():
     assert cause.render({"x": 2.34e-5, "n": 300}) == ("budget", "reached 2.3e-5 after 300 updates")
     assert cause.render({"x": 1e-8, "n": 300})[0] == "open"
     assert evidence({"values": {"a": 1}, "seconds": 60, "seeds": 3})["budget"] == 60
+
+
+def test_the_first_alternative_whose_facts_hold_is_stated():
+    """A cause with ``otherwise``: its own text where its facts hold, else the alternative's;
+    "open" naming the alternative's failed facts where neither holds."""
+    at_b16 = Cause("deviation", "b={b}", {"a small batch": lambda v: v["b"] < 64})
+    cause = dataclasses.replace(at_b16, otherwise=Cause("disagreement", "b={b}, {n} updates", {"enough": lambda v: v["n"] > 9}))
+    assert cause.render({"b": 16, "n": 1}) == ("deviation", "b=16")
+    assert cause.render({"b": 64, "n": 10}) == ("disagreement", "b=64, 10 updates")
+    neither = "the stated cause (disagreement) is contradicted by these runs: not enough"
+    assert cause.render({"b": 64, "n": 1}) == ("open", neither)
+    assert cause.contradicted({"b": 64, "n": 1}) == ["enough"] and cause.contradicted({"b": 64, "n": 10}) == []
 
 
 # -- rules on synthetic measurements -------------------------------------------------------

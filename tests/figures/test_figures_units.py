@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -482,3 +483,24 @@ def test_a_figure_records_when_and_at_which_revisions_its_runs_were_made():
     zones = [run("2026-11-24T00:30:00+0100", "2026-11-24T00:40:00+0100", "c0ffee0"), run("2026-11-23T23:35:00+0000", "", "")]
     assert runs_made(SimpleNamespace(runs=lambda: zones)) == {"runs": "runs made 2026-11-23 23:30-23:40 UTC at c0ffee0"}
     assert runs_made(SimpleNamespace(runs=lambda: [])) == {}
+    # run files that record what the runs had of their cores say so (older ones do not)
+    same_day[0].meta["env"] |= {"cpu_share": 0.991, "load_at_finish": "2.04 2.01 1.97"}
+    same_day[1].meta["env"] |= {"cpu_share": 0.62, "load_at_finish": "3.10 2.80 2.00"}
+    shares = "; 2 of 2 runs: CPU share 0.62-0.99, load at the end 2.04-3.10"
+    assert runs_made(data) == {"runs": f"runs made 2026-11-24 04:53-05:10 UTC at ab5624b, b5158bd{shares}"}
+
+
+def test_a_run_file_records_what_the_run_had_of_its_cores(tmp_path):
+    """The CPU share is the process's CPU time over wall time and threads since the run began:
+    about 1 for a run busy on its one thread, far below 1 for one that waits."""
+    from higbench.runner.environment import CpuUse
+
+    waiting = CpuUse(threads=1)
+    time.sleep(0.2)
+    idle = waiting.summary()
+    busy = CpuUse(threads=1)
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < 0.2:
+        pass
+    assert idle["cpu_share"] < 0.1 < 0.25 < busy.summary()["cpu_share"], (idle, busy.summary())
+    assert len(idle["load_at_finish"].split()) == 3
