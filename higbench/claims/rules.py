@@ -79,33 +79,44 @@ class Cause:
         return [self, *(self.otherwise.chain() if self.otherwise else [])]
 
     def contradicted(self, evidence: dict) -> list[str]:
-        """Names of the facts the evidence contradicts, of the last alternative where none
-        holds (KeyError: a value is missing)."""
-        wrong = [name for name, holds in self.facts.items() if not holds(evidence)]
-        return self.otherwise.contradicted(evidence) if wrong and self.otherwise else wrong
+        """[] if some alternative holds; else the facts the evidence contradicts, of every
+        alternative (KeyError: an alternative lacks a value, so it might still hold)."""
+        judged = [c._failed(evidence) for c in self.chain()]
+        if [] in judged:
+            return []
+        if None in judged:
+            raise KeyError(self.chain()[judged.index(None)]._absent(evidence)[0])
+        return [name for wrong in judged for name in wrong]
 
     def render(self, evidence: dict) -> tuple[str, str]:
-        """(category, text) filled from the evidence, of the first alternative that holds;
-        ("open", why) if a value is missing or a fact fails."""
-        if self.otherwise is not None and self._holds(evidence) is False:
-            return self.otherwise.render(evidence)
-        absent = sorted({name for _, name, _, _ in string.Formatter().parse(self.text) if name and name not in evidence})
+        """(category, text) of the first alternative that holds, filled from the evidence; else
+        ("open", why): the values an alternative lacks, or (none lacks any) the facts that fail."""
         try:
-            wrong = [] if absent else self.contradicted(evidence)
-        except KeyError as missing:
-            absent = [missing.args[0]]
-        if absent:
-            return "open", f"the stated cause ({self.category}) needs {', '.join(absent)}, which these runs' data do not hold"
-        if wrong:
-            return "open", f"the stated cause ({self.category}) is contradicted by these runs: not {'; not '.join(wrong)}"
-        return self.category, _Numbers().vformat(self.text, (), evidence)
-
-    def _holds(self, evidence: dict) -> bool | None:
-        """Whether every fact holds (None: a value is missing)."""
-        try:
-            return all(holds(evidence) for holds in self.facts.values())
+            wrong = self.contradicted(evidence)
         except KeyError:
+            lacking = next(c for c in self.chain() if c._absent(evidence))
+            needs = ", ".join(lacking._absent(evidence))
+            return "open", f"the stated cause ({lacking.category}) needs {needs}, which these runs' data do not hold"
+        if wrong:
+            categories = "/".join(c.category for c in self.chain())
+            return "open", f"the stated cause ({categories}) is contradicted by these runs: not {'; not '.join(wrong)}"
+        holding = next(c for c in self.chain() if c._failed(evidence) == [])
+        return holding.category, _Numbers().vformat(holding.text, (), evidence)
+
+    def _absent(self, evidence: dict) -> list[str]:
+        """The values the text or the facts quote that the evidence lacks."""
+        absent = {name for _, name, _, _ in string.Formatter().parse(self.text) if name and name not in evidence}
+        try:
+            [holds(evidence) for holds in self.facts.values()]
+        except KeyError as missing:
+            absent.add(missing.args[0])
+        return sorted(absent)
+
+    def _failed(self, evidence: dict) -> list[str] | None:
+        """The names of the facts that fail ([]: it holds), or None when a value is missing."""
+        if self._absent(evidence):
             return None
+        return [name for name, holds in self.facts.items() if not holds(evidence)]
 
 
 @dataclass

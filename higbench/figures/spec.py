@@ -162,7 +162,6 @@ class Figure:
 # -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----
 
 
-@cache
 # -- the jobs a figure needs at a preset --------------------------------------------------
 def expand(figure: Figure, preset: Preset) -> list[Job]:
     """The jobs of a figure at a preset, in declaration order (a parent or seed search before its jobs)."""
@@ -215,6 +214,7 @@ def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, 
     return list(main.values())
 
 
+@cache
 def _conf(rel: str) -> dict:
     import yaml
 

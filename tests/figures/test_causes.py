@@ -39,7 +39,7 @@ def test_every_claim_is_declared_in_one_module_apart_from_the_figures():
 def test_cause_texts_have_no_typed_numbers(cid):
     cause = CAUSE[cid]
     assert cause.category in CAUSES and cause.category != "open"
-    prose = re.sub(r"\{[^}]*\}|\b[a-z]{3}-\d+\b", "", cause.text)  # fields and claim ids (poi-2)
+    prose = re.sub(r"\{[^}]*\}|\b[a-z]{3}-\d+a?\b", "", cause.text)  # fields and claim ids (poi-2)
     assert not re.search(r"(?<![A-Za-z_\d])\d", prose), f"{cid}: a number typed into the cause text: {prose!r}"
     assert cause.facts, f"{cid}: a cause states no fact a measurement could contradict"
 
@@ -132,7 +132,7 @@ SYNTHETIC = [
         dict(hig=7.6e-7, hig_half=1e-6, hig_updates=36799, lowest=6.5e-7, lowest_name="GN"),
         dict(hig=1e-7),  # below the authors' draw's level
     ),
-    ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9), dict(hig_b=64)),
+    ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9, hig_slope=-1.0, authors_hig_decades=1.5), dict(hig_updates=100)),
     ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=0.5)),
     ("abl-1", dict(spread=36.7, spread_half=300.0), dict(spread_half=10.0)),
     ("toy-2", dict(adam_final=4.4e-3, adam_half=3.7e-3, gn_final=5.7e-2, gn_half=5.7e-2), dict(gn_final=0.25)),
@@ -149,6 +149,21 @@ def test_a_cause_is_contradicted_when_its_values_flip(cid, values, flip):
     flipped = finish(c, _row(cid, "not", {**values, **flip}))
     assert flipped["cause"][0] == "open" and "contradicted" in flipped["cause"][1], flipped["cause"]
     assert contradictions(c, flipped)
+
+
+def test_poisson_hig_at_the_papers_batch_has_the_cause_its_runs_and_the_authors_setup_give():
+    """poi-1 at b=64 (the long preset): the data distribution where the authors' setup reaches
+    the paper's decades, a disagreement where it falls short too; b=16 keeps its deviation."""
+    c = registry.claims()["poi-1"]
+    at_64 = dict(hig_b=64, hig_updates=340, hig_decades=1.9, hig_slope=-1.7, adam_decades=3.7)
+    assert finish(c, _row("poi-1", "partly", at_64 | {"authors_hig_decades": 1.5}))["cause"][0] == "disagreement"
+    assert finish(c, _row("poi-1", "partly", at_64 | {"authors_hig_decades": 3.0}))["cause"][0] == "unspecified"
+    at_16 = dict(hig_b=16, hig_updates=434, hig_decades=1.1, hig_slope=-0.6)  # the authors' setup is not run at b=16
+    assert finish(c, _row("poi-1", "partly", at_16))["cause"][0] == "deviation"
+    short = finish(c, _row("poi-1", "partly", at_64 | {"authors_hig_decades": 1.5, "hig_updates": 100}))
+    assert short["cause"][0] == "open" and "contradicted" in short["cause"][1]
+    alone = finish(c, _row("poi-1", "partly", at_64))  # the authors' runs not made: no data cause invented
+    assert alone["cause"][0] == "open" and "authors_hig_decades" in alone["cause"][1]
 
 
 def test_missing_evidence_is_open_not_invented():
@@ -184,14 +199,15 @@ def test_render_formats_numbers_from_the_values():
 
 def test_the_first_alternative_whose_facts_hold_is_stated():
     """A cause with ``otherwise``: its own text where its facts hold, else the alternative's;
-    "open" naming the alternative's failed facts where neither holds."""
+    "open" where neither holds, naming the failed facts, or the values an alternative lacks."""
     at_b16 = Cause("deviation", "b={b}", {"a small batch": lambda v: v["b"] < 64})
     cause = dataclasses.replace(at_b16, otherwise=Cause("disagreement", "b={b}, {n} updates", {"enough": lambda v: v["n"] > 9}))
     assert cause.render({"b": 16, "n": 1}) == ("deviation", "b=16")
     assert cause.render({"b": 64, "n": 10}) == ("disagreement", "b=64, 10 updates")
-    neither = "the stated cause (disagreement) is contradicted by these runs: not enough"
+    neither = "the stated cause (deviation/disagreement) is contradicted by these runs: not a small batch; not enough"
     assert cause.render({"b": 64, "n": 1}) == ("open", neither)
-    assert cause.contradicted({"b": 64, "n": 1}) == ["enough"] and cause.contradicted({"b": 64, "n": 10}) == []
+    assert cause.contradicted({"b": 64, "n": 1}) == ["a small batch", "enough"] and cause.contradicted({"b": 64, "n": 10}) == []
+    assert cause.render({"b": 64})[0] == "open" and "needs n" in cause.render({"b": 64})[1]  # the alternative might hold
 
 
 # -- rules on synthetic measurements -------------------------------------------------------
