@@ -159,9 +159,6 @@ class Figure:
         return for_preset(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)
 
 
-# -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----
-
-
 # -- the jobs a figure needs at a preset --------------------------------------------------
 def expand(figure: Figure, preset: Preset) -> list[Job]:
     """The jobs of a figure at a preset, in declaration order (a parent or seed search before its jobs)."""
@@ -212,6 +209,9 @@ def _with_search(figure_id: str, sweep: Sweep, mine: list[Job], preset: Preset, 
             jobs.extend(searches[skey])
         job.search = searches[skey]
     return list(main.values())
+
+
+# -- paper facts read from conf/ (one copy: the experiment configs and per-pair defaults) ----
 
 
 @cache
