@@ -57,10 +57,10 @@ class CpuUse:
 
     def __init__(self, threads: int):
         self.threads = max(1, threads)
-        self.cpu0, self.wall0 = _cpu_seconds(), time.perf_counter()
+        self.cpu0, self.wall0 = _cpu_seconds(), _wall_seconds()
 
     def summary(self) -> dict:
-        wall = time.perf_counter() - self.wall0
+        wall = _wall_seconds() - self.wall0
         share = (_cpu_seconds() - self.cpu0) / (wall * self.threads) if wall > 0 else float("nan")
         load = " ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else ""
         return {"cpu_share": round(share, 3), "load_at_finish": load}
@@ -69,6 +69,10 @@ class CpuUse:
 def _cpu_seconds() -> float:
     t = _PROCESS.cpu_times()
     return t.user + t.system
+
+
+def _wall_seconds() -> float:
+    return time.perf_counter()
 
 
 def current_rss_mb() -> float:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -490,17 +489,18 @@ def test_a_figure_records_when_and_at_which_revisions_its_runs_were_made():
     assert runs_made(data) == {"runs": f"runs made 2026-11-24 04:53-05:10 UTC at ab5624b, b5158bd{shares}"}
 
 
-def test_a_run_file_records_what_the_run_had_of_its_cores(tmp_path):
-    """The CPU share is the process's CPU time over wall time and threads since the run began:
-    about 1 for a run busy on its one thread, far below 1 for one that waits."""
-    from higbench.runner.environment import CpuUse
+def test_a_run_file_records_what_the_run_had_of_its_cores(monkeypatch):
+    """The CPU share is the process's CPU seconds over wall seconds times threads since the run
+    began: 1 for a run busy on all its threads, lower for one that shared its cores or waited.
+    (Clocks replaced: a real measure would depend on the machine's load.)"""
+    from higbench.runner import environment
 
-    waiting = CpuUse(threads=1)
-    time.sleep(0.2)
-    idle = waiting.summary()
-    busy = CpuUse(threads=1)
-    t0 = time.perf_counter()
-    while time.perf_counter() - t0 < 0.2:
-        pass
-    assert idle["cpu_share"] < 0.1 < 0.25 < busy.summary()["cpu_share"], (idle, busy.summary())
-    assert len(idle["load_at_finish"].split()) == 3
+    clock = {"cpu": 100.0, "wall": 50.0}
+    monkeypatch.setattr(environment, "_cpu_seconds", lambda: clock["cpu"])
+    monkeypatch.setattr(environment, "_wall_seconds", lambda: clock["wall"])
+    use = environment.CpuUse(threads=2)
+    clock["cpu"], clock["wall"] = 100.0 + 2 * 10.0, 60.0  # both threads busy for 10 s
+    assert use.summary()["cpu_share"] == 1.0
+    clock["cpu"], clock["wall"] = 100.0 + 2 * 10.0 + 5.0, 70.0  # then one thread's worth for half of 10 s
+    assert use.summary()["cpu_share"] == 0.625
+    assert len(use.summary()["load_at_finish"].split()) == 3
