@@ -118,6 +118,20 @@ def epochs(run: RunData, curves) -> np.ndarray:
     return curves["step"].to_numpy(dtype=float) * float(run.cfg("batch_size")) / float(run.cfg("problem.epoch_size"))
 
 
+CURVE_POINTS = 500  # evaluations drawn per run and scale (a 3,000 s Adam run has ~54,000)
+
+
+def thinned(n: int, y: np.ndarray, keep: int = CURVE_POINTS) -> np.ndarray:
+    """Indices of the evaluations to draw of ``n``: all if few, else ``keep`` evenly spread and
+    ``keep`` log-spaced (dense early: log axes), the first, the last and the lowest ``y``."""
+    if n <= 2 * keep:
+        return np.arange(n)
+    even = np.linspace(0, n - 1, keep).round()
+    early = np.geomspace(1, n, keep).round() - 1
+    lowest = [np.nanargmin(y)] if np.isfinite(y).any() else []
+    return np.unique(np.concatenate([even, early, lowest, [0, n - 1]]).astype(int))
+
+
 def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss", color=None, ls="-", x_offset=0.0, **kw):
     """One setting: a line for one seed, median line + min-max band for several.
 
@@ -127,7 +141,7 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
     runs = [r for r in runs if r.ok and y in r.curves]
     series, diverged = [], []
     for r in runs:
-        c = r.curves
+        c = r.curves.iloc[thinned(len(r.curves), r.curves[y].to_numpy(dtype=float))]
         xs = (epochs(r, c) if x == "epoch" else c[x].to_numpy(dtype=float)) + x_offset
         ys = c[y].to_numpy(dtype=float)
         d.record(panel, label, r, x, xs, y, ys)

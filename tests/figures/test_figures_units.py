@@ -504,3 +504,19 @@ def test_a_run_file_records_what_the_run_had_of_its_cores(monkeypatch):
     clock["cpu"], clock["wall"] = 100.0 + 2 * 10.0 + 5.0, 70.0  # then one thread's worth for half of 10 s
     assert use.summary()["cpu_share"] == 0.625
     assert len(use.summary()["load_at_finish"].split()) == 3
+
+
+def test_long_curves_are_thinned_to_what_a_panel_can_show_keeping_the_start_end_and_lowest():
+    """A 3,000 s Adam run has ~54,000 evaluations: drawn and written as ~1,000 (the data files stay
+    small), evenly spread and log-spaced, with the first, the last and the lowest kept."""
+    from higbench.figures.plot import CURVE_POINTS, thinned
+
+    short = np.arange(2 * CURVE_POINTS, dtype=float)
+    assert (thinned(len(short), short) == np.arange(len(short))).all()
+    n = 54_000
+    y = np.abs(np.sin(np.arange(n) / 7.0)) + 1.0
+    y[31_337] = 0.5  # the lowest, between the evenly spread points
+    idx = thinned(n, y)
+    assert len(idx) <= 2 * CURVE_POINTS + 3 and (np.diff(idx) > 0).all()
+    assert {0, n - 1, 31_337} <= set(idx.tolist()) and set(range(20)) <= set(idx.tolist())  # dense at the start
+    assert np.diff(idx).max() <= n / (CURVE_POINTS - 1) + 1  # no gap wider than the even spacing
