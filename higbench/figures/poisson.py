@@ -140,7 +140,7 @@ FIGURES = [
         beside_authors(FIG3B, FIG3B_AUTHORS),
         size=(2, 4.6, 3.6),
         panels=[
-            Curves(f"b) Poisson, {who}: Adam and HIG ({x} time)", series, f"{tag}loss ({x} time)", xscale=x)
+            Curves(f"b) Poisson, {who}:\nAdam and HIG ({x} time)", series, f"{tag}loss ({x} time)", xscale=x)
             for who, series, tag in ((OURS, BY_LR, ""), (THEIRS, BY_LR_AUTHORS, "authors: "))
             for x in ("linear", "log")
         ],
@@ -151,7 +151,7 @@ FIGURES = [
         beside_authors(FIG3C, FIG3C_AUTHORS),
         size=(1, 6.2, 4.0),
         panels=[
-            Curves(f"c) Poisson, {who}: Adam vs HIG pre-trained with Adam", chain, f"{tag}loss")
+            Curves(f"c) Poisson, {who}:\nAdam vs HIG pre-trained with Adam", chain, f"{tag}loss")
             for who, chain, tag in ((OURS, CHAIN, ""), (THEIRS, CHAIN_AUTHORS, "authors: "))
         ],
     ),
@@ -170,9 +170,9 @@ FIGURES = [
                 (THEIRS, BY_LR_AUTHORS, CHAIN_AUTHORS, "adam_after_hig_authors", "authors: "),
             )
             for panel in (
-                Curves(f"a) Poisson, {who}: loss per epoch", by_lr, f"{tag}a) loss per epoch", "epoch", "log", EPOCHS),
+                Curves(f"a) Poisson, {who}:\nloss per epoch", by_lr, f"{tag}a) loss per epoch", "epoch", "log", EPOCHS),
                 Curves(
-                    f"b) Poisson, {who}: pre-training in both directions",
+                    f"b) Poisson, {who}:\npre-training in both directions",
                     [*chain, Series(after, name="Adam pre-trained with HIG", color="tab:purple")],
                     f"{tag}b) pre-training both ways",
                 ),
