@@ -17,11 +17,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def parser(description: str, name: str) -> argparse.ArgumentParser:
-    """--jobs, --root (default outputs/probes/NAME), --out (docs/results/probes), --report-only."""
+    """--jobs, --root (default outputs/probes/NAME), --out (docs/results/probes), --set, --report-only."""
     p = argparse.ArgumentParser(description=description)
     p.add_argument("--jobs", type=int, default=2, help="runs at once, one thread each")
     p.add_argument("--root", type=Path, default=ROOT / "outputs" / "probes" / name)
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "probes")
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="more overrides of every run (device=cuda)")
     p.add_argument("--report-only", action="store_true")
     return p
 
@@ -34,13 +35,14 @@ def parse(p: argparse.ArgumentParser, script: str, argv=None) -> argparse.Namesp
     return args
 
 
-def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int) -> None:
-    """One multirun of ``jobs`` through the job-list sweeper (never into an existing folder)."""
+def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int, extra: list[str] = ()) -> None:
+    """One multirun of ``jobs``, each with the ``extra`` overrides, through the job-list sweeper
+    (never into an existing folder)."""
     if sweep_dir.exists():
         raise SystemExit(f"{sweep_dir} exists: its runs are kept; use --report-only or another --root")
     sweep_dir.parent.mkdir(parents=True, exist_ok=True)
     jobs_file = sweep_dir.with_suffix(".jobs.json")
-    jobs_file.write_text(json.dumps(jobs, indent=1))
+    jobs_file.write_text(json.dumps([[*job, *extra] for job in jobs], indent=1))
     from higbench.jobs import multirun_command  # the figures' job-list multirun, one thread per run
 
     cmd = multirun_command(jobs_file, sweep_dir, ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"])

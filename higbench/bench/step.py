@@ -24,11 +24,16 @@ resident set at that moment, over warm-up plus one update. So it is the extra ho
 the updates need on top of the process with its data and model (the paper reports GPU
 memory; first-order numbers here are therefore small). ``--no-memory`` skips it.
 
+``--device cuda``: the same on a GPU, closer to the paper's tables: every phase ends with a
+synchronisation (``higbench.runner.updates``), and memory is the peak of the GPU memory the
+updates allocate on top of what is allocated before them (torch's allocator statistics).
+
 Examples (``python scripts/bench_step.py`` and ``make bench`` are the same entry point):
 
     python -m higbench.bench.step --problem oscillator --optimizer adam hig --batch-size 128 512
     python -m higbench.bench.step --problem poisson --optimizer hig --batch-size 16 --jacobian structured naive --solver gram svd
     python -m higbench.bench.step --paper-tables --out outputs/bench      # tables 3-5 (+ naive path)
+    python -m higbench.bench.step --paper-tables --device cuda --out docs/results/probes/gpu
 
 ``--paper-tables`` writes ``paper_tables.csv`` and ``paper_tables.md`` to ``--out``
 (default outputs/bench/) for the figures pipeline, with the paper's GPU figures beside
@@ -52,8 +57,14 @@ import torch
 
 from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
 from higbench.dtypes import DTYPES
+from higbench.runner.updates import synchronize
 
 PHASES = ("jacobian_s", "inversion_s", "apply_s")
+CPU = torch.device("cpu")
+MEMORY_MEANING = {
+    "cpu": "extra resident host memory of the update",
+    "cuda": "peak GPU memory the update allocates beyond the set-up's",
+}
 DEFAULT_OUT = Path("outputs") / "bench"
 
 
@@ -111,13 +122,13 @@ def is_jacobian_power(optimizer: str) -> bool:
 class Runner:
     """One configuration, ready to run updates from fixed weights on a fixed batch."""
 
-    def __init__(self, cfg: Config, dtype: torch.dtype):
+    def __init__(self, cfg: Config, dtype: torch.dtype, device: torch.device = CPU):
         from higbench.problems import build_problem
         from higbench.runner.updates import build_update
 
         c = compose(cfg)
         self.cfg = cfg
-        self.problem = build_problem(c.problem, dtype=dtype, device=torch.device("cpu"), seed=0)
+        self.problem = build_problem(c.problem, dtype=dtype, device=device, seed=0)
         self.model = self.problem.build_model()
         gen = torch.Generator().manual_seed(0)
         self.batch = next(iter(self.problem.epoch(cfg.batch_size, gen)))
@@ -132,18 +143,22 @@ class Runner:
         return result
 
 
-def time_configs(configs: list[Config], repeats: int, warmup: int, dtype: torch.dtype, log=print) -> dict[Config, Timing]:
+def time_configs(
+    configs: list[Config], repeats: int, warmup: int, dtype: torch.dtype, device: torch.device = CPU, log=print
+) -> dict[Config, Timing]:
     """Interleaved timing: every round runs one update of every configuration."""
     runners = {}
     for cfg in configs:
-        runners[cfg] = Runner(cfg, dtype)
+        runners[cfg] = Runner(cfg, dtype, device)
         for _ in range(warmup):
             runners[cfg]()
     timings = {cfg: Timing() for cfg in configs}
     for r in range(repeats):
         for cfg, run in runners.items():
+            synchronize(device)
             t0, c0 = time.perf_counter(), time.process_time()
             result = run()
+            synchronize(device)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             t = timings[cfg]
             t.wall.append(wall)
@@ -168,12 +183,21 @@ def _status_mb() -> dict[str, float]:
     return out
 
 
-def memory_probe(cfg: Config, warmup: int, dtype: torch.dtype) -> float:
-    """Peak extra resident memory (MB) of warm-up + one update, in this (fresh) process."""
-    run = Runner(cfg, dtype)
+def memory_probe(cfg: Config, warmup: int, dtype: torch.dtype, device: torch.device = CPU) -> float:
+    """Peak extra memory (MB) of warm-up + one update, in this (fresh) process: resident host
+    memory, or on a GPU the memory allocated on top of what the set-up holds."""
+    run = Runner(cfg, dtype, device)
     import gc
 
     gc.collect()
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+        torch.cuda.reset_peak_memory_stats(device)
+        base = torch.cuda.memory_allocated(device)
+        for _ in range(max(warmup, 0) + 1):
+            run()
+        torch.cuda.synchronize(device)
+        return max(0.0, (torch.cuda.max_memory_allocated(device) - base) / 2**20)
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")  # reset VmHWM to the current resident set
     base = _status_mb()["VmRSS"]
@@ -182,7 +206,7 @@ def memory_probe(cfg: Config, warmup: int, dtype: torch.dtype) -> float:
     return max(0.0, _status_mb()["VmHWM"] - base)
 
 
-def measure_memory(cfg: Config, warmup: int, dtype: str, threads: int) -> float | None:
+def measure_memory(cfg: Config, warmup: int, dtype: str, threads: int, device: str = "cpu") -> float | None:
     cmd = [
         sys.executable,
         "-m",
@@ -192,7 +216,7 @@ def measure_memory(cfg: Config, warmup: int, dtype: str, threads: int) -> float 
         "--warmup",
         str(min(warmup, 1)),
     ]
-    cmd += ["--dtype", dtype, "--threads", str(threads)]
+    cmd += ["--dtype", dtype, "--threads", str(threads), "--device", device]
     package_parent = str(Path(__file__).resolve().parents[2])  # the same higbench in the probe
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([package_parent, *filter(None, [os.environ.get("PYTHONPATH")])]))
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -205,7 +229,7 @@ def measure_memory(cfg: Config, warmup: int, dtype: str, threads: int) -> float 
 # -- results --
 
 
-def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str) -> dict:
+def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str, device: str = "cpu") -> dict:
     med = {k: statistics.median(v) for k, v in t.phases.items()}
     out = {
         "problem": cfg.problem,
@@ -225,6 +249,7 @@ def row(cfg: Config, t: Timing, mem: float | None, threads: int, dtype: str) -> 
         "repeats": len(t.wall),
         "threads": threads,
         "dtype": dtype,
+        "device": device,
         "finite": t.finite,
     }
     if cfg.overrides:
@@ -381,7 +406,8 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         "",
         f"Machine: {meta['machine']}; torch {meta['torch']}, {meta['threads']} thread(s), {meta['dtype']}; "
         f"medians over {meta['repeats']} interleaved updates after {meta['warmup']} warm-up. "
-        "Paper columns: the paper's GPU figures. Memory: extra resident memory of the update (see higbench/bench/step.py).",
+        f"Paper columns: the paper's GPU figures. Memory: {meta.get('memory', MEMORY_MEANING['cpu'])} "
+        "(see higbench/bench/step.py).",
         "",
     ]
     for problem, table in PROBLEM_TABLES.items():
@@ -472,6 +498,7 @@ def main(argv=None) -> None:
         help="torch and BLAS threads: N or auto (as the runner's threads=auto); 1: robust on a shared machine",
     )
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"])
+    parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="where the updates run (cuda: a GPU)")
     parser.add_argument("--no-memory", action="store_true", help="skip the per-configuration memory subprocesses")
     parser.add_argument("--paper-tables", action="store_true", help="the rows of paper tables 3-5, plus the naive path")
     parser.add_argument(
@@ -486,10 +513,13 @@ def main(argv=None) -> None:
     args.threads = resolve_threads(args.threads if args.threads == "auto" else int(args.threads))
     torch.set_num_threads(args.threads)
     dtype = DTYPES[args.dtype]
+    if args.device == "cuda" and not torch.cuda.is_available():
+        parser.error("--device cuda: CUDA is not available on this machine")
+    device = torch.device(args.device)
     if args.memory_probe:
         spec = json.loads(args.memory_probe)
         spec["overrides"] = tuple(spec["overrides"])
-        print(memory_probe(Config(**spec), args.warmup, dtype))
+        print(memory_probe(Config(**spec), args.warmup, dtype, device))
         return
 
     if args.paper_tables:
@@ -509,10 +539,10 @@ def main(argv=None) -> None:
     for group in groups:
         repeats, warmup = args.repeats, args.warmup
         print(f"timing {len(group)} configuration(s) interleaved: {', '.join(c.label() for c in group)}", file=sys.stderr)
-        timings = time_configs(group, repeats, warmup, dtype)
+        timings = time_configs(group, repeats, warmup, dtype, device)
         for cfg in group:
-            mem = None if args.no_memory else measure_memory(cfg, warmup, args.dtype, args.threads)
-            r = row(cfg, timings[cfg], mem, args.threads, args.dtype)
+            mem = None if args.no_memory else measure_memory(cfg, warmup, args.dtype, args.threads, args.device)
+            r = row(cfg, timings[cfg], mem, args.threads, args.dtype, device_name(device))
             rows.append(r)
             print(json.dumps(r), flush=True)
     if args.paper_tables:
@@ -520,7 +550,9 @@ def main(argv=None) -> None:
 
         meta = {
             "date": time.strftime("%Y-%m-%d %H:%M"),
-            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}",
+            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
+            + (f"; {device_name(device)}" if device.type == "cuda" else ""),
+            "memory": MEMORY_MEANING[device.type],
             "torch": torch.__version__,
             "threads": args.threads,
             "dtype": args.dtype,
@@ -531,6 +563,10 @@ def main(argv=None) -> None:
         for t in targets(rows):
             print(json.dumps(t), flush=True)
         print(f"wrote {args.out / 'paper_tables.csv'} and {args.out / 'paper_tables.md'}", file=sys.stderr)
+
+
+def device_name(device: torch.device) -> str:
+    return f"cuda ({torch.cuda.get_device_name(device)})" if device.type == "cuda" else "cpu"
 
 
 def default_batch(problem: str, optimizer: str) -> int:

@@ -37,7 +37,8 @@ class UpdateResult:
     spectrum: dict = field(default_factory=dict)
 
 
-def _sync(device: torch.device) -> None:
+def synchronize(device: torch.device) -> None:
+    """Wait for the device's queued work, so a clock read after it counts that work (GPU only)."""
     if device.type == "cuda":
         torch.cuda.synchronize(device)
 
@@ -81,7 +82,7 @@ class Update:
         except NonFiniteStep as exc:
             loss = closure.first_mean
             return UpdateResult(math.nan if loss is None else loss.item(), finite=False, reason=str(exc))
-        _sync(self.problem.device)
+        synchronize(self.problem.device)
         total = time.perf_counter() - t0
         loss = closure.first_mean if closure.first_mean is not None else value
         timings = getattr(opt, "last_timings", None)

@@ -326,15 +326,27 @@ def test_path_shares_of_y_space_trajectories():
 
 
 def test_a_cause_quotes_its_committed_probe_and_reads_open_without_it(monkeypatch, tmp_path):
-    """poi-2's cause quotes the Poisson data probe (docs/results/probes/poisson_data.csv)."""
+    """poi-2's cause quotes the GPU Poisson data probe (docs/results/probes/gpu/poisson_data.csv)."""
     from higbench.claims import rules
 
     c = registry.claims()["poi-2"]
     values = dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier")
     probe = c.cause.probe()
-    assert {"probe_phiflow_hig", "probe_fourier_adam"} <= set(probe)
+    assert {"probe_phiflow_hig", "probe_fourier_adam_300", "probe_phiflow_hig_updates"} <= set(probe)
     row = finish(c, _row("poi-2", "not", values))
-    assert row["cause"][0] == "disagreement" and f"{probe['probe_phiflow_hig']:.1e}".replace("e-0", "e-") in row["cause"][1]
+    assert row["cause"][0] == "disagreement" and f"{probe['probe_phiflow_hig']:.3g}" in row["cause"][1]
     monkeypatch.setattr(rules, "PROBES_DIR", tmp_path)  # an installed package: no docs/results
     row = finish(c, _row("poi-2", "not", values))
     assert row["cause"][0] == "open" and "probe_" in row["cause"][1]
+
+
+def test_a_probe_contradicting_the_cause_turns_it_open():
+    """spd-1 says the ratio is the hardware's: its GPU probe must give the paper's ratio. A GPU probe 10x off the
+    paper's ratio contradicts it, and the row says so instead of stating the cause."""
+    c = registry.claims()["spd-1"]
+    values = dict(ratio=8.7, paper_ratio=1.8, ref_ratio=39.0)
+    assert finish(c, _row("spd-1", "partly", values))["cause"][0] == "hardware"
+    probe = c.cause.probe()
+    off = dataclasses.replace(c, cause=dataclasses.replace(c.cause, probe=lambda: probe | {"probe_ratio": 18.0}))
+    kind, text = finish(off, _row("spd-1", "partly", values))["cause"]
+    assert kind == "open" and "not the paper's ratio on a GPU" in text

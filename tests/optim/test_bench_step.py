@@ -97,3 +97,10 @@ def test_script_is_a_thin_entry_point_to_the_package():
     assert "from higbench.bench.step import main" in script and "def " not in script
     out = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench_step.py"), "--help"], capture_output=True, text=True)
     assert out.returncode == 0 and "--paper-tables" in out.stdout
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="needs a machine without CUDA")
+def test_cuda_asked_for_without_one_is_one_clear_error(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        bench_step.main(["--problem", "toy", "--device", "cuda", "--no-memory"])
+    assert exit_info.value.code == 2 and "--device cuda: CUDA is not available" in capsys.readouterr().err
