@@ -195,6 +195,7 @@ def build(
     log=print,
 ) -> BuildResult:
     t0 = time.perf_counter()
+    _revision()  # read before the build writes its outputs, which would make a clean checkout look modified
     figures = registry.select(ids)
     result = BuildResult()
     if run and bench and preset not in UPDATES_ONLY and any(f.id in ("table3", "table4", "table5") for f in figures):
