@@ -104,3 +104,13 @@ def test_cuda_asked_for_without_one_is_one_clear_error(capsys):
     with pytest.raises(SystemExit) as exit_info:
         bench_step.main(["--problem", "toy", "--device", "cuda", "--no-memory"])
     assert exit_info.value.code == 2 and "--device cuda: CUDA is not available" in capsys.readouterr().err
+
+
+def test_the_cpu_targets_are_left_out_of_a_gpu_table(tmp_path):
+    cfg = bench_step.Config("oscillator", "adam", 512)
+    t = bench_step.Timing()
+    t.wall, t.phases = [1.0], {"jacobian_s": [0.1], "inversion_s": [0.0], "apply_s": [0.0]}
+    meta = dict(date="today", machine="test", torch="x", threads=1, dtype="float32", repeats=1, warmup=0)
+    for device, has_targets in (("cpu", True), ("cuda", False)):
+        bench_step.write_tables([bench_step.row(cfg, t, 1.0, 1, "float32")], tmp_path, meta | {"device": device})
+        assert ("## Targets" in (tmp_path / "paper_tables.md").read_text()) is has_targets
