@@ -216,10 +216,19 @@ def test_plan_counts_a_run_two_figures_share_once_even_while_it_waits(tmp_path):
     assert seconds["fig7"] == 10 * 3000  # fig3b's other 8 runs and 2 Adam-after-HIG runs; not fig3c's waiting ones again
 
 
-def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path):
+def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path, monkeypatch):
+    import json
+
     import pandas as pd
 
+    from higbench.figures import build as build_module
     from higbench.figures.build import build
+    from higbench.runner import revision
+
+    # The checkout counts as modified once the build has written its outputs: the revision recorded must be read first.
+    written = lambda: (tmp_path / "figs").is_dir() and any((tmp_path / "figs").iterdir())  # noqa: E731
+    monkeypatch.setattr(revision, "git_revision", lambda: "a" * 40 + ("-dirty" if written() else ""))
+    build_module._revision.cache_clear()  # read once per process: here, by this build
 
     bench = tmp_path / "outputs" / "bench"
     bench.mkdir(parents=True)
@@ -250,7 +259,10 @@ def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path):
             for p, o, b, j, u, t in rows
         ]
     ).to_csv(bench / "paper_tables.csv", index=False)
-    result = build(["table3"], preset="smoke", runs_root=tmp_path / "outputs", out_dir=tmp_path / "figs", bench=False)
+    try:
+        result = build(["table3"], preset="smoke", runs_root=tmp_path / "outputs", out_dir=tmp_path / "figs", bench=False)
+    finally:
+        build_module._revision.cache_clear()  # not this fake revision for later tests
     assert result.launched == 0 and result.drawn == ["table3"]
     table = pd.read_csv(tmp_path / "figs" / "table3.csv")
     assert list(zip(table["Optimizer"], table["Batch size"], table["Update duration (s)"])) == [
@@ -260,6 +272,7 @@ def test_tables_3_to_5_use_the_benchmark_scripts_table_when_present(tmp_path):
     ]
     report = (tmp_path / "figs" / "REPORT.md").read_text()
     assert "HIG 0.25 s / Adam 0.1 s = 2.5x" in report and "**reproduced**" in report  # 2.5x vs the paper's 1.8x: within 3x
+    assert json.loads((tmp_path / "figs" / "table3.json").read_text())["made"]["revision"] == "aaaaaaa"
 
 
 def _fake_run(t, loss, **cols):
