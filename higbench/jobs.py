@@ -12,7 +12,11 @@ by the identity of the run it points at).
 Reuse. The results index of the runs root (``outputs/`` by default, runs made by hand with
 ``higbench`` included) decides which runs exist: one per config by its rule
 (``one_per_config``), done meaning ``DONE_STATUSES`` (completed or diverged: a diverged run
-is a result). Missing, failed, interrupted and still-running (or killed) runs are (re)run.
+is a result). A run that stopped before its end (interrupted, failed, or killed: its file still
+says running) and left a checkpoint continues from it (``resume=<its run dir>``, in place, for the
+rest of its budget: a session cut off mid-run loses only the time since its last checkpoint); a
+missing run, or one without a checkpoint, is run from the start. A run still going in another
+process is refused by the resume and left alone.
 
 Running. The jobs that can run now (a continued run waits for its parent, a searched seed for
 its search) form one ``higbench -m`` multirun over their list (the job-list sweeper,
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import subprocess
 import sys
@@ -34,7 +39,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -43,6 +48,7 @@ from higbench.errors import override_value as fmt  # the one value-to-override r
 from higbench.results.index import DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.checkpoint import RESUMABLE_STATUSES, checkpoint_path
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
 LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
@@ -64,6 +70,8 @@ class Job:
     config: dict | None = None  # resolved task config (init_from: the parent's path)
     path: Path | None = None  # the run file that satisfies it
     status: str = "missing"
+    resume_from: Path | None = None  # a stopped run of it with a checkpoint: launched as resume=
+    clock_done: float = 0.0  # that run's training clock (seconds of its budget already spent)
 
     def override_list(self) -> list[str]:
         """The job's overrides as ``key=value`` strings (``init_from``: its parent's run file)."""
@@ -71,6 +79,12 @@ class Job:
         if self.parent is not None:
             items.append(f"init_from={fmt(str(self.parent.path)) if self.parent.path else 'PENDING'}")
         return items
+
+    def launch_overrides(self) -> list[str]:
+        """What the multirun runs for this job: its overrides, or ``resume=`` its stopped run."""
+        if self.resume_from is not None:
+            return [f"resume={fmt(str(self.resume_from.parent))}"]
+        return self.override_list()
 
     @property
     def done(self) -> bool:
@@ -151,19 +165,35 @@ def compose(overrides: tuple[str, ...]) -> dict:
     return yaml.load(OmegaConf.to_yaml(cfg, resolve=True), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 
 
-def run_index(root: Path | None) -> dict[str, tuple[Path, str]]:
-    """The results index of a runs root, one run per config (``one_per_config``): identity -> (run
-    file, status). A view of ``load_runs(root, figure_runs=True)``, no status or duplicate rule of
-    its own; read again after a launch, so that runs continued from new ones get their parent's identity."""
+class IndexedRun(NamedTuple):
+    path: Path
+    status: str
+    clock: float  # training clock reached (s)
+
+
+def run_index(root: Path | None) -> dict[str, IndexedRun]:
+    """The results index of a runs root, one run per config (``one_per_config``): identity -> its
+    run. A view of ``load_runs(root, figure_runs=True)``, no status or duplicate rule of its own;
+    read again after a launch, so that runs continued from new ones get their parent's identity."""
     if root is None or not Path(root).is_dir():
         return {}
     runs = one_per_config(load_runs(Path(root), figure_runs=True))
-    return {str(i): (Path(p).resolve(), str(s)) for i, p, s in zip(runs["config_id"], runs["path"], runs["status"])}
+    clocks = runs.get("train_time_s", [math.nan] * len(runs))
+    return {
+        str(i): IndexedRun(Path(p).resolve(), str(s), float(c) if c == c else 0.0)
+        for i, p, s, c in zip(runs["config_id"], runs["path"], runs["status"], clocks)
+    }
 
 
-def resolve(jobs: Iterable[Job], index: dict[str, tuple[Path, str]], compose: Callable[[tuple], dict] = compose) -> None:
-    """Fill in each job's config and identity, and its run file if one is done; a job whose
-    parent or seed search is not done yet is "waiting" (declaration order: those come first)."""
+def resumable(run: IndexedRun) -> bool:
+    """A run stopped before its end that left a checkpoint (``resume=`` continues it)."""
+    return run.status in RESUMABLE_STATUSES and checkpoint_path(run.path).is_file()
+
+
+def resolve(jobs: Iterable[Job], index: dict[str, IndexedRun], compose: Callable[[tuple], dict] = compose) -> None:
+    """Fill in each job's config and identity, and its run file if one is done (or the stopped
+    run to resume); a job whose parent or seed search is not done yet is "waiting" (declaration
+    order: those come first)."""
     with hydra_conf():
         for job in jobs:
             if (job.parent is not None and not job.parent.done) or not all(s.done for s in job.search):
@@ -174,8 +204,11 @@ def resolve(jobs: Iterable[Job], index: dict[str, tuple[Path, str]], compose: Ca
                 job.overrides["seed"] = job.seed
             job.config = dict(compose(tuple(job.override_list())))
             job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
-            path, job.status = index.get(job.identity, (None, "missing"))
-            job.path = path if job.status in DONE_STATUSES else None
+            run = index.get(job.identity)
+            job.status = run.status if run else "missing"
+            job.path = run.path if run and job.done else None
+            job.resume_from = run.path if run and resumable(run) else None
+            job.clock_done = run.clock if job.resume_from else 0.0
 
 
 @dataclass(frozen=True)
@@ -216,9 +249,12 @@ def multirun_command(jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[s
 
 
 def job_seconds(job: Job) -> float:
-    """Rough training seconds of a job (its budget; updates count as one second each)."""
+    """Rough training seconds a job has left (its budget less what a stopped run of it spent;
+    a budget in updates counts one second each)."""
     s = job.overrides.get("budget.seconds")
-    return float(s) if s is not None else float(job.overrides.get("budget.max_updates") or 1)
+    if s is not None:
+        return max(0.0, float(s) - job.clock_done)
+    return float(job.overrides.get("budget.max_updates") or 1)
 
 
 def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print) -> list[Path]:
@@ -230,12 +266,14 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     sweep_dir = (runs_root / FIGURE_RUNS_DIR / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}-{os.getpid()}").resolve()
     sweep_dir.mkdir(parents=True, exist_ok=False)
     jobs_file = sweep_dir / "jobs.json"
-    jobs_file.write_text(json.dumps([j.override_list() for j in jobs], indent=1) + "\n")
+    jobs_file.write_text(json.dumps([j.launch_overrides() for j in jobs], indent=1) + "\n")
     secs = sum(map(job_seconds, jobs))
     extra = launcher.args(len(jobs), n_jobs, secs)
     how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
     figures = ", ".join(sorted({j.figure for j in jobs}))
-    log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}, ~{secs:.0f} s of training) -> {sweep_dir}")
+    resumed = [j.resume_from for j in jobs if j.resume_from is not None]
+    again = f", {len(resumed)} resumed in place" if resumed else ""
+    log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}{again}, ~{secs:.0f} s of training) -> {sweep_dir}")
     env = dict(os.environ)  # the checkout on the path: higbench and its hydra_plugins (the job-list sweeper)
     env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
     t0 = time.perf_counter()
@@ -244,7 +282,7 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
         out.write(" ".join(cmd) + "\n\n")
         out.flush()
         proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
-    new = sorted(sweep_dir.rglob(RUN_FILE))
+    new = sorted([*sweep_dir.rglob(RUN_FILE), *resumed])
     status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
     log(f"[figures] {len(new)}/{len(jobs)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
     return new

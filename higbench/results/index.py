@@ -448,8 +448,9 @@ def _chain_ids(rows: list[dict]) -> None:
 
 def one_per_config(runs: pd.DataFrame) -> pd.DataFrame:
     """One run per ``config_id`` (the rule for duplicates of the same config): the newest done
-    run (``DONE_STATUSES``; newest by ``finished``), else the newest run of any status (by
-    ``started``). Rows without a ``config_id`` (unreadable files) are left out."""
+    run (``DONE_STATUSES``; newest by ``finished``), else the run furthest along (most training
+    clock, ``train_time_s``: the one worth resuming), then the newest (by ``started``). Rows without
+    a ``config_id`` (unreadable files) are left out."""
     if runs.empty:
         return runs
     df = runs[runs["config_id"].notna()]
@@ -459,10 +460,12 @@ def one_per_config(runs: pd.DataFrame) -> pd.DataFrame:
             return pd.Series(pd.NaT, index=df.index, dtype="datetime64[ns, UTC]")
         return pd.to_datetime(df[col], utc=True, errors="coerce", format="%Y-%m-%dT%H:%M:%S%z")
 
-    order = df.assign(_done=df["status"].isin(DONE_STATUSES), _when=when("finished").fillna(when("started"))).sort_values(
-        ["config_id", "_done", "_when", "path"], ascending=[True, False, False, False], na_position="last"
+    done = df["status"].isin(DONE_STATUSES)
+    clock = pd.to_numeric(df.get("train_time_s", pd.Series(float("nan"), index=df.index)), errors="coerce")
+    order = df.assign(_done=done, _along=clock.where(~done), _when=when("finished").fillna(when("started"))).sort_values(
+        ["config_id", "_done", "_along", "_when", "path"], ascending=[True, False, False, False, False], na_position="last"
     )
-    return order.groupby("config_id", sort=False).head(1).drop(columns=["_done", "_when"])
+    return order.groupby("config_id", sort=False).head(1).drop(columns=["_done", "_along", "_when"])
 
 
 def under_figure_runs(path: Path, roots: list[Path]) -> bool:

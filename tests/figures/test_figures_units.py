@@ -12,7 +12,7 @@ import pytest
 
 from higbench.figures import registry
 from higbench.figures.spec import PRESETS, Preset, expand
-from higbench.jobs import Job, Launcher, fmt, identity_of, multirun_command
+from higbench.jobs import Job, Launcher, fmt, identity_of, job_seconds, multirun_command
 from higbench.results.index import COSMETIC_KEYS
 
 # The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
@@ -193,6 +193,39 @@ def test_missing_runs_go_out_as_one_multirun_longest_first(tmp_path, monkeypatch
     jobs_file = Path(next(a for a in cmd if a.startswith("hydra.sweeper.jobs_file=")).split("=", 1)[1])
     listed = json.loads(jobs_file.read_text())
     assert [job[0] for job in listed] == ["budget.seconds=90", "budget.seconds=45", "budget.seconds=20"]
+
+
+def test_a_stopped_figure_run_is_resumed_in_place_for_the_rest_of_its_budget(tmp_path, monkeypatch):
+    """A figure run cut off (a session's end) continues from its checkpoint: the round's multirun
+    gets ``resume=<its run dir>``, the same run file completes, and no second run is made."""
+    from reliability.rel_helpers import stopped_run
+
+    from higbench import jobs as runs
+    from higbench.runfile.reader import read_head
+
+    overrides = {"problem": "toy", "optimizer": "adam", "budget.max_updates": 1000, "eval_unit": "updates", "eval_every": 5}
+    run = tmp_path / "figures-runs" / "earlier" / "0" / "run.h5"
+    run.parent.mkdir(parents=True)
+    stopped_run(run, monkeypatch, after=25)  # the same config, stopped after 25 loop turns
+    job = Job("f", "s", dict(overrides), seed=0)
+    runs.resolve([job], runs.run_index(tmp_path))
+    assert job.status == "interrupted" and not job.done and job.resume_from == run.resolve()
+    assert job.launch_overrides() == [f"resume={run.resolve().parent}"]
+    written = runs.launch([job], tmp_path, n_jobs=1, log=lambda _: None)
+    assert written == [run.resolve()]  # the run continued where it was: no new run file
+    head = read_head(run)
+    assert str(head.attrs["status"]) == "completed" and int(head.attrs["steps"]) == 1000, dict(head.attrs)
+    again = Job("f", "s", dict(overrides), seed=0)
+    runs.resolve([again], runs.run_index(tmp_path))
+    assert again.done and again.path == run.resolve() and again.resume_from is None
+
+
+def test_a_resumed_job_counts_only_the_budget_it_has_left():
+    job = Job("f", "s", {"budget.seconds": 3000.0}, seed=0)
+    assert job_seconds(job) == 3000.0
+    job.resume_from, job.clock_done = Path("x/run.h5"), 2394.5
+    assert job_seconds(job) == pytest.approx(605.5)
+    assert job.launch_overrides() == ["resume=x"]
 
 
 def test_cli_lists_figures_and_plans_without_running(tmp_path, capsys):

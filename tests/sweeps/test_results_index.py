@@ -266,3 +266,18 @@ def test_one_run_per_config_newest_done_first(tmp_path):
     assert config_id({"a": 1, "threads": 3}) == config_id({"a": 1})
     only_old = one_per_config(runs[runs["path"].isin([str(failed), str(done), str(later_failed)])])
     assert only_old["path"].tolist() == [str(done)]  # diverged counts as done; failed/interrupted do not
+
+
+def test_one_run_per_config_without_a_done_run_takes_the_one_furthest_along(tmp_path):
+    """Of two stopped runs of one config, the one with more training clock is the one to resume,
+    whichever started later (a session cut off a long run; a later build started it again)."""
+    import time
+
+    far = write_run(tmp_path / "a/run.h5", status="interrupted", test_loss=[1.0, 0.5, 0.2, 0.1, 0.05, 0.02])
+    time.sleep(1.1)  # started has one-second resolution
+    write_run(tmp_path / "b/run.h5", status="interrupted", test_loss=[1.0, 0.5])
+    runs = load_runs(tmp_path)
+    assert runs["config_id"].nunique() == 1
+    assert one_per_config(runs)["path"].tolist() == [str(far)]
+    done = write_run(tmp_path / "c/run.h5", status="completed", test_loss=[1.0, 0.5])
+    assert one_per_config(load_runs(tmp_path))["path"].tolist() == [str(done)]  # a done run first, however short
