@@ -133,7 +133,11 @@ SYNTHETIC = [
         dict(hig=1e-7),  # below the authors' draw's level
     ),
     ("poi-1", dict(hig_b=16, hig_updates=308, hig_decades=0.9, hig_slope=-1.0, authors_hig_decades=1.5), dict(hig_updates=100)),
-    ("poi-2", dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier"), dict(hig_final=0.5)),
+    (
+        "poi-2",
+        dict(start=2.3, hig_final=5.0, adam_final=0.97, hig_b=16, data="fourier", hig_first=2.6, hig_updates=300, advantage=0.19),
+        dict(hig_final=0.5),  # HIG below Adam, but rising at its first update: neither cause holds
+    ),
     ("abl-1", dict(spread=36.7, spread_half=300.0), dict(spread_half=10.0)),
     ("toy-2", dict(adam_final=4.4e-3, adam_half=3.7e-3, gn_final=5.7e-2, gn_half=5.7e-2), dict(gn_final=0.25)),
     ("spd-2", dict(ratio=1.2, b_lo=32, b_hi=128), dict(ratio=15.6)),
@@ -253,6 +257,19 @@ def test_poi4_compares_per_update_and_refuses_a_time_evaluated_adam():
     adam = _Run([300.0, 280.0, 260.0, 20.0], steps=[0, 1, 2, 1000])
     measured, verdict, _, values = _measure("poi-4", {"fig7": _Fig(adam=[adam], hig=[hig])})
     assert values["n"] == 2 and verdict == "reproduced", measured  # 50 vs 260 after two updates each
+
+
+def test_poisson_hig_from_a_deep_pretraining_has_its_own_cause():
+    """fig. 3c at long: from 3,000 s of Adam HIG drops at its first update and ends below Adam, by less than 2x; the
+    cause says so from the run's values (poi-2 and poi-2a), and turns open when HIG's first update raises the loss."""
+    deep = dict(start=0.021, hig_first=0.0178, hig_final=0.0105, adam_final=0.0181, hig_b=64, data="phiflow_noise")
+    deep |= dict(hig_updates=355, advantage=0.0181 / 0.0105)
+    for cid in ("poi-2", "poi-2a"):
+        c = registry.claims()[cid]
+        kind, text = finish(c, _row(cid, "partly", deep))["cause"]
+        assert kind == "disagreement" and "first update lowers the loss to 0.0178" in text and "1.7x" in text, text
+        kind, text = finish(c, _row(cid, "partly", deep | {"hig_first": 0.03}))["cause"]
+        assert kind == "open" and "contradicted" in text, text
 
 
 def test_the_authors_setup_claims_read_its_own_sweeps_and_its_best_eta():
