@@ -396,8 +396,9 @@ def rule_why(why: str) -> str:
 
 
 def contradictions(c: Claim, row: dict) -> list[str]:
-    """The facts of the claim's cause that its row's values contradict (for a "not"/"partly" row)."""
-    if c.cause is None or row["verdict"] not in (NOT, PARTLY):
+    """The facts of the claim's cause that its row's values contradict (for a "not"/"partly" row
+    whose verdict is the rule's: a row the seed gate caps shows the gate's cause, not the claim's)."""
+    if c.cause is None or row["verdict"] not in (NOT, PARTLY) or row.get("rule_verdict") == REPRODUCED:
         return []
     try:
         return c.cause.contradicted(evidence(row, c.cause))
