@@ -57,8 +57,9 @@ FIG3C = [
     # Fair baseline: the continued Adam with a re-tuned learning rate, same budget.
     poi("adam_cont_tuned", "adam", "adam_pre", grid={"optimizer.lr": PerPreset(TUNED_CONT_LRS, smoke=TUNED_CONT_LRS[:1])}),
 ]
+PRE_TRAINING = "0.35"  # grey: the shared stage, apart from the blues of Adam's continuations
 CHAIN = [
-    Series("adam_pre", name="Adam", color=COLORS["adam"]),
+    Series("adam_pre", name="Adam", color=PRE_TRAINING),
     Series("adam_cont", name="Adam, continued", color="#08306b"),
     Series("hig_cont", name="HIG pre-trained with Adam", color=COLORS["hig"]),
 ]
@@ -79,7 +80,7 @@ FIG3C_AUTHORS = [
 ]
 FIG7_AUTHORS = poi("adam_after_hig_authors", "adam", "hig_cont_authors", **AUTHORS, **{"optimizer.lr": ADAM_LR})
 CHAIN_AUTHORS = [
-    Series("adam_pre_authors", name="Adam", color=COLORS["adam"]),
+    Series("adam_pre_authors", name="Adam", color=PRE_TRAINING),
     Series("adam_cont_authors", "optimizer.lr", name="Adam, continued", color=BLUES[1:]),
     Series("hig_cont_authors", "optimizer.lr", name="HIG pre-trained with Adam", color=GREENS[1:]),
 ]

@@ -94,6 +94,13 @@ SYNTHETIC = [
         ),  # fmt: skip
         dict(hig_hi_eq=9e-6),  # HIG b=128 no longer lower per update
     ),
+    # osc-5 at the long budget: per update GN prefers the large b too (its other cause)
+    (
+        "osc-5",
+        dict(b_lo=32, b_hi=128, hig_lo=1.9e-7, hig_hi=7.6e-7, gn_lo=5.9e-7, gn_hi=6.5e-7, n_eq=35793, hig_lo_updates=283737)
+        | dict(hig_hi_updates=36799, hig_lo_eq=2.1e-6, hig_hi_eq=7.5e-7, gn_lo_eq=8.3e-7, gn_hi_eq=6.5e-7),
+        dict(hig_lo_updates=30000),  # the smaller b no longer buys more updates
+    ),
     ("osc-6", dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, calm_falling=3), dict(calm_falling=2)),
     (
         "dip-1",
@@ -284,9 +291,30 @@ def test_the_authors_setup_claims_read_its_own_sweeps_and_its_best_eta():
     assert verdict == "partly"  # 0.1 below 0.15, not half of it
     parent, other = hig[0], hig[1]
     parent.path, other.path = Path("/runs/a/run.h5"), Path("/runs/b/run.h5")
-    after = _Run([2.0, 3.0], init_from="/runs/a/run.h5")
-    _, verdict, _, values = _measure("poi-3a", {"fig7": _Fig(hig_cont_authors=[other, parent], adam_after_hig_authors=[after])})
+    after = _Run([2.0, 3.0], init_from="/runs/a/run.h5", **{"optimizer.lr": 1e-4})
+    fig7 = _Fig(hig_cont_authors=[other, parent], adam_after_hig_authors=[after], adam_cont_authors=adam)
+    _, verdict, _, values = _measure("poi-3a", {"fig7": fig7})
     assert values["hig_final"] == 2.0 and verdict == "partly"  # read from the run Adam continued, not the other eta
+    assert values["adam_cont"] == 0.8  # Adam continued at the η Adam after HIG uses
+
+
+def test_poi3_asks_adam_after_hig_to_give_back_hig_s_lead_at_once_and_at_its_end():
+    """The paper: Adam from HIG's weights 'quickly loses the progress the HIGs have made, and continues with a loss
+    value similar to the original Adam run'. HIG 1 -> 0.2, Adam continued 0.5: a lead of 2.5x."""
+    hig = _Run([1.0, 0.5, 0.2], **{"optimizer.lr": 0.02})
+    hig.path = Path("/runs/hig/run.h5")
+    cont = _Run([1.0, 1.3, 0.5], **{"optimizer.lr": 1e-4})
+
+    def judged(after_losses):
+        after = _Run(after_losses, init_from="/runs/hig/run.h5", **{"optimizer.lr": 1e-4})
+        return _measure("poi-3", {"fig7": _Fig(hig_cont=[hig], adam_cont=[cont], adam_after_hig=[after])})
+
+    measured, verdict, _, values = judged([0.2, 0.6, 0.45])
+    assert verdict == "reproduced" and values["lead"] == pytest.approx(2.5), measured
+    assert values["given_back"] == pytest.approx(0.885, abs=1e-3) and "1.0e0 -> 1.3e0" in measured  # Adam's own restart
+    assert judged([0.2, 0.25, 0.45])[1] == "partly"  # not at once: a slow drift up is not losing the progress quickly
+    assert judged([0.2, 0.6, 0.25])[1] == "partly"  # back down near HIG's level at its end
+    assert judged([0.2, 0.15, 0.1])[1] == "not"  # keeps HIG's progress and builds on it
 
 
 def test_dip2_needs_three_hig_evaluations_in_the_initial_stage():
@@ -367,3 +395,11 @@ def test_a_probe_contradicting_the_cause_turns_it_open():
     off = dataclasses.replace(c, cause=dataclasses.replace(c.cause, probe=lambda: probe | {"probe_ratio": 18.0}))
     kind, text = finish(off, _row("spd-1", "partly", values))["cause"]
     assert kind == "open" and "not the paper's ratio on a GPU" in text
+
+
+def test_osc5_states_the_per_update_direction_each_optimizer_shows():
+    """At standard GN's larger b was not lower per update, at long it is: the cause says which."""
+    c, (_, long_values, _) = registry.claims()["osc-5"], [s for s in SYNTHETIC if s[0] == "osc-5"][1]
+    assert "both follow the paper" in finish(c, _row("osc-5", "partly", long_values))["cause"][1]
+    gn_not = finish(c, _row("osc-5", "partly", long_values | {"gn_hi_eq": 9e-7}))["cause"]
+    assert gn_not[0] == "hardware" and "GN does not" in gn_not[1], gn_not
