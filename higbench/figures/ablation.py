@@ -11,13 +11,14 @@ from higbench.figures.plot import Curves, Series
 from higbench.figures.spec import Budget, Figure, PerPreset, Sweep, paper_grid
 
 BUDGET = Budget(seconds={"paper": 3600, "quick": 30, "standard": 120})
+FIG12 = Budget(seconds={"paper": 3600, "quick": 30, "standard": 120, "long": 900})  # long: abl-1 past its 120 s
 BETAS = paper_grid("fig12a_beta", "optimizer.beta")
 KAPPAS = paper_grid("fig12b_kappa", "optimizer.kappa")
 TAUS = paper_grid("fig13_tau", "optimizer.tau")
 
 
-def sweep(name: str, opt: str, key: str, values: PerPreset, **kw) -> Sweep:
-    return Sweep(name, {"problem": "oscillator", "optimizer": opt}, BUDGET, grid={key: values}, **kw)
+def sweep(name: str, opt: str, key: str, values: PerPreset, budget: Budget = BUDGET, **kw) -> Sweep:
+    return Sweep(name, {"problem": "oscillator", "optimizer": opt}, budget, grid={key: values}, **kw)
 
 
 def lines(title: str, sweep: str, key: str, panel: str) -> Curves:
@@ -31,8 +32,8 @@ FIGURES = [
         "Oscillator ablation: a) beta from 0 to -0.5, b) kappa from 1 to -1",
         size=(2, 4.8, 3.8),
         sweeps=[
-            sweep("beta", "hig", "optimizer.beta", PerPreset(BETAS, [0.0, -0.25, -0.5], [0.0, -0.5])),
-            sweep("kappa", "hig", "optimizer.kappa", PerPreset(KAPPAS, [1.0, 0.5, 0.0, -0.5, -1.0], [1.0, -0.5])),
+            sweep("beta", "hig", "optimizer.beta", PerPreset(BETAS, [0.0, -0.25, -0.5], [0.0, -0.5]), FIG12),
+            sweep("kappa", "hig", "optimizer.kappa", PerPreset(KAPPAS, [1.0, 0.5, 0.0, -0.5, -1.0], [1.0, -0.5]), FIG12),
         ],
         panels=[
             lines("a) oscillators, HIG: prefactor max(s)^β", "beta", "optimizer.beta", "a) beta"),

@@ -18,7 +18,7 @@ from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240, "long": 900})
-GRID = Budget(seconds={"paper": 3600, "quick": 12, "standard": 15})
+GRID = Budget(seconds={"paper": 3600, "quick": 12, "standard": 15, "long": 120})  # long: osc-6 past its 15 s
 FIG5_LRS = {opt: paper_grid(f"fig5_{opt}", "optimizer.lr") for opt in GD_GRIDS["fig5"]}
 FIG6_LRS = paper_grid("fig6_adam", "optimizer.lr")
 GRID_BATCHES = paper_grid("fig6_adam", "batch_size")
