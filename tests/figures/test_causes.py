@@ -403,3 +403,14 @@ def test_osc5_states_the_per_update_direction_each_optimizer_shows():
     assert "both follow the paper" in finish(c, _row("osc-5", "partly", long_values))["cause"][1]
     gn_not = finish(c, _row("osc-5", "partly", long_values | {"gn_hi_eq": 9e-7}))["cause"]
     assert gn_not[0] == "hardware" and "GN does not" in gn_not[1], gn_not
+
+
+def test_a_rule_that_passed_is_not_held_against_its_cause():
+    """A row capped at `partly` by the seed gate while its rule says `reproduced` (poi-2 at long) shows the gate's
+    cause: the claim's own cause is not checked against it; the same values with the rule's own `partly` are."""
+    c = registry.claims()["poi-2"]
+    values = dict(start=2.3, hig_final=0.5, adam_final=0.97, hig_b=16, data="fourier", hig_first=2.6, hig_updates=300)
+    row = finish(c, _row("poi-2", "partly", values | {"advantage": 1.9}))
+    assert row["verdict"] == "partly" and contradictions(c, row)  # neither of its causes holds
+    capped = finish(c, _row("poi-2", "reproduced", values | {"advantage": 1.9, "seeds": 1}))
+    assert capped["verdict"] == "partly" and capped["cause"][0] == "seeds" and contradictions(c, capped) == []
