@@ -39,6 +39,7 @@ from higbench.claims.rules import (
     final,
     float32_loss,
     half_way,
+    last_half_trend,
     loss_at,
     median,
     num,
@@ -471,6 +472,10 @@ def _per_update(d, ends: dict, fin: dict) -> dict:
     return values | {"n_eq": n_eq}
 
 
+GD_ALIKE = "over b the five behave alike (best-η spreads {spread_min:.1f}x-{spread_max:.1f}x); at the largest η "
+GD_ALIKE_FACT = {"alike over b": lambda v: v["spread_max"] <= 10}
+
+
 @claim(
     "osc-6",
     "fig5 fig6",
@@ -478,28 +483,39 @@ def _per_update(d, ends: dict, fin: dict) -> dict:
     min_seconds=12,  # divergence shows early
     cause=Cause(
         "budget",
-        "over b the five behave alike (best-η spreads {spread_min:.1f}x-{spread_max:.1f}x); at the largest η "
-        "{diverged} of {cells} optimizer-b runs diverge, and {calm_falling} of the {calm} that neither diverge nor "
-        "oscillate most are still falling over the second half of their {budget:g} s, where the paper's grids ran an hour",
-        {
-            "alike over b": lambda v: v["spread_max"] <= 10,
-            "the calm largest-η runs still falling": lambda v: v["calm"] > 0 and v["calm_falling"] == v["calm"],
-        },
+        GD_ALIKE + "{diverged} of {cells} optimizer-b runs diverge, and {calm_falling} of the {calm} that neither "
+        "diverge nor oscillate most are still falling over the second half of their {budget:g} s (a fitted fall beyond "
+        "twice its noise), where the paper's grids ran an hour",
+        GD_ALIKE_FACT | {"the calm largest-η runs still falling": lambda v: v["calm"] > 0 and v["calm_falling"] == v["calm"]},
+        otherwise=Cause(
+            "disagreement",
+            GD_ALIKE + "{diverged} of {cells} optimizer-b runs diverge, but {calm_run} neither diverges nor oscillates "
+            "most, and not for want of time: over the second half of its {budget:g} s it has stopped falling "
+            "({calm_change:+.2f} decades, noise {calm_noise:.2f}) on a plateau {calm_above:.1f}x above the next-smaller "
+            "η's final, while η={wobble_most_lr} oscillates more ({wobble_most:.3f} against {calm_wobble:.3f} decades "
+            "per evaluation). The rule counts divergence or the largest oscillation as unstable; this run stagnates",
+            GD_ALIKE_FACT
+            | {
+                "the calm run stopped falling": lambda v: v["calm_change"] > -2 * v["calm_noise"],
+                "its plateau above the next-smaller η": lambda v: v["calm_above"] > 1,
+                "another η oscillating more": lambda v: v["wobble_most"] > v["calm_wobble"],
+            },
+        ),
     ),
 )
 def gd_family(datas):
     """Oscillators (figs 5-6): the gradient-descent family behaves alike over batch sizes and becomes unstable at large
     η. Rule: at every b each optimizer's largest-η run diverges or oscillates most over its last half (of its η), and
     at its best η the final losses over b lie within 10x (partly: one of the two)"""
-    unstable, spreads, calm_falling, text = [], [], [], []
+    unstable, spreads, calm, text = [], [], [], []
     for fid, opts in GD_GRIDS.items():
         for opt in opts:
             require(runs := datas[fid].runs(opt), what=f"{fid} {opt}")
             bs = sorted({r.cfg("batch_size") for r in runs})
-            shaky = [_largest_lr_unstable([r for r in runs if r.cfg("batch_size") == b]) for b in bs]
+            at_b = {b: sorted((r for r in runs if r.cfg("batch_size") == b), key=lambda r: r.cfg("optimizer.lr")) for b in bs}
+            shaky = [_largest_lr_unstable(at_b[b]) for b in bs]
             unstable += shaky
-            largest = max(r.cfg("optimizer.lr") for r in runs)
-            calm_falling += [final([r]) < half_way([r]) for r, u in _at_largest(runs, largest, bs, shaky) if not u]
+            calm += [_calm(at_b[b], f"{OPTIMIZER_NAMES[opt]} at b={b}") for b, u in zip(bs, shaky) if not u]
             fin = {(r.cfg("optimizer.lr"), r.cfg("batch_size")): final([r]) for r in runs}
             best_lr = min({k[0] for k in fin}, key=lambda lr: median(fin.get((lr, b), math.inf) for b in bs))
             at = [fin[(best_lr, b)] for b in bs if (best_lr, b) in fin]
@@ -509,22 +525,33 @@ def gd_family(datas):
                 f"η={num(best_lr)} {spreads[-1]:.1f}x"
             )
     diverged = sum(u == "diverged" for u in unstable)
-    values = {"cells": len(unstable), "diverged": diverged, "calm": sum(not u for u in unstable)}
-    values["calm_falling"] = sum(calm_falling)
+    values = {"cells": len(unstable), "diverged": diverged, "calm": len(calm)}
+    values["calm_falling"] = sum(c["calm_change"] < -2 * c["calm_noise"] for c in calm)
     values |= {"spread_min": min(spreads), "spread_max": max(spreads)}
+    values |= max(calm, key=lambda c: c["calm_change"] + 2 * c["calm_noise"], default={})  # the least falling
     alike = all(s <= 10 for s in spreads)
     return "; ".join(text), all(unstable) and alike, all(unstable) or alike, values
 
 
-def _at_largest(runs: list, lr: float, bs: list, shaky: list) -> list:
-    """(the largest-η run at b, its instability) for each b."""
-    at = {r.cfg("batch_size"): r for r in runs if r.cfg("optimizer.lr") == lr}
-    return [(at[b], u) for b, u in zip(bs, shaky) if b in at]
+def _calm(runs: list, label: str) -> dict:
+    """What the largest-η run at one b (``runs`` sorted by η) does when it neither diverges nor oscillates most: its
+    last half's trend, its level against the next-smaller η's, its oscillation against the most oscillating η's."""
+    top, wobble = runs[-1], [oscillation(r) for r in runs]
+    change, noise = last_half_trend(top)
+    most = int(np.nanargmax(wobble))
+    return {
+        "calm_run": f"{label} η={num(top.cfg('optimizer.lr'))}",
+        "calm_change": change,
+        "calm_noise": noise,
+        "calm_above": final([top]) / final(runs[-2:-1]) if len(runs) > 1 else math.nan,
+        "calm_wobble": wobble[-1],
+        "wobble_most": wobble[most],
+        "wobble_most_lr": num(runs[most].cfg("optimizer.lr")),
+    }
 
 
 def _largest_lr_unstable(runs: list) -> str:
-    """ "diverged", "oscillates" (most of the η at this b over the last half) or "" (neither)."""
-    runs = sorted(runs, key=lambda r: r.cfg("optimizer.lr"))
+    """ "diverged", "oscillates" (most of the η at this b over the last half) or "" (neither); ``runs`` sorted by η."""
     if runs[-1].status == "diverged" or not math.isfinite(final(runs[-1:])):
         return "diverged"
     wobble = [oscillation(r) for r in runs]

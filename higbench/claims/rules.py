@@ -258,6 +258,20 @@ def oscillation(run) -> float:
     return float(np.median(np.abs(np.diff(y)))) if len(y) > 2 else float("nan")
 
 
+def last_half_trend(run) -> tuple[float, float]:
+    """(change of log10 test loss over the run's last half, its standard error), from a
+    least-squares line through those evaluations against training time. A noisy plateau
+    reads as flat here, where its last value against its half-way value can read as falling."""
+    t, y = run.curves["wall_time"].to_numpy(dtype=float), np.log10(_loss(run))
+    keep = (t >= 0.5 * t[-1]) & np.isfinite(y)
+    t, y = t[keep], y[keep]
+    if len(t) < 4:
+        return math.nan, math.nan
+    (slope, icept), span = np.polyfit(t, y, 1), t[-1] - t[0]
+    spread = np.sum((y - slope * t - icept) ** 2) / (len(t) - 2)
+    return float(slope * span), float(math.sqrt(spread / np.sum((t - t.mean()) ** 2)) * span)
+
+
 def updates_of(r) -> int:
     """Updates the run made (its last evaluation's step)."""
     return int(r.curves["step"].iloc[-1]) if len(r.curves) else 0

@@ -10,10 +10,12 @@ import re
 import string
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from higbench.claims.report import collect, write_report
-from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence, finish
+from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence, finish, last_half_trend
 from higbench.figures import registry
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
@@ -72,6 +74,10 @@ def _row(cid, verdict, values, seconds=1e9, seeds=3):
     return {"id": cid, "rule_verdict": verdict, "why": "rule", "values": values, "seconds": seconds, "seeds": seeds}
 
 
+OSC6_SHORT = dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, calm_falling=3) | dict(
+    calm_run="Adadelta at b=256 η=1", calm_change=-0.4, calm_noise=0.05, calm_above=2.0, calm_wobble=0.03
+) | dict(wobble_most=0.05, wobble_most_lr="0.1")  # fmt: skip
+
 # (claim, values the cause's facts hold for, the same with one value flipped)
 SYNTHETIC = [
     # osc-5: equal time favours the small b (more updates); per update HIG prefers the large b, GN does not
@@ -101,7 +107,8 @@ SYNTHETIC = [
         | dict(hig_hi_updates=36799, hig_lo_eq=2.1e-6, hig_hi_eq=7.5e-7, gn_lo_eq=8.3e-7, gn_hi_eq=6.5e-7),
         dict(hig_lo_updates=30000),  # the smaller b no longer buys more updates
     ),
-    ("osc-6", dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, calm_falling=3), dict(calm_falling=2)),
+    # osc-6 at standard (15 s): the calm largest-η runs still falling; at long one has stopped (its other cause)
+    ("osc-6", OSC6_SHORT, dict(calm_falling=2)),
     (
         "dip-1",
         dict(
@@ -414,3 +421,36 @@ def test_a_rule_that_passed_is_not_held_against_its_cause():
     assert row["verdict"] == "partly" and contradictions(c, row)  # neither of its causes holds
     capped = finish(c, _row("poi-2", "reproduced", values | {"advantage": 1.9, "seeds": 1}))
     assert capped["verdict"] == "partly" and capped["cause"][0] == "seeds" and contradictions(c, capped) == []
+
+
+def test_osc6_says_a_calm_run_that_stopped_falling_is_not_the_budget():
+    """At long (120 s) Adadelta's largest η at b=256 sat on a noisy plateau: its last value below its half-way value,
+    its fitted trend flat within noise. The cause then is no longer the budget, and says why the rule missed it."""
+    c = registry.claims()["osc-6"]
+    plateau = OSC6_SHORT | dict(calm=1, calm_falling=0, calm_change=-0.03, calm_noise=0.05, calm_above=4.9)
+    cause = finish(c, _row("osc-6", "partly", plateau))["cause"]
+    assert cause[0] == "disagreement" and "stopped falling" in cause[1] and "Adadelta at b=256" in cause[1], cause
+    flipped = finish(c, _row("osc-6", "partly", plateau | dict(calm_wobble=0.2)))  # it oscillates most after all
+    assert flipped["cause"][0] == "open" and "another η oscillating more" in flipped["cause"][1], flipped["cause"]
+
+
+def test_a_noisy_plateau_is_not_falling():
+    """osc-6's "still falling" is a fitted trend against its noise, not the last value against the half-way one."""
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 120, 61)
+    plateau = 10 ** (-2.4 + 0.15 * rng.standard_normal(t.size))
+    plateau[-1] = plateau[t.size // 2] / 2  # ends below its half-way value by chance
+    change, noise = last_half_trend(_Run(t, plateau))
+    assert change > -2 * noise, (change, noise)
+    change, noise = last_half_trend(_Run(t, plateau * 10 ** (-t / 120)))  # a decade per 120 s under the same noise
+    assert change < -2 * noise and -0.8 < change < -0.2, (change, noise)
+
+
+@dataclasses.dataclass
+class _Run:
+    wall_time: np.ndarray
+    test_loss: np.ndarray
+
+    @property
+    def curves(self):
+        return pd.DataFrame({"wall_time": self.wall_time, "test_loss": self.test_loss})
