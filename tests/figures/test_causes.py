@@ -11,7 +11,6 @@ import string
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from higbench.claims.report import collect, write_report
@@ -440,17 +439,9 @@ def test_a_noisy_plateau_is_not_falling():
     t = np.linspace(0, 120, 61)
     plateau = 10 ** (-2.4 + 0.15 * rng.standard_normal(t.size))
     plateau[-1] = plateau[t.size // 2] / 2  # ends below its half-way value by chance
-    change, noise = last_half_trend(_Run(t, plateau))
+    change, noise = last_half_trend(_Run(list(plateau), times=list(t)))
     assert change > -2 * noise, (change, noise)
-    change, noise = last_half_trend(_Run(t, plateau * 10 ** (-t / 120)))  # a decade per 120 s under the same noise
+    change, noise = last_half_trend(
+        _Run(list(plateau * 10 ** (-t / 120)), times=list(t))
+    )  # a decade per 120 s under the same noise
     assert change < -2 * noise and -0.8 < change < -0.2, (change, noise)
-
-
-@dataclasses.dataclass
-class _Run:
-    wall_time: np.ndarray
-    test_loss: np.ndarray
-
-    @property
-    def curves(self):
-        return pd.DataFrame({"wall_time": self.wall_time, "test_loss": self.test_loss})
