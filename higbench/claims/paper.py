@@ -538,7 +538,7 @@ def _calm(runs: list, label: str) -> dict:
     last half's trend, its level against the next-smaller η's, its oscillation against the most oscillating η's."""
     top, wobble = runs[-1], [oscillation(r) for r in runs]
     change, noise = last_half_trend(top)
-    most = int(np.nanargmax(wobble))
+    most = int(np.nanargmax(wobble)) if np.isfinite(wobble).any() else -1  # too few evaluations: itself
     return {
         "calm_run": f"{label} η={num(top.cfg('optimizer.lr'))}",
         "calm_change": change,
@@ -555,7 +555,9 @@ def _largest_lr_unstable(runs: list) -> str:
     if runs[-1].status == "diverged" or not math.isfinite(final(runs[-1:])):
         return "diverged"
     wobble = [oscillation(r) for r in runs]
-    return "oscillates" if wobble[-1] >= np.nanmax(wobble) else ""  # NaN (too few evaluations): not shown
+    if not np.isfinite(wobble).any():
+        return ""  # too few evaluations to show an oscillation
+    return "oscillates" if wobble[-1] >= np.nanmax(wobble) else ""  # NaN: not shown
 
 
 # -- Poisson (figures 3b, 3c, 7) ------------------------------------------------------------

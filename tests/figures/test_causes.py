@@ -6,6 +6,7 @@ No training.
 """
 
 import dataclasses
+import math
 import re
 import string
 from pathlib import Path
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from higbench.claims.paper import GD_FAMILY
 from higbench.claims.report import collect, write_report
 from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence, finish, last_half_trend
 from higbench.figures import registry
@@ -445,3 +447,11 @@ def test_a_noisy_plateau_is_not_falling():
         _Run(list(plateau * 10 ** (-t / 120)), times=list(t))
     )  # a decade per 120 s under the same noise
     assert change < -2 * noise and -0.8 < change < -0.2, (change, noise)
+
+
+def test_osc6_judges_runs_too_short_to_show_a_trend_without_failing():
+    """Three evaluations per run (a smoke budget): no oscillation or trend to read; the claim is still judged."""
+    grid = [(lr, b) for lr in (0.01, 0.1) for b in (256, 1024)]
+    runs = {o: [_Run([1.0, 0.5, 0.4], **{"optimizer.lr": lr, "batch_size": b}) for lr, b in grid] for o in GD_FAMILY}
+    _, verdict, _, values = _measure("osc-6", {"fig5": _Fig(**runs), "fig6": _Fig(**runs)})
+    assert values["calm"] == 10 and values["calm_falling"] == 0 and math.isnan(values["calm_change"]), values
