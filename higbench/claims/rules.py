@@ -272,6 +272,14 @@ def last_half_trend(run) -> tuple[float, float]:
     return float(slope * span), float(math.sqrt(spread / np.sum((t - t.mean()) ** 2)) * span)
 
 
+def by_setting(runs: list) -> list[list]:
+    """Runs grouped by setting (optimizer and hyper-parameters, as their label names them): the seeds of each."""
+    groups: dict[str, list] = {}
+    for r in runs:
+        groups.setdefault(r.label(), []).append(r)
+    return list(groups.values())
+
+
 def updates_of(r) -> int:
     """Updates the run made (its last evaluation's step)."""
     return int(r.curves["step"].iloc[-1]) if len(r.curves) else 0

@@ -50,12 +50,14 @@ REDUCED = {
     "fig11": {"lr": {"quick": [0.7]}, "b": {"quick": [16], "smoke": [8]}, "tau": {"smoke": [1e-4]}},
 }
 KEYS = {"lr": "optimizer.lr", "b": "batch_size", "tau": "optimizer.tau"}
+# cnn-1 compares the best CNN settings of figs. 10 and 11, a comparison the median of three seeds decides
+SEEDS = {fid: PerPreset([0], long=[0, 1, 2]) for fid in ("fig10", "fig11")}  # paper: its configs, one seed
 
 
 def grid_figure(fid: str, title: str, problem: str, opt: str, experiment: str) -> Figure:
     """Adam: one panel per η, a line per b; HIG: one row per b, a panel per τ, a line per η."""
     grid = {KEYS[k]: PerPreset(paper_grid(experiment, KEYS[k]), **v) for k, v in REDUCED[fid].items()}
-    sweep = Sweep(opt, {"problem": problem, "optimizer": opt}, GRID, grid=grid)
+    sweep = Sweep(opt, {"problem": problem, "optimizer": opt}, GRID, grid=grid, seeds=SEEDS.get(fid, [0]))
     cnn, name = ("CNN " if problem == "dipole_cnn" else ""), OPTIMIZER_NAMES[opt]
     if opt == "adam":
         facets = Facets([opt], "optimizer.lr", "batch_size", prefix=cnn + name)

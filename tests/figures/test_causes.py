@@ -455,3 +455,12 @@ def test_osc6_judges_runs_too_short_to_show_a_trend_without_failing():
     runs = {o: [_Run([1.0, 0.5, 0.4], **{"optimizer.lr": lr, "batch_size": b}) for lr, b in grid] for o in GD_FAMILY}
     _, verdict, _, values = _measure("osc-6", {"fig5": _Fig(**runs), "fig6": _Fig(**runs)})
     assert values["calm"] == 10 and values["calm_falling"] == 0 and math.isnan(values["calm_change"]), values
+
+
+def test_cnn1_compares_settings_by_their_median_over_seeds():
+    """One lucky seed does not make a setting best: HIG setting 1 has a run at 1e-5 but a median of 1e-2."""
+    adam = [_Run([1.0, 1e-3], label="Adam η=2e-4 b=256", **{"optimizer.lr": 2e-4, "batch_size": 256}) for _ in range(3)]
+    hig = [_Run([1.0, v], label="HIG η=0.7 τ=1e-4 b=16") for v in (1e-5, 1e-2, 1e-2)]
+    hig += [_Run([1.0, 6e-4], label="HIG η=0.7 τ=1e-3 b=16") for _ in range(3)]
+    measured, verdict, _, values = _measure("cnn-1", {"fig10": _Fig(adam=adam), "fig11": _Fig(hig=hig)})
+    assert values["hig"] == 6e-4 and verdict == "partly" and "τ=1e-3" in measured and "medians of 3 and 3 seeds" in measured
