@@ -37,6 +37,7 @@ from higbench.claims.rules import (
     claim,
     crossing_time,
     end_time,
+    falling,
     final,
     float32_loss,
     half_way,
@@ -497,7 +498,7 @@ GD_ALIKE_FACT = {"alike over b": lambda v: v["spread_max"] <= 10}
             "per evaluation). The rule counts divergence or the largest oscillation as unstable; this run stagnates",
             GD_ALIKE_FACT
             | {
-                "the calm run stopped falling": lambda v: v["calm_change"] > -2 * v["calm_noise"],
+                "the calm run stopped falling": lambda v: not falling(v["calm_change"], v["calm_noise"]),
                 "its plateau above the next-smaller η": lambda v: v["calm_above"] > 1,
                 "another η oscillating more": lambda v: v["wobble_most"] > v["calm_wobble"],
             },
@@ -527,7 +528,7 @@ def gd_family(datas):
             )
     diverged = sum(u == "diverged" for u in unstable)
     values = {"cells": len(unstable), "diverged": diverged, "calm": len(calm)}
-    values["calm_falling"] = sum(c["calm_change"] < -2 * c["calm_noise"] for c in calm)
+    values["calm_falling"] = sum(falling(c["calm_change"], c["calm_noise"]) for c in calm)
     values |= {"spread_min": min(spreads), "spread_max": max(spreads)}
     values |= max(calm, key=lambda c: c["calm_change"] + 2 * c["calm_noise"], default={})  # the least falling
     alike = all(s <= 10 for s in spreads)

@@ -267,16 +267,26 @@ def last_half_trend(run) -> tuple[float, float]:
     t, y = t[keep], y[keep]
     if len(t) < 4:
         return math.nan, math.nan
-    (slope, icept), span = np.polyfit(t, y, 1), t[-1] - t[0]
-    spread = np.sum((y - slope * t - icept) ** 2) / (len(t) - 2)
-    return float(slope * span), float(math.sqrt(spread / np.sum((t - t.mean()) ** 2)) * span)
+    (slope, _), cov = np.polyfit(t, y, 1, cov=True)  # cov scaled by the residuals over n-2 degrees of freedom
+    span = t[-1] - t[0]
+    return float(slope * span), float(math.sqrt(cov[0, 0]) * span)
+
+
+def falling(change: float, noise: float) -> bool:
+    """A trend from ``last_half_trend`` falls when its fall exceeds twice its standard error."""
+    return change < -2 * noise
+
+
+def setting_of(job) -> tuple:
+    """A job's setting: its figure, sweep and overrides but the seed (what the seeds of a setting share)."""
+    return job.figure, job.sweep, tuple(sorted((k, str(v)) for k, v in job.overrides.items() if k != "seed"))
 
 
 def by_setting(runs: list) -> list[list]:
-    """Runs grouped by setting (optimizer and hyper-parameters, as their label names them): the seeds of each."""
-    groups: dict[str, list] = {}
+    """Runs grouped by setting: the seeds of each."""
+    groups: dict[tuple, list] = {}
     for r in runs:
-        groups.setdefault(r.label(), []).append(r)
+        groups.setdefault(setting_of(r.job), []).append(r)
     return list(groups.values())
 
 
@@ -447,8 +457,7 @@ def claim_seeds(datas: dict) -> int:
     a setting whose seed came from a seed search counts as settled (the paper's fixed seed)."""
     groups: dict[tuple, set] = {}
     for j in (j for j in _main_jobs(datas) if not j.search):
-        key = (j.figure, j.sweep, tuple(sorted((k, str(v)) for k, v in j.overrides.items() if k != "seed")))
-        groups.setdefault(key, set()).add(j.seed)
+        groups.setdefault(setting_of(j), set()).add(j.seed)
     return min(len(s) for s in groups.values()) if groups else 99
 
 

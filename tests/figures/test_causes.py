@@ -10,6 +10,7 @@ import math
 import re
 import string
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -243,6 +244,7 @@ class _Run:
             {"test_loss": losses, "step": steps or list(range(n)), "wall_time": times or [float(i) for i in range(n)]}
         )
         self.status, self._cfg, self._label, self.seed = status, cfg, label, 0
+        self.job = SimpleNamespace(figure="fig", sweep="sweep", overrides=dict(cfg))  # its setting: cfg but the seed
         self.initial_loss, self.final_loss = float(losses[0]), float(losses[-1])
 
     def cfg(self, key, default=None):
@@ -449,6 +451,19 @@ def test_a_noisy_plateau_is_not_falling():
     assert change < -2 * noise and -0.8 < change < -0.2, (change, noise)
 
 
+def test_last_half_trend_is_the_textbook_least_squares_line():
+    """Against the slope and standard error written out (sums of squares), on a small uneven curve."""
+    t = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.5, 7.0, 9.0, 10.0])
+    y = np.array([0.0, -0.1, -0.3, -0.2, -0.5, -0.4, -0.8, -0.6, -0.9, -1.1])
+    th, yh = t[t >= 5.0], y[t >= 5.0]
+    sxx = np.sum((th - th.mean()) ** 2)
+    slope = np.sum((th - th.mean()) * (yh - yh.mean())) / sxx
+    residual = yh - yh.mean() - slope * (th - th.mean())
+    se = np.sqrt(np.sum(residual**2) / (len(th) - 2) / sxx)
+    change, noise = last_half_trend(_Run(list(10**y), times=list(t)))
+    assert change == pytest.approx(slope * 5.0) and noise == pytest.approx(se * 5.0)
+
+
 def test_osc6_judges_runs_too_short_to_show_a_trend_without_failing():
     """Three evaluations per run (a smoke budget): no oscillation or trend to read; the claim is still judged."""
     grid = [(lr, b) for lr in (0.01, 0.1) for b in (256, 1024)]
@@ -460,7 +475,7 @@ def test_osc6_judges_runs_too_short_to_show_a_trend_without_failing():
 def test_cnn1_compares_settings_by_their_median_over_seeds():
     """One lucky seed does not make a setting best: HIG setting 1 has a run at 1e-5 but a median of 1e-2."""
     adam = [_Run([1.0, 1e-3], label="Adam η=2e-4 b=256", **{"optimizer.lr": 2e-4, "batch_size": 256}) for _ in range(3)]
-    hig = [_Run([1.0, v], label="HIG η=0.7 τ=1e-4 b=16") for v in (1e-5, 1e-2, 1e-2)]
-    hig += [_Run([1.0, 6e-4], label="HIG η=0.7 τ=1e-3 b=16") for _ in range(3)]
+    hig = [_Run([1.0, v], label="HIG η=0.7 τ=1e-4 b=16", **{"optimizer.tau": 1e-4}) for v in (1e-5, 1e-2, 1e-2)]
+    hig += [_Run([1.0, 6e-4], label="HIG η=0.7 τ=1e-3 b=16", **{"optimizer.tau": 1e-3}) for _ in range(3)]
     measured, verdict, _, values = _measure("cnn-1", {"fig10": _Fig(adam=adam), "fig11": _Fig(hig=hig)})
     assert values["hig"] == 6e-4 and verdict == "partly" and "τ=1e-3" in measured and "medians of 3 and 3 seeds" in measured
