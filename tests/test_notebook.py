@@ -1,7 +1,10 @@
-"""examples/hig_in_your_code.ipynb runs top to bottom, and HIG ends far below Adam at lr=1e-3 at equal wall clock.
+"""examples/hig_in_your_code.ipynb runs top to bottom, and HIG reaches the notebook's target
+test loss in far fewer updates and seconds than Adam.
 
-Against the re-tuned Adam (lr=1e-2) six seconds decide nothing reliably (1.1x above to 10x
-below over repeated runs), so the notebook says so and the test does not assert it."""
+Each optimizer trains for a fixed number of updates, so the loss curves do not depend on the
+machine's speed or load (a 6 s wall-clock budget did: on a fast machine Adam at lr=1e-3 got
+four times the updates and ended 2x, not 100x, above HIG). Only the seconds are this
+machine's, and the margin asserted on them (3x) is a quarter of the one measured (12x)."""
 
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ nbclient = pytest.importorskip("nbclient", reason="needs the dev extra (nbformat
 NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "hig_in_your_code.ipynb"
 
 
-def test_notebook_runs_and_hig_beats_adam_at_its_default_lr():
+def test_notebook_runs_and_hig_reaches_the_target_loss_long_before_adam():
     nb = nbformat.read(NOTEBOOK, as_version=4)
     for cell in nb.cells:  # run from scratch, not from the stored outputs
         if cell.cell_type == "code":
@@ -28,7 +31,10 @@ def test_notebook_runs_and_hig_beats_adam_at_its_default_lr():
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert all(c.execution_count for c in code), "a code cell did not run"
     assert any("image/png" in o.get("data", {}) for c in code for o in c.outputs), "no plot drawn"
-    final = json.loads(code[-1].outputs[-1]["text"])
-    hig, adams = final.pop("HIG (lr=1)"), final
-    assert hig < 1e-2, f"HIG's final test loss {hig:.2e} (expected < 1e-2 after 6 s)"
-    assert hig < adams["Adam (lr=1e-3)"] / 3, f"HIG {hig:.2e} not well below Adam at lr=1e-3 {adams}"
+    reached = json.loads(code[-1].outputs[-1]["text"].splitlines()[-1])
+    hig, tuned, default = reached["HIG (lr=1)"], reached["Adam (lr=1e-2)"], reached["Adam (lr=1e-3)"]
+    assert hig["updates"] is not None, f"HIG never reached the target: {reached}"
+    assert tuned["updates"] is not None, f"the re-tuned Adam never reached the target: {reached}"
+    assert hig["updates"] * 10 < tuned["updates"], f"HIG not ten times fewer updates than Adam at lr=1e-2: {reached}"
+    assert hig["seconds"] * 3 < tuned["seconds"], f"HIG not three times sooner than Adam at lr=1e-2: {reached}"
+    assert default["updates"] is None or default["updates"] > tuned["updates"], f"Adam at lr=1e-3 beat lr=1e-2: {reached}"
