@@ -50,8 +50,9 @@ REDUCED = {
     "fig11": {"lr": {"quick": [0.7]}, "b": {"quick": [16], "smoke": [8]}, "tau": {"smoke": [1e-4]}},
 }
 KEYS = {"lr": "optimizer.lr", "b": "batch_size", "tau": "optimizer.tau"}
-# cnn-1 compares the best CNN settings of figs. 10 and 11, a comparison the median of three seeds decides
-SEEDS = {fid: PerPreset([0], long=[0, 1, 2]) for fid in ("fig10", "fig11")}  # paper: its configs, one seed
+# cnn-1 compares the best CNN settings of figs. 10 and 11, and dip-7 the η of fig. 8 at each b:
+# comparisons the median of three seeds decides
+SEEDS = {fid: PerPreset([0], long=[0, 1, 2]) for fid in ("fig8", "fig10", "fig11")}  # paper: its configs, one seed
 
 
 def grid_figure(fid: str, title: str, problem: str, opt: str, experiment: str) -> Figure:
