@@ -123,7 +123,12 @@ SYNTHETIC = [
         ),
         dict(adam_plateau_updates=15),
     ),  # fmt: skip
-    ("dip-7", dict(n_b=2, slow_b=2, shaky_b=1, seeds=1), dict(slow_b=1)),
+    (
+        "dip-7",
+        dict(n_b=2, slow_b=2, shaky_b=1, seeds=1, calm_b=16, wobble_most_lr="1e-3", wobble_most=0.88)
+        | dict(largest_wobble=0.36, smallest_wobble=0.12),
+        dict(slow_b=1),  # the smallest η no longer slow at every b: neither cause holds
+    ),
     # dip-8 and abl-3 also read the committed precision probe; the flips are of the claims' own runs
     ("dip-8", dict(tau6=1.4e-7, best_mid=2.4e-7), dict(tau6=1e-5)),
     (
@@ -479,3 +484,30 @@ def test_cnn1_compares_settings_by_their_median_over_seeds():
     hig += [_Run([1.0, 6e-4], label="HIG η=0.7 τ=1e-3 b=16", **{"optimizer.tau": 1e-3}) for _ in range(3)]
     measured, verdict, _, values = _measure("cnn-1", {"fig10": _Fig(adam=adam), "fig11": _Fig(hig=hig)})
     assert values["hig"] == 6e-4 and verdict == "partly" and "τ=1e-3" in measured and "medians of 3 and 3 seeds" in measured
+
+
+def _fig8(wobbly_middle: int) -> dict:
+    """Fig. 8 at b=16 and 256, three seeds per η: the smallest η slow, the largest oscillating by
+    0.3 decades per evaluation; at b=16 ``wobbly_middle`` of η=1e-3's seeds oscillate by 0.8."""
+    runs = []
+    for b in (16, 256):
+        for lr, start in ((1e-4, 0.9), (1e-3, 0.1), (1e-2, 0.01)):
+            for seed in range(3):
+                swing = 0.8 if (b == 16 and lr == 1e-3 and seed < wobbly_middle) else 0.3 if lr == 1e-2 else 0.02
+                tail = [start * 10 ** (swing if i % 2 else 0) for i in range(19)]
+                runs.append(_Run([1.0, *tail], **{"optimizer.lr": lr, "batch_size": b}))
+    return {"fig8": _Fig(adam=runs)}
+
+
+def test_dip7_judges_each_eta_by_its_median_over_seeds():
+    """One seed of η=1e-3 oscillating more than η=1e-2 does not move the median; two do, and
+    the cause then names the middle η from the medians (three seeds, so not "seeds")."""
+    measured, verdict, _, values = _measure("dip-7", _fig8(wobbly_middle=1))
+    assert verdict == "reproduced" and "medians of 3 seeds" in measured, measured
+    measured, verdict, _, values = _measure("dip-7", _fig8(wobbly_middle=2))
+    assert verdict == "partly" and values["calm_b"] == 16 and values["wobble_most_lr"] == "1e-3", values
+    assert values["wobble_most"] == pytest.approx(0.8) and values["largest_wobble"] == pytest.approx(0.3), values
+    kind, text = finish(registry.claims()["dip-7"], _row("dip-7", "partly", values | {"seeds": 3}))["cause"]
+    assert kind == "disagreement" and "η=1e-3 changes by 0.80 decades" in text and "largest η by 0.30" in text, text
+    kind, _ = finish(registry.claims()["dip-7"], _row("dip-7", "partly", values | {"seeds": 1}))["cause"]
+    assert kind == "seeds"
