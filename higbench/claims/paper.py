@@ -1128,7 +1128,7 @@ def adam_trade_off(datas):
             + ", ".join(f"η={lr} {w:.2g}" for lr, w in zip(lrs, wobble))
         )
     require(per_b, what="fig8 (two η at one b)")
-    seeds = max(len(g) for g in by_setting(runs))
+    seeds = min(len(g) for g in by_setting(runs))  # the fewest any η has
     values = {"n_b": len(per_b), "slow_b": sum(slow), "shaky_b": sum(shaky)} | calm
     measured = "; ".join(text) + (f" (medians of {seeds} seeds)" if seeds > 1 else "")
     return measured, all(per_b), any(per_b), values
