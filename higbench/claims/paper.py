@@ -1124,8 +1124,7 @@ def adam_trade_off(datas):
             calm |= {"largest_wobble": wobble[-1], "smallest_wobble": wobble[0]}
         text.append(
             f"b={b}: at 10% of the budget η={lrs[0]} {sci(early[0])}, η={lrs[-1]} {sci(early[-1])} (lowest: "
-            f"η={lrs[int(np.argmin(early))]}); oscillation "
-            + ", ".join(f"η={lr} {w:.2g}" for lr, w in zip(lrs, wobble))
+            f"η={lrs[int(np.argmin(early))]}); oscillation " + ", ".join(f"η={lr} {w:.2g}" for lr, w in zip(lrs, wobble))
         )
     require(per_b, what="fig8 (two η at one b)")
     seeds = min(len(g) for g in by_setting(runs))  # the fewest any η has
