@@ -2,9 +2,11 @@
 test loss in far fewer updates and seconds than Adam.
 
 Each optimizer trains for a fixed number of updates, so the loss curves do not depend on the
-machine's speed or load (a 6 s wall-clock budget did: on a fast machine Adam at lr=1e-3 got
-four times the updates and ended 2x, not 100x, above HIG). Only the seconds are this
-machine's, and the margin asserted on them (3x) is a quarter of the one measured (12x)."""
+machine's speed or load. A 6 s wall-clock budget did: made on a loaded machine, the
+notebook showed Adam at lr=1e-3 100x above HIG; on an idle one Adam makes four times those
+updates in 6 s, and CI measured 2x. Only the seconds are this machine's. The margins asserted are well inside those measured, so that another machine's
+floating point (a slightly different curve) or a burst of load during HIG's fraction of a second
+does not fail it: updates 5x (measured 23x: 120 against 2,810), seconds 2x (measured 12x)."""
 
 from __future__ import annotations
 
@@ -35,6 +37,6 @@ def test_notebook_runs_and_hig_reaches_the_target_loss_long_before_adam():
     hig, tuned, default = reached["HIG (lr=1)"], reached["Adam (lr=1e-2)"], reached["Adam (lr=1e-3)"]
     assert hig["updates"] is not None, f"HIG never reached the target: {reached}"
     assert tuned["updates"] is not None, f"the re-tuned Adam never reached the target: {reached}"
-    assert hig["updates"] * 10 < tuned["updates"], f"HIG not ten times fewer updates than Adam at lr=1e-2: {reached}"
-    assert hig["seconds"] * 3 < tuned["seconds"], f"HIG not three times sooner than Adam at lr=1e-2: {reached}"
+    assert hig["updates"] * 5 < tuned["updates"], f"HIG not five times fewer updates than Adam at lr=1e-2: {reached}"
+    assert hig["seconds"] * 2 < tuned["seconds"], f"HIG not twice as soon as Adam at lr=1e-2: {reached}"
     assert default["updates"] is None or default["updates"] > tuned["updates"], f"Adam at lr=1e-3 beat lr=1e-2: {reached}"
