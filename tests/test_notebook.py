@@ -4,9 +4,11 @@ test loss in far fewer updates and seconds than Adam.
 Each optimizer trains for a fixed number of updates, so the loss curves do not depend on the
 machine's speed or load. A 6 s wall-clock budget did: made on a loaded machine, the
 notebook showed Adam at lr=1e-3 100x above HIG; on an idle one Adam makes four times those
-updates in 6 s, and CI measured 2x. Only the seconds are this machine's. The margins asserted are well inside those measured, so that another machine's
-floating point (a slightly different curve) or a burst of load during HIG's fraction of a second
-does not fail it: updates 5x (measured 23x: 120 against 2,810), seconds 2x (measured 12x)."""
+updates in 6 s, and CI measured 2x. Only the seconds are this machine's.
+
+The margins asserted are well inside those measured, so that another machine's floating
+point (a slightly different curve) or a burst of load during HIG's fraction of a second does
+not fail it: updates 5x (measured 23x: 120 against 2,810), seconds 2x (measured 12x)."""
 
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ def table_rows(path: Path, group: str = "curves") -> int:
             if group not in f or "step" not in f[group]:
                 return 0
             return int(f[group]["step"].shape[0])
-    except (OSError, KeyError):
+    except (OSError, KeyError, RuntimeError):  # RuntimeError: h5py read metadata torn by the live writer
         return 0
 
 
