@@ -556,10 +556,12 @@ def _largest_lr_unstable(runs: list) -> str:
     """ "diverged", "oscillates" (most of the η at this b over the last half) or "" (neither); ``runs`` sorted by η."""
     if runs[-1].status == "diverged" or not math.isfinite(final(runs[-1:])):
         return "diverged"
-    wobble = [oscillation(r) for r in runs]
-    if not np.isfinite(wobble).any():
-        return ""  # too few evaluations to show an oscillation
-    return "oscillates" if wobble[-1] >= np.nanmax(wobble) else ""  # NaN: not shown
+    return "oscillates" if _largest_oscillates_most([oscillation(r) for r in runs]) else ""
+
+
+def _largest_oscillates_most(wobble: list) -> bool:
+    """Whether the last (largest-η) oscillation of ``wobble`` is the largest; NaN (too few evaluations) shows none."""
+    return bool(np.isfinite(wobble).any()) and wobble[-1] >= np.nanmax(wobble)
 
 
 # -- Poisson (figures 3b, 3c, 7) ------------------------------------------------------------
@@ -1116,10 +1118,10 @@ def adam_trade_off(datas):
         wobble = [median(map(oscillation, g)) for g in settings]
         lrs = [num(g[0].cfg("optimizer.lr")) for g in settings]
         slow.append(early[0] == max(early))
-        shaky.append(wobble[-1] == max(wobble))
+        shaky.append(_largest_oscillates_most(wobble))
         per_b.append(slow[-1] and shaky[-1])
-        if not shaky[-1] and not calm:  # the first b where a middle η oscillates most
-            most = int(np.argmax(wobble))
+        if not shaky[-1] and not calm and np.isfinite(wobble).any():  # the first b where a middle η oscillates most
+            most = int(np.nanargmax(wobble))
             calm = {"calm_b": b, "wobble_most_lr": lrs[most], "wobble_most": wobble[most]}
             calm |= {"largest_wobble": wobble[-1], "smallest_wobble": wobble[0]}
         text.append(

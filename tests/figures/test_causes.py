@@ -511,3 +511,10 @@ def test_dip7_judges_each_eta_by_its_median_over_seeds():
     assert kind == "disagreement" and "η=1e-3 changes by 0.80 decades" in text and "largest η by 0.30" in text, text
     kind, _ = finish(registry.claims()["dip-7"], _row("dip-7", "partly", values | {"seeds": 1}))["cause"]
     assert kind == "seeds"
+
+
+def test_dip7_reads_runs_too_short_to_oscillate_as_showing_nothing():
+    """Two evaluations per run give no oscillation (NaN): no η oscillates most, and no middle η is named with NaN."""
+    runs = [_Run([1.0, s], **{"optimizer.lr": lr, "batch_size": 16}) for lr, s in ((1e-4, 0.9), (1e-3, 0.1), (1e-2, 0.01))]
+    _, verdict, _, values = _measure("dip-7", {"fig8": _Fig(adam=runs)})
+    assert verdict == "not" and values["shaky_b"] == 0 and "wobble_most" not in values, values
