@@ -561,7 +561,7 @@ def _largest_lr_unstable(runs: list) -> str:
 
 def _largest_oscillates_most(wobble: list) -> bool:
     """Whether the last (largest-η) oscillation of ``wobble`` is the largest; NaN (too few evaluations) shows none."""
-    return bool(np.isfinite(wobble).any()) and wobble[-1] >= np.nanmax(wobble)
+    return bool(np.isfinite(wobble).any() and wobble[-1] >= np.nanmax(wobble))  # a plain bool: values are JSON
 
 
 # -- Poisson (figures 3b, 3c, 7) ------------------------------------------------------------

@@ -504,6 +504,7 @@ def test_dip7_judges_each_eta_by_its_median_over_seeds():
     the cause then names the middle η from the medians (three seeds, so not "seeds")."""
     measured, verdict, _, values = _measure("dip-7", _fig8(wobbly_middle=1))
     assert verdict == "reproduced" and "medians of 3 seeds" in measured, measured
+    assert type(values["shaky_b"]) is int and values["shaky_b"] == 2, values  # a numpy integer is dropped from the JSON
     measured, verdict, _, values = _measure("dip-7", _fig8(wobbly_middle=2))
     assert verdict == "partly" and values["calm_b"] == 16 and values["wobble_most_lr"] == "1e-3", values
     assert values["wobble_most"] == pytest.approx(0.8) and values["largest_wobble"] == pytest.approx(0.3), values
