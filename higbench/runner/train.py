@@ -52,7 +52,7 @@ from higbench.optim import memory_guard
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
-from higbench.runner import checkpoint
+from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
@@ -210,6 +210,43 @@ def _setup(cfg: DictConfig, device: torch.device | None = None):
     torch.manual_seed(cfg.seed)
     problem = build_problem(cfg.problem, dtype=dtype, device=device, seed=cfg.seed)
     return device, problem
+
+
+def _update_cost(cfg: DictConfig, device: torch.device) -> float:
+    """Seconds of one update of this run's optimizer and batch size on ``device`` (the least of
+    ``placement.TIMED_UPDATES`` after one untimed update; inf if it cannot fit in memory there).
+    Throwaway problem, network and optimizer; the caller's random streams are left as they were."""
+    threads = torch.get_num_threads()
+    with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
+        try:
+            _device, problem = _setup(cfg, device=device)
+            warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))
+            model = problem.build_model()
+            update = build_update(problem, model, cfg.optimizer)
+            estimate = check_memory(cfg, problem, model, update)
+        except ConfigError:  # too large for this device's memory
+            return math.inf
+        if cfg.get("threads") == "auto" and estimate is not None:
+            torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
+        generator = torch.Generator().manual_seed(int(cfg.seed))
+        batches = problem.epoch(int(cfg.batch_size), generator)
+        seconds = []
+        for _ in range(1 + placement.TIMED_UPDATES):
+            batch = next(batches, None) or next(problem.epoch(int(cfg.batch_size), generator))
+            t0 = time.perf_counter()
+            update(batch)  # synchronizes a GPU before returning
+            seconds.append(time.perf_counter() - t0)
+    torch.set_num_threads(threads)
+    return min(seconds[1:])
+
+
+def choose_placement(cfg: DictConfig, state: dict | None) -> placement.Placement | None:
+    """``device=auto``: the measured choice (a resumed run keeps its device); else None."""
+    if cfg.device != "auto":
+        return None
+    if state is not None:
+        return placement.resumed(state)
+    return placement.place(lambda device: _update_cost(cfg, device))
 
 
 def preflight(cfg: DictConfig) -> None:
@@ -508,7 +545,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     state = checkpoint.load(run_path) if resume else None
     if state is not None:
         checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
-    device, problem = _setup(cfg)
+    placed = choose_placement(cfg, state)
+    device, problem = _setup(cfg, device=placed.device if placed else None)
     warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     model = problem.build_model()
@@ -521,7 +559,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
 
     clock.pause()  # creating/reopening the file is not training
     extra = _extra_sinks(cfg, run_path)
-    file = RunFileSink(_open_run_file(cfg, run_path, state, {**environment(device), "warmup_s": warmup_s}, overrides))
+    env = {**environment(device), "warmup_s": warmup_s, **(placed.record() if placed else {})}
+    file = RunFileSink(_open_run_file(cfg, run_path, state, env, overrides))
     step = state["step"] if state else 0
     name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     progress = Progress(
