@@ -10,7 +10,8 @@ decade of the test loss, and its updates and final loss. One row per (problem, d
 The question it answers is the one a user with a GPU asks: on this machine, does
 ``device=cuda`` reach each loss no later than ``device=cpu``? Runs side by side share the
 machine's memory bus and the host's cores (the compiled solvers of a CUDA run run on the
-host): give each its cores with ``--cuda-threads`` and ``--cpu-threads``.
+host): give each its share of the cores with ``--cuda-threads`` and ``--cpu-threads`` (each run
+takes ``threads=auto`` within its share, as under a parallel launcher).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -28,20 +30,26 @@ THRESHOLDS = tuple(sorted({*DEFAULT_THRESHOLDS, 1e-7}, reverse=True))
 DEVICES = ("cuda", "cpu")
 
 
-def run_command(problem: str, optimizer: str, device: str, threads: int, seconds: float, run_dir: Path, extra) -> list[str]:
+def run_command(problem: str, optimizer: str, device: str, seconds: float, run_dir: Path, extra) -> list[str]:
     return [
         sys.executable, "-m", "higbench.cli", f"problem={problem}", f"optimizer={optimizer}", f"device={device}",
-        f"threads={threads}", f"budget.seconds={seconds}", "progress=false", "checkpoint_every=null",
+        "threads=auto", f"budget.seconds={seconds}", "progress=false", "checkpoint_every=null",
         f"hydra.run.dir={run_dir}", *extra,
     ]  # fmt: skip
+
+
+def thread_share(threads: int) -> dict:
+    """The environment of a run given ``threads`` cores: ``threads=auto`` takes this share, as
+    under a parallel launcher (and still drops to one thread for a small eigen-solve)."""
+    return {**os.environ, "OMP_NUM_THREADS": str(threads)}
 
 
 def run_side_by_side(problem: str, optimizer: str, seconds: float, out: Path, threads: dict, extra=()) -> dict[str, Path]:
     """Both devices' runs of one problem at once; their run files by device."""
     dirs = {d: out / f"{problem}_{optimizer}" / d for d in DEVICES}
     procs = {
-        d: subprocess.Popen(run_command(problem, optimizer, d, threads[d], seconds, dirs[d], extra), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+        d: subprocess.Popen(run_command(problem, optimizer, d, seconds, dirs[d], extra), env=thread_share(threads[d]),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         for d in DEVICES
     }  # fmt: skip
     for d, proc in procs.items():
