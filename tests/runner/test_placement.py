@@ -93,9 +93,13 @@ def test_devices_benchmark_says_where_cuda_is_later():
     from higbench.bench.devices import verdicts
     from higbench.results.index import threshold_column
 
-    t1, t2 = threshold_column(1e-1), threshold_column(1e-2)
+    t0, t1, t2 = threshold_column(1e0), threshold_column(1e-1), threshold_column(1e-2)
     rows = [
-        {"problem": "p", "device": "cuda", t1: 1.0, t2: float("nan")},
-        {"problem": "p", "device": "cpu", t1: 2.0, t2: 5.0},
+        {"problem": "p", "device": "cuda", t0: 3.002, t1: 4.0, t2: float("nan")},
+        {"problem": "p", "device": "cpu", t0: 3.001, t1: 3.0, t2: 5.0},
     ]
-    assert verdicts(rows) == ["p 0.1: cuda 1.0 s, cpu 2.0 s: no later", "p 0.01: cuda not reached, cpu 5.0 s: LATER"]
+    assert verdicts(rows) == [
+        "p 1: cuda 3.0 s, cpu 3.0 s: no later",  # the same scheduled evaluation
+        "p 0.1: cuda 4.0 s, cpu 3.0 s: LATER",
+        "p 0.01: cuda not reached, cpu 5.0 s: LATER",
+    ]
