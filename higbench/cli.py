@@ -438,7 +438,7 @@ def _print_sweep_configs(argv: list[str]) -> None:
 
 # Hydra's flags (``higbench --hydra-help``): those taking a value, and those that do not.
 _VALUE_FLAGS = ("-c", "--cfg", "-p", "--package", "-cp", "--config-path", "-cn", "--config-name", "-cd", "--config-dir")
-_VALUE_FLAGS += ("--experimental-rerun",)
+_UNPICKLING_FLAGS = ("--experimental-rerun",)  # Hydra unpickles the file it names: never accepted
 _PLAIN_FLAGS = ("-h", "--help", "--hydra-help", "--version", "--resolve", "-r", "--run", "-m", "--multirun", "-sc")
 _PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
 _INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
@@ -460,6 +460,10 @@ def _refuse_early(argv: list[str]) -> ConfigError | None:
     """Command lines Hydra's argparse would answer with its usage text: one line instead."""
     for i, arg in enumerate(argv):
         name = arg.split("=", 1)[0]
+        if name in _UNPICKLING_FLAGS:  # the file would be unpickled (run as code) before any check
+            value = arg.partition("=")[2] or (argv[i + 1] if i + 1 < len(argv) else "<missing>")
+            why = "refused: Hydra would unpickle that file, which can run code; higbench reruns from resume=<run dir>"
+            return ConfigError(name, value, why)
         if arg.startswith("-") and name not in (*_VALUE_FLAGS, *_PLAIN_FLAGS):
             return ConfigError("option", arg, "not an option of higbench (higbench --help lists them)")
         if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):

@@ -38,6 +38,7 @@ from omegaconf.errors import OmegaConfBaseException, ValidationError
 
 from higbench.config import (
     SIZING_KEYS,
+    check_bool_overrides,
     check_hydra_references,
     config_dir,
     constructor_args,
@@ -215,6 +216,22 @@ def check_stored_targets(stored: dict, composed: dict, resume_value) -> None:
             raise ConfigError("resume", resume_value, why)
 
 
+PATH_KEYS = ("init_from",)  # config keys naming a file higbench opens
+
+
+def check_stored_paths(stored: dict, overrides: list[str], resume_value) -> None:
+    """A stored config (someone else's file) never makes higbench open a file: a path it
+    names must be given again on this command line, where the user names what is opened."""
+    for key in PATH_KEYS:
+        path = stored.get(key)
+        if path and given_value(overrides, key) != str(path):
+            why = (
+                f"its stored config names {key}={path}; a stored config never makes higbench open a file: "
+                f"give {key}={path} on the command line to start it again from that file"
+            )
+            raise ConfigError("resume", resume_value, why)
+
+
 def _targets(node, prefix: str = ""):
     if isinstance(node, dict):
         for k, v in node.items():
@@ -303,7 +320,11 @@ def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: b
         stored = _parse_stored(stored_yaml, task["resume"])
     check_stored_targets(stored, task, task["resume"])  # before anything of it is built
     merged = checkpoint.resume_config(stored, task, overrides)
-    validate(merged)
+    if empty:  # started again from its stored config: it would read the file its init_from names
+        check_stored_paths(stored, overrides, task["resume"])
+        validate(merged)
+    else:  # continued: the weights are the checkpoint's; the stored init_from is a record, never opened
+        validate({**merged, "init_from": None})
     if not empty:
         checkpoint.check_owner(checkpoint.load(run_path), run_path, task["resume"])  # readable, of this run
     return merged, not empty, empty
@@ -361,6 +382,7 @@ def _checked_task(config: DictConfig) -> dict:
     with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
         HydraConfig.instance().set_config(config)
     check_hydra_references(config)
+    check_bool_overrides(list(config.hydra.overrides.task))
     task = to_plain(config)
     if not task.get("resume"):
         validate(task)
