@@ -38,6 +38,7 @@ import math
 import os
 import shlex
 import signal
+import stat
 import sys
 import time
 import traceback
@@ -81,6 +82,33 @@ def claim_dir(output_dir: Path, key: str) -> None:
         os.close(fd)
         return
     _CLAIMS.append(fd)
+
+
+def hold_log_files(output_dir: Path, key: str) -> None:
+    """Open the job's log file now, never through a link, and keep the descriptor.
+
+    Hydra's handler opens ``higbench.log`` by path at its first line (``delay: true``), so a
+    link planted in the directory after the checks would be followed. Opened here with
+    ``O_NOFOLLOW`` (and refused with a second hard link), the handler writes to this file only.
+    """
+    for owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
+        for handler in getattr(owner, "handlers", []):
+            filename = getattr(handler, "baseFilename", None)
+            if not filename or handler.stream is not None or Path(filename).parent != Path(output_dir).absolute():
+                continue
+            flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
+            try:
+                fd = os.open(filename, flags, 0o644)
+            except OSError as exc:
+                why = "is a symbolic link; higbench never writes through links" if os.path.islink(filename) else exc.strerror
+                raise ConfigError(key, str(output_dir), f"{filename} {why}") from None
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+                os.close(fd)
+                what = "is not a regular file" if not stat.S_ISREG(st.st_mode) else f"has {st.st_nlink} hard links"
+                raise ConfigError(key, str(output_dir), f"{filename} {what}; higbench writes only its own files")
+            os.set_blocking(fd, True)
+            handler.stream = os.fdopen(fd, "a", encoding=getattr(handler, "encoding", None) or "utf-8")
 
 
 def release_dirs() -> None:
@@ -327,6 +355,7 @@ def _hydra_main(cfg: DictConfig) -> float:
     _SWEEP["jobs"] += 1
     made: list[Path] = []
     try:
+        hold_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
             return _report_kept_run(plan.run_path, plan.kept)

@@ -270,6 +270,20 @@ def check_no_links(out: Path, key: str) -> None:
             raise ConfigError(key, str(out), why)
 
 
+def check_tensorboard_dir(task: dict, out: Path, key: str) -> None:
+    """``tensorboard=true``: its directory in the run dir is absent or a real directory (a link
+    would take the event files elsewhere; a file or a dangling link would fail mid-run)."""
+    from higbench.runner.tensorboard import TENSORBOARD_DIR
+
+    path = Path(out) / TENSORBOARD_DIR
+    if not task.get("tensorboard") or not os.path.lexists(path):
+        return
+    if path.is_symlink():
+        raise ConfigError(key, str(out), f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links")
+    if not path.is_dir():
+        raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
+
+
 def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool) -> RunPlan:
     """The one decision about a job's directory (ConfigError when it must not run)."""
     from higbench.runner import checkpoint
@@ -281,10 +295,12 @@ def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bo
         check_output_dir(run_path.parent, "resume")
         check_no_links(run_path.parent, "resume")
         merged, continues, empty = resume_plan(task, run_path, overrides, multirun=multirun)
+        check_tensorboard_dir(merged, run_path.parent, "resume")
         return RunPlan(merged, run_path, resume=continues, restart=empty)
     run_path = output_dir / RUN_FILE
     check_output_dir(output_dir, "hydra.run.dir", RUN_FILE)
     check_no_links(output_dir, "hydra.run.dir")
+    check_tensorboard_dir(task, output_dir, "hydra.run.dir")
     if not os.path.lexists(run_path):
         return RunPlan(task, run_path)
     empty = checkpoint.recorded_nothing(run_path)

@@ -271,6 +271,10 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
         raise ConfigError("resume", resume_value, why)
     if not run_file.is_file():
         raise ConfigError("resume", resume_value, f"no run file {run_file}")
+    links = run_file.stat().st_nlink
+    if links > 1:  # resume writes it in place: a snapshot sharing its inode (cp -al) would change too
+        why = f"{run_file} has {links} hard links (a snapshot shares it); resume writes in place: copy it (cp, not cp -l) first"
+        raise ConfigError("resume", resume_value, why)
     try:  # with file locking: a live writer holds the file, and we must not write into it
         head = read_head(run_file, locking=True)
     except RunFileLocked:

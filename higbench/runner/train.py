@@ -30,8 +30,10 @@ Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
 
 from __future__ import annotations
 
+import contextlib
 import math
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -318,7 +320,11 @@ def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
         return []
     from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
 
-    return [TensorBoardSink(run_path.parent / "tensorboard")]
+    try:
+        return [TensorBoardSink(run_path.parent)]
+    except OSError as exc:  # its directory became a file or a link after the checks: a view, not the run
+        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
+        return []
 
 
 class TrainingRun:
@@ -531,7 +537,8 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
     run.file.close_failed(exc, run.step, write_pending)
     for sink in run.sinks.sinks:
         if sink is not run.file:
-            sink.close("failed", str(exc), run.step)
+            with contextlib.suppress(Exception):  # a side sink's failure must not hide the run's
+                sink.close("failed", str(exc), run.step)
     signals.restore()
 
 
