@@ -279,7 +279,8 @@ def check_tensorboard_dir(task: dict, out: Path, key: str) -> None:
     if not task.get("tensorboard") or not os.path.lexists(path):
         return
     if path.is_symlink():
-        raise ConfigError(key, str(out), f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links")
+        why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
+        raise ConfigError(key, str(out), why)
     if not path.is_dir():
         raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
 

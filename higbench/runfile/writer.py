@@ -106,7 +106,8 @@ def check_own_file(f: h5py.File, path: Path) -> None:
     if (opened.st_dev, opened.st_ino) != (named.st_dev, named.st_ino):
         raise RunFileShared(f"run file {path} was replaced by a link or another file; refusing to write through it")
     if opened.st_nlink > 1:
-        raise RunFileShared(f"run file {path} has {opened.st_nlink} hard links (a snapshot shares it); refusing to write it in place")
+        why = f"has {opened.st_nlink} hard links (a snapshot shares it); refusing to write it in place"
+        raise RunFileShared(f"run file {path} {why}")
 
 
 class RunFileFault(OSError):
