@@ -428,7 +428,8 @@ def check_run(config: DictConfig) -> RunPlan:
     announce(task.get("progress", True), start_text(plan.start_config()) + " - checking", transient=True)
     from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
 
-    preflight(OmegaConf.create({**plan.task, "init_from": None} if plan.resume else plan.task))  # weights: the checkpoint's
+    task = {**plan.task, "init_from": None} if plan.resume else plan.task  # weights: the checkpoint's
+    preflight(OmegaConf.create(task), resume_from=plan.run_path if plan.resume else None)
     return plan
 
 

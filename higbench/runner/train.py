@@ -251,7 +251,15 @@ def choose_placement(cfg: DictConfig, state: dict | None) -> placement.Placement
     return placement.place(lambda device: _update_cost(cfg, device))
 
 
-def preflight(cfg: DictConfig) -> None:
+def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, update, cfg: DictConfig, run_path: Path) -> None:
+    """A resumed run's checkpoint against the network and optimizer its stored config builds
+    (``checkpoint.check_fits``); ConfigError on ``resume`` when any part of it does not fit."""
+    train_set = getattr(problem, "train", None)
+    per_epoch = len(train_set) // int(cfg.batch_size) if train_set is not None else None
+    checkpoint.check_fits(state, model, update.optimizer, per_epoch, str(run_path), checkpoint.checkpoint_path(run_path))
+
+
+def preflight(cfg: DictConfig, resume_from: Path | None = None) -> None:
     """Build the problem and network once and run the checks that need them (no file written).
 
     Raises ConfigError for an ``init_from`` run whose weights do not fit this network and
@@ -275,6 +283,8 @@ def preflight(cfg: DictConfig) -> None:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
+    if resume_from is not None:  # read once per process: train() gets the same state back
+        check_checkpoint(checkpoint.load(resume_from), problem, model, update, cfg, Path(resume_from))
     if cfg.get("tensorboard"):
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
@@ -560,6 +570,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     if cfg.get("init_from") and not resume:
         load_initial_weights(model, cfg.init_from, cfg.problem.name)
     update = build_update(problem, model, cfg.optimizer)
+    if state is not None:  # all of it fits this network and optimizer, before the run file is touched
+        check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
