@@ -189,11 +189,10 @@ def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: D
     if not plan.resume and not plan.restart and os.path.lexists(plan.run_path):  # made after the plan
         raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
     if plan.restart and not plan.resume:
-        aside = checkpoint.move_aside(plan.run_path, "empty")
-        print(
-            f"higbench: {plan.run_path} recorded nothing ({plan.restart}); moved to {aside.name}, starting the run again",
-            file=sys.stderr,
-        )
+        stopped = plan.restart.startswith("stopped")  # checkpoint.stopped_without_checkpoint
+        aside = checkpoint.move_aside(plan.run_path, "stopped" if stopped else "empty")
+        what = plan.restart if stopped else f"recorded nothing ({plan.restart})"
+        print(f"higbench: {plan.run_path} {what}; moved to {aside.name}, starting the run again", file=sys.stderr)
     if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
         aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
         print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
@@ -364,7 +363,12 @@ def _hydra_main(cfg: DictConfig) -> float:
     except ConfigError as exc:  # refused before its run file: nothing of it stays
         remove_job_files(made)
         remove_hydra_outputs(output_dir, None)
-        refuse(exc)
+        if not multirun:
+            refuse(exc)
+        # One job of a sweep refused: it fails alone (one line), the others run; the sweep says how many failed.
+        print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+        _SWEEP["failed"] += 1
+        raise JobFailed(str(exc), written=False) from None
     except JobFailed as exc:
         if not exc.written:
             remove_job_files(made)

@@ -329,6 +329,10 @@ def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: b
 
     if multirun and not run_path.exists():
         return {**task, "resume": None}, False, None
+    if multirun:  # a job stopped before its first checkpoint (killed with its sweep): run it again
+        lost = checkpoint.stopped_without_checkpoint(run_path)
+        if lost:
+            return {**task, "resume": None}, False, lost
     empty = checkpoint.recorded_nothing(run_path)
     if empty:
         stored = task if multirun else _parse_stored(_stored_config(run_path, task["resume"]), task["resume"])

@@ -597,6 +597,25 @@ def recorded_nothing(run_file: Path) -> str | None:
     return None
 
 
+def stopped_without_checkpoint(run_file: Path) -> str | None:
+    """Why a sweep job's run must run again from the start, or None: it stopped (status
+    running, interrupted or failed, no writer alive on this host) before its first
+    checkpoint, so nothing can continue it. A sweep stopped with Ctrl-C hard-kills the
+    parallel workers that were not yet writing one; the sweep's resume command reruns them
+    (the stopped file is moved aside, never deleted)."""
+    run_file = Path(run_file)
+    if not run_file.is_file() or checkpoint_path(run_file).exists():
+        return None
+    try:
+        head = read_head(run_file, locking=True)  # a live writer on this host holds the lock
+    except UnreadableRunFile:
+        return None
+    status = str(head.attrs.get("status", ""))
+    if status in RESUMABLE_STATUSES:
+        return f"stopped ({status}) after {head.n_updates} updates, before its first checkpoint"
+    return None
+
+
 def move_aside(path: Path, label: str) -> Path:
     """Rename ``path`` to ``<name>.<label>-<time>`` beside it (never deleted: nothing is lost)."""
     path = Path(path)
