@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import logging
 import math
 import os
@@ -84,31 +85,33 @@ def claim_dir(output_dir: Path, key: str) -> None:
     _CLAIMS.append(fd)
 
 
-def hold_log_files(output_dir: Path, key: str) -> None:
-    """Open the job's log file now, never through a link, and keep the descriptor.
+def guard_log_files(output_dir: Path, key: str) -> None:
+    """The job's log file is never opened through a link, and never one with a second hard link.
 
-    Hydra's handler opens ``higbench.log`` by path at its first line (``delay: true``), so a
-    link planted in the directory after the checks would be followed. Opened here with
-    ``O_NOFOLLOW`` (and refused with a second hard link), the handler writes to this file only.
+    Hydra's handler opens ``higbench.log`` by path at its first line (``delay: true``: a
+    refused job makes none), so a link planted in the directory after the checks would be
+    followed. A link there now is refused; the handler's opener is replaced by one with
+    ``O_NOFOLLOW`` that checks the opened file, so one planted later is never written through.
     """
     for owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
         for handler in getattr(owner, "handlers", []):
             filename = getattr(handler, "baseFilename", None)
-            if not filename or handler.stream is not None or Path(filename).parent != Path(output_dir).absolute():
+            if not filename or Path(filename).parent != Path(output_dir).absolute():
                 continue
-            flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
-            try:
-                fd = os.open(filename, flags, 0o644)
-            except OSError as exc:
-                why = "is a symbolic link; higbench never writes through links" if os.path.islink(filename) else exc.strerror
-                raise ConfigError(key, str(output_dir), f"{filename} {why}") from None
-            st = os.fstat(fd)
-            if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
-                os.close(fd)
-                what = "is not a regular file" if not stat.S_ISREG(st.st_mode) else f"has {st.st_nlink} hard links"
-                raise ConfigError(key, str(output_dir), f"{filename} {what}; higbench writes only its own files")
-            os.set_blocking(fd, True)
-            handler.stream = os.fdopen(fd, "a", encoding=getattr(handler, "encoding", None) or "utf-8")
+            if os.path.islink(filename):
+                raise ConfigError(key, str(output_dir), f"{filename} is a symbolic link; higbench never writes through links")
+            handler._open = functools.partial(_open_log, filename, getattr(handler, "encoding", None))
+
+
+def _open_log(filename: str, encoding: str | None):
+    """Append to ``filename``, a regular file with one link, never reached through a link."""
+    fd = os.open(filename, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+        os.close(fd)
+        raise OSError(f"{filename} is not the run's own log file (not a regular file, or has a second hard link)")
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "a", encoding=encoding or "utf-8")
 
 
 def release_dirs() -> None:
@@ -354,7 +357,7 @@ def _hydra_main(cfg: DictConfig) -> float:
     _SWEEP["jobs"] += 1
     made: list[Path] = []
     try:
-        hold_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
+        guard_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
             return _report_kept_run(plan.run_path, plan.kept)

@@ -217,3 +217,19 @@ def test_the_index_does_not_follow_a_run_file_link_out_of_its_tree(completed, tm
     (tree / "c" / "run.h5").symlink_to(inner)  # a link within the tree is read
     assert find_run_files(tree) == [tree / "b" / "run.h5", tree / "c" / "run.h5"]
     assert find_run_files(tree / "a" / "run.h5") == [tree / "a" / "run.h5"]  # a file named by the user is read
+
+
+@pytest.mark.parametrize("planted", ["symbolic", "hard"])
+def test_the_log_opener_refuses_a_link_planted_once_the_job_runs(planted, tmp_path):
+    """Hydra's handler opens the log at its first line: by then a link may be there."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("someone's file\n")
+    log = tmp_path / "higbench.log"
+    log.symlink_to(victim) if planted == "symbolic" else os.link(victim, log)
+    with pytest.raises(OSError):
+        cli._open_log(str(log), None)
+    assert victim.read_text() == "someone's file\n"
+    fresh = cli._open_log(str(tmp_path / "own.log"), None)
+    fresh.write("a line\n")
+    fresh.close()
+    assert (tmp_path / "own.log").read_text() == "a line\n"

@@ -70,3 +70,50 @@ def test_the_job_list_sweeper_refuses_a_fifo(tmp_path):
     except subprocess.TimeoutExpired:
         pytest.fail("read_jobs blocked on a FIFO")
     assert proc.returncode == 1 and "not a regular file" in proc.stderr, proc.stderr
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_a_joblib_sweep_loses_no_job(tmp_path):
+    """SIGINT to a parallel sweep's process group, both jobs training and neither past its
+    first checkpoint: the printed command completes both."""
+    import shlex
+    import signal
+    import time
+
+    from rel_helpers import table_rows
+
+    sweep = tmp_path / "sweep"
+    args = ["-m", "problem=toy", "optimizer=adam", "optimizer.lr=0.001,0.002", "budget.max_updates=400", "budget.seconds=null"]
+    args += ["eval_unit=updates", "eval_every=20", "progress=false", "threads=1", "hydra.sweep.subdir=${hydra.job.num}"]
+    args += ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep}"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "higbench.cli", *args],
+        cwd=tmp_path,
+        env=cli_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and not all(table_rows(sweep / str(n) / "run.h5") >= 2 for n in (0, 1)):
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGINT)
+    _out, err = proc.communicate(timeout=120)
+    lines = [line for line in err.splitlines() if line.startswith("complete the sweep with: ")]
+    assert lines, err
+    command = shlex.split(lines[-1].split(": ", 1)[1])
+    assert command[0] == "higbench"
+    done = subprocess.run(
+        [sys.executable, "-m", "higbench.cli", *command[1:]],
+        cwd=tmp_path,
+        env=cli_env(),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    for n in (0, 1):
+        head = read_head(sweep / str(n) / "run.h5")
+        assert head.status == "completed" and head.n_updates >= 400, (n, head.status, done.stderr[-2000:])
