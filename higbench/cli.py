@@ -401,6 +401,9 @@ def main(argv: list[str] | None = None) -> None:
     argv = _flags_first(argv)
     if {"-m", "--multirun"} & set(argv) and {"-c", "--cfg"} & set(argv):
         return _print_sweep_configs(argv)
+    from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
+
+    register()  # hydra/sweeper=joblist, also where Hydra's plugin scan cannot see it (an editable install)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
     _SWEEP.update(jobs=0, failed=0)

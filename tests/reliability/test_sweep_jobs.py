@@ -117,3 +117,18 @@ def test_ctrl_c_in_a_joblib_sweep_loses_no_job(tmp_path):
     for n in (0, 1):
         head = read_head(sweep / str(n) / "run.h5")
         assert head.status == "completed" and head.n_updates >= 400, (n, head.status, done.stderr[-2000:])
+
+
+def test_the_job_list_sweeper_is_found_without_the_figures_launcher(tmp_path):
+    """``higbench -m hydra/sweeper=joblist ...`` as docs/sweeps.md writes it, from any directory,
+    with no PYTHONPATH (the figures' launcher sets one)."""
+    from rel_helpers import run_cli
+
+    jobs = tmp_path / "jobs.json"
+    jobs.write_text('[["optimizer.lr=0.1"], ["optimizer.lr=0.2"]]')
+    env = cli_env()
+    env.pop("PYTHONPATH", None)
+    args = ["-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}", "problem=toy", "optimizer=sgd"]
+    args += ["budget.max_updates=2", "budget.seconds=null", "progress=false", "threads=1", "hydra.sweep.dir=sweep"]
+    run_cli(args, cwd=tmp_path, env=env, check=True)
+    assert len(list((tmp_path / "sweep").glob("*/run.h5"))) == 2
