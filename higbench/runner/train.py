@@ -49,7 +49,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
-from higbench.errors import ConfigError
+from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
@@ -281,6 +281,14 @@ def preflight(cfg: DictConfig, resume_from: Path | None = None) -> None:
         raise
     except (ValueError, TypeError) as exc:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
+    except (MemoryError, RuntimeError) as exc:  # torch's allocator: a network far too large
+        if not isinstance(exc, MemoryError) and "allocat" not in str(exc):
+            raise
+        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
+        first = " ".join(str(exc).split())[:200]
+        raise ConfigError(
+            key, show(OmegaConf.to_container(cfg.problem).get("hidden", "?")), f"the network does not fit in memory ({first})"
+        ) from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
     if resume_from is not None:  # read once per process: train() gets the same state back

@@ -39,3 +39,11 @@ def test_switches_take_true_and_false(value):
     from higbench.config import check_bool_overrides
 
     check_bool_overrides([f"progress={value}", f"tensorboard={value}", "seed=2"])
+
+
+def test_a_network_too_large_for_memory_is_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    args = ["problem=oscillator", "optimizer=adam", "problem.hidden=[10000000,10000000]", *TINY, "hydra.run.dir=run"]
+    line = refused(args, capsys)
+    assert "problem.hidden=" in line and "does not fit in memory" in line, line
+    assert not (tmp_path / "run").exists()
