@@ -403,8 +403,8 @@ def _checked_task(config: DictConfig) -> dict:
     with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
         HydraConfig.instance().set_config(config)
     check_hydra_references(config)
-    check_bool_overrides(list(config.hydra.overrides.task))
     task = to_plain(config)
+    check_bool_overrides(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))  # as typed
     if not task.get("resume"):
         validate(task)
     return task

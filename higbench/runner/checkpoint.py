@@ -283,8 +283,7 @@ def check_fields(state: dict, refuse) -> None:
         "shuffle_epoch_start": (lambda v: _rng_state(v, torch.Generator().get_state()), "a torch generator state"),
         "torch_rng": (lambda v: _rng_state(v, torch.get_rng_state()), "a torch generator state"),
         "rows": (_rows, "{group: {table: rows}} with integer counts"),
-        "run_id": (lambda v: isinstance(v, str), "a string"),
-    }
+    }  # run_id: compared with the run file's next (none, or another: "belongs to another run")
     for key, (ok, what) in rules.items():
         if key not in state:
             raise refuse(f"has no {key}")
