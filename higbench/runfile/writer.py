@@ -159,6 +159,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("updates", "sv_max"): ("singular value", "GN/HIG/LM: largest singular value of this update's Jacobian"),
     ("updates", "sv_min_kept"): ("singular value", "GN/HIG/LM: smallest singular value kept by the truncation tau"),
     ("updates", "sv_dropped"): ("count", "GN/HIG/LM: singular values the truncation tau dropped"),
+    ("updates", "step_error"): ("relative", "GN/HIG solver=krylov: estimated relative error of the step (NaN: exact route)"),
     ("logs", "sv_quantiles"): ("singular value", "GN/HIG/LM: 11 quantiles (0, 0.1, ..., 1) of the last update's singular values"),
 }
 

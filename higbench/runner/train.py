@@ -49,6 +49,7 @@ from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError
 from higbench.optim import memory_guard
+from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
@@ -198,6 +199,8 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
         device=str(problem.device),
         limit_mb=cfg.get("memory_limit_mb"),
         jacobian="structured" if getattr(update, "structured", False) else "naive",
+        krylov_steps=opt.group.get("krylov_steps", 200),
+        factor_values=mlp_factor_values(model),
     )
 
 
