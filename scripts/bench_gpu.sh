@@ -11,7 +11,8 @@
 #            and dipole (compiled solvers on the host; and the torch reference solvers on the
 #            GPU), Poisson;
 #   devices  the same HIG run on cuda and cpu side by side for SECONDS of training clock
-#            (default 25), and the training clock at which each reached each loss decade;
+#            (default 25), and the training clock at which each reached each loss decade
+#            (DEVICES_PROBLEMS: which problems, default oscillator dipole poisson);
 #   auto     what device=auto chooses per problem, and its reason;
 #   krylov   Poisson HIG on the GPU, exact (Gram) against Krylov route: per-update cost and
 #            memory at b = 64, 256, 1024, and 2 x SECONDS of training at b = 64 each way.
@@ -49,7 +50,7 @@ fi
 
 if has devices; then
   echo "== cuda and cpu side by side, ${seconds} s each"
-  $py -m higbench.bench.devices --problems oscillator dipole poisson --seconds "$seconds" --cuda-threads 2 \
+  $py -m higbench.bench.devices --problems ${DEVICES_PROBLEMS:-oscillator dipole poisson} --seconds "$seconds" --cuda-threads 2 \
     --cpu-threads $(( $(nproc) - 2 )) --out "$runs/devices"
   cp "$runs/devices/devices.json" "$out/devices.json"
 fi
