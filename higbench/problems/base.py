@@ -100,6 +100,21 @@ class Problem(abc.ABC):
     def outputs(self, model: nn.Module, batch: Batch) -> torch.Tensor:
         return self.physics(batch.inputs, model(batch.net_inputs))
 
+    # -- optional: an inverse simulator (the SIP optimizer needs one) --
+    def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """u with physics(inputs, u) = y_target, or as close as the problem's inverse gets: P^-1(x, y*; u0).
+
+        Optional. A problem that overrides it declares an inverse simulator: exact where P is
+        invertible (toy, Poisson), else a local or regularised inverse near the current guess
+        ``u0`` (b, |u>) (the heat example). Batched like ``physics``: y_target (b, |y|) -> (b, |u|).
+        ``optimizer=sip`` refuses a problem that does not override it (``has_inverse_simulator``).
+        """
+        raise NotImplementedError(f"problem {self.name} has no inverse simulator")
+
+    @classmethod
+    def has_inverse_simulator(cls) -> bool:
+        return cls.inverse_simulator is not Problem.inverse_simulator
+
     # -- data --
     @abc.abstractmethod
     def train_size(self) -> int | None:

@@ -64,6 +64,15 @@ class Poisson(Problem):
         b = u.shape[0]
         return laplace(u.reshape(b, self.n, self.n)).reshape(b, -1)
 
+    def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """Exact: the potential whose Laplacian is y_target, one linear Poisson solve (phi = 0 on
+        the boundary, as ``physics``); -Laplace is symmetric positive definite: one Cholesky factor."""
+        if getattr(self, "_neg_laplace_factor", None) is None:
+            minus_l = -laplace_matrix(self.n, self.n, dtype=torch.float64)
+            self._neg_laplace_factor = torch.linalg.cholesky(minus_l).to(self.device)
+        rhs = -y_target.reshape(len(y_target), -1).to(torch.float64).T  # (n*n, b)
+        return torch.cholesky_solve(rhs, self._neg_laplace_factor).T.to(y_target.dtype)
+
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return 0.5 * ((y - targets) ** 2).sum(dim=1)
 

@@ -450,6 +450,7 @@ class TrainingRun:
         self.batch_losses.append(result.loss)
         t = result.timings
         row = {"step": self.step, "wall_time": self.clock(), "loss": result.loss, "update_s": sum(t.values()), **t}
+        row.update(result.metrics)  # an optimizer's own values (SIP: proxy_loss)
         if self.records_spectrum:
             row.update(spectrum_columns(result.spectrum))
         self.sinks.on_update(row)
