@@ -171,9 +171,36 @@ def _with_names(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
     return df.assign(budget=budget_labels(df), setting=setting_labels(df, keys or None))
 
 
+def _problem_variant(name: str) -> dict[str, object] | None:
+    """A shipped problem config that is another problem with other keys (``dipole_cnn``: the
+    dipole with ``problem.model=cnn``) as {column: value}; None for any other name."""
+    import yaml
+
+    from higbench.config import config_dir
+
+    path = Path(config_dir()) / "problem" / f"{name}.yaml"
+    if not path.is_file():
+        return None
+    conf = yaml.safe_load(path.read_text()) or {}
+    bases = [d for d in conf.get("defaults", []) if isinstance(d, str) and d != "_self_"]
+    keys = {f"problem.{k}": v for k, v in (conf.get("problem") or {}).items() if k != "name" and not isinstance(v, dict)}
+    return {"problem.name": bases[0], **keys} if len(bases) == 1 and keys else None
+
+
 def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
+    problems = _values(args.problem)
+    variants = [v for v in map(_problem_variant, problems) if v]
+    if variants and len(df):  # --problem dipole_cnn: its runs are problem.name dipole with problem.model cnn
+        match = pd.Series(False, index=df.index)
+        for name in problems:
+            wanted = _problem_variant(name) or {"problem.name": name}
+            hit = pd.Series(True, index=df.index)
+            for column, value in wanted.items():
+                hit &= df[column].astype(str) == str(value) if column in df else False
+            match |= hit
+        df, problems = df[match], []
     for key, wanted in (
-        ("problem.name", _values(args.problem)),
+        ("problem.name", problems),
         ("optimizer.name", _values(args.optimizer)),
         ("status", _values(args.status)),
     ):

@@ -172,3 +172,14 @@ def test_bookkeeping_keys_do_not_split_a_setting(tmp_path):
     write_run(tmp_path / "b/run.h5", optimizer="hig", config_extra={"tensorboard": False, "seed": 2})
     runs = load_runs(tmp_path)
     assert setting_labels(runs).tolist() == ["hig", "hig"]
+
+
+def test_problem_dipole_cnn_finds_the_dipole_runs_with_the_cnn(tmp_path, capsys):
+    root = tmp_path / "dipole"
+    write_run(root / "cnn/run.h5", problem="dipole", optimizer="hig", problem_extra={"model": "cnn"})
+    write_run(root / "mlp/run.h5", problem="dipole", optimizer="hig", problem_extra={"model": "mlp"})
+    assert results_main([str(root), "--problem", "dipole_cnn"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("1 of 2 runs") and "cnn/run.h5" in out and "mlp/run.h5" not in out
+    assert results_main([str(root), "--problem", "dipole"]) == 0
+    assert capsys.readouterr().out.startswith("2 of 2 runs")
