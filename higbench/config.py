@@ -190,7 +190,10 @@ def problem_class(problem: dict) -> type:
     try:
         cls = locate(target)
     except (ImportError, AttributeError) as exc:
-        raise ConfigError("problem._target_", target, f"cannot import this problem class ({type(exc).__name__}: {exc})") from None
+        why = f"cannot import this problem class ({type(exc).__name__}: {exc})"
+        if isinstance(exc, ImportError) and not str(target).startswith("higbench."):
+            why += f"; is the folder of its module {str(target).rpartition('.')[0]!r} on PYTHONPATH?"
+        raise ConfigError("problem._target_", target, why) from None
     if not (isinstance(cls, type) and issubclass(cls, Problem)):
         raise ConfigError("problem._target_", target, "is not a higbench.problems.base.Problem subclass")
     return cls

@@ -43,6 +43,7 @@ from higbench.optim.structured import (
     output_jacobian,
     solver_jacobian,
 )
+from higbench.optim.threads import check_threads, update_threads
 
 SOLVERS = ("auto", "gram", "svd", "krylov")
 JACOBIANS = ("structured", "naive")
@@ -71,6 +72,11 @@ class JacobianPower(torch.optim.Optimizer):
         krylov_steps: solver="krylov": most Lanczos steps per update (memory rows x steps).
         krylov_tol: solver="krylov": stop early once the estimated relative error of the
             direction is below it (0: always take krylov_steps).
+        threads: torch's threads during an update (``higbench.optim.threads``): "auto"
+            (default) runs updates of fewer than 1,536 Gram rows (b·|y|) on one thread,
+            which is faster for them even on an idle machine and avoids the collapse of
+            torch's default thread count on a shared one (22x on a loaded 2-core machine);
+            an integer; or None for torch's count as it is. Restored after each update.
     """
 
     def __init__(
@@ -86,7 +92,9 @@ class JacobianPower(torch.optim.Optimizer):
         jacobian: str = "structured",
         krylov_steps: int = 200,
         krylov_tol: float = 0.0,
+        threads: int | str | None = "auto",
     ):
+        check_threads(threads)
         if not 0 < lr < math.inf:
             raise ValueError(f"lr={lr}: must be a number > 0")
         if not -1.0 <= kappa <= 1.0:
@@ -137,6 +145,10 @@ class JacobianPower(torch.optim.Optimizer):
         self.last_spectrum: dict = {}
         # b when the objective is the batch mean, 1 for the sum (Levenberg-Marquardt models the sum).
         self.samples_averaged: int = 1
+        # Not a param-group key (a checkpoint's state dict stays as it was): where the run
+        # sets the threads (the runner), it passes None.
+        self.threads = threads
+        self._gram_rows: int | None = None  # b·|y| of the last update: what "auto" threads go by
 
     # -- the pieces, so callers with their own Jacobians (the runner) can time each phase --
 
@@ -298,6 +310,10 @@ class JacobianPower(torch.optim.Optimizer):
             return self.step_structured(
                 closure.model, closure.net_inputs, closure.physics, closure.loss, closure.inputs, closure.reduction
             )
+        with update_threads(self.threads, self._gram_rows):
+            return self._step(closure)
+
+    def _step(self, closure: Callable[[], object]) -> torch.Tensor:
         t0 = time.perf_counter()
         with torch.enable_grad():
             u, y, objective, mean = _closure_outputs(closure)
@@ -311,6 +327,7 @@ class JacobianPower(torch.optim.Optimizer):
             else:
                 A = output_jacobian(y2, u)
             J = GraphJacobian(u, self.params, A, self.group["precision"])
+        self._gram_rows = y2.numel()
         reduction = closure.reduction if isinstance(closure, LossClosure) else "mean"
         self.samples_averaged = y.shape[0] if reduction == "mean" else 1
 
@@ -344,6 +361,10 @@ class JacobianPower(torch.optim.Optimizer):
         whatever the reduction; ``last_timings``, ``last_finite``, ``last_reason`` and
         ``last_spectrum`` say how the update went.
         """
+        with update_threads(self.threads, self._gram_rows):
+            return self._step_structured(model, net_inputs, physics, loss, inputs, reduction)
+
+    def _step_structured(self, model, net_inputs, physics, loss, inputs, reduction) -> torch.Tensor:
         t0 = time.perf_counter()
         naive = self.group["jacobian"] == "naive"
         closure = LossClosure(model, net_inputs, physics, loss, inputs, reduction)
@@ -358,6 +379,7 @@ class JacobianPower(torch.optim.Optimizer):
             per_sample = loss(y.requires_grad_(True))
             (grad_y,) = torch.autograd.grad(reduce_loss(per_sample, reduction), y)
             value = per_sample.mean().detach()
+        self._gram_rows = y.numel()
         if not torch.isfinite(value):
             self._refuse("non-finite loss")
             return value

@@ -19,8 +19,18 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.errors import quiet_broken_pipe
-from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
+from higbench.results.index import (
+    DEFAULT_THRESHOLDS,
+    DONE_STATUSES,
+    best_runs,
+    find_run_files,
+    load_runs,
+    one_per_config,
+    threshold_column,
+    under_figure_runs,
+)
 from higbench.results.profile import (
+    BEST_OVER,
     all_targets,
     budget_labels,
     default_targets,
@@ -78,8 +88,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--metric", default="final_test_loss", help="what --best and the sort minimise (default: final_test_loss)")
     p.add_argument(
         "--by",
-        help="grouping of --best, comma-separated (default: problem.name,problem.model,optimizer.name;"
-        " problem.model only where runs have it)",
+        help="grouping of --best, comma-separated (default: per problem, every key that changes a result except"
+        f" {' and '.join(BEST_OVER)}, which --best selects over: column setup)",
     )
     p.add_argument("--threshold", action="append", type=float, help="add a time_to_<t> column (repeatable)")
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
@@ -161,9 +171,36 @@ def _with_names(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
     return df.assign(budget=budget_labels(df), setting=setting_labels(df, keys or None))
 
 
+def _problem_variant(name: str) -> dict[str, object] | None:
+    """A shipped problem config that is another problem with other keys (``dipole_cnn``: the
+    dipole with ``problem.model=cnn``) as {column: value}; None for any other name."""
+    import yaml
+
+    from higbench.config import config_dir
+
+    path = Path(config_dir()) / "problem" / f"{name}.yaml"
+    if not path.is_file():
+        return None
+    conf = yaml.safe_load(path.read_text()) or {}
+    bases = [d for d in conf.get("defaults", []) if isinstance(d, str) and d != "_self_"]
+    keys = {f"problem.{k}": v for k, v in (conf.get("problem") or {}).items() if k != "name" and not isinstance(v, dict)}
+    return {"problem.name": bases[0], **keys} if len(bases) == 1 and keys else None
+
+
 def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
+    problems = _values(args.problem)
+    variants = [v for v in map(_problem_variant, problems) if v]
+    if variants and len(df):  # --problem dipole_cnn: its runs are problem.name dipole with problem.model cnn
+        match = pd.Series(False, index=df.index)
+        for name in problems:
+            wanted = _problem_variant(name) or {"problem.name": name}
+            hit = pd.Series(True, index=df.index)
+            for column, value in wanted.items():
+                hit &= df[column].astype(str) == str(value) if column in df else False
+            match |= hit
+        df, problems = df[match], []
     for key, wanted in (
-        ("problem.name", _values(args.problem)),
+        ("problem.name", problems),
         ("optimizer.name", _values(args.optimizer)),
         ("status", _values(args.status)),
     ):
@@ -173,13 +210,16 @@ def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
-    """The best run per group, at equal budget: the budget is always one of the group keys,
-    so a 30 s run never competes with a 5 s one (a note says when budgets were mixed)."""
-    by = (
-        [k for k in args.by.split(",") if k]
-        if args.by
-        else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
-    )
+    """The best run per setup, at equal budget: a setup is every key that changes a result
+    except those --best selects over (``BEST_OVER``: the learning rate and the batch size), so
+    GN at gamma=0.01 never sits beside HIG at gamma=1, nor an amsgrad run beside plain Adam
+    (column ``setup``). The budget is always one of the group keys, so a 30 s run never
+    competes with a 5 s one (a note says when budgets were mixed). --by: the whole grouping."""
+    if args.by:
+        by = [k for k in args.by.split(",") if k]
+    else:
+        df = df.assign(setup=setting_labels(df, leave_out=BEST_OVER))
+        by = [k for k in ("problem.name", "setup") if k in df]
     if "budget" not in by:
         by.append("budget")
     if len(df) and df.groupby("problem.name")["budget"].nunique().max() > 1:
@@ -195,13 +235,38 @@ def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float
     return targets
 
 
+def _comparable(runs: pd.DataFrame, targets: dict[str, list[float]], args: argparse.Namespace) -> pd.DataFrame:
+    """The runs --plot and --profile compare: one per configuration (a run found twice, e.g.
+    a sweep directory inside another, or a job run again, counts once), done runs only; a
+    note on stderr says what was left out and why."""
+    notes = []
+    done = runs[runs["status"].isin(DONE_STATUSES)]
+    not_done = runs["status"][~runs["status"].isin(DONE_STATUSES)].value_counts()
+    if len(not_done):
+        counts = ", ".join(f"{n} {s}" for s, n in not_done.items())
+        notes.append(f"{counts} run(s) left out: not results (resume interrupted ones with resume=<run dir>)")
+    unique = one_per_config(done) if "config_id" in done and done["config_id"].notna().all() else done
+    if len(unique) < len(done):
+        notes.append(
+            f"{len(done) - len(unique)} duplicate run(s) left out: same configuration and seed as another run"
+            " (the newest counts once; a sweep directory inside another?)"
+        )
+    if args.targets:
+        for problem, n in unique["problem.name"].value_counts().sort_index().items():
+            if problem not in targets:
+                notes.append(f"{problem}: {n} run(s) in the plot but not in the table: no --targets {problem}=...")
+    for line in notes:
+        print(f"note: {line}", file=sys.stderr)
+    return unique
+
+
 def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int:
     """--plot and --profile: the time-to-target table, then the figures."""
     from higbench.results.plot import plot_curves, plot_profile, profile_taus
 
     targets = _targets(args, df)
     runs, curves = _load(args, roots, all_targets(targets) or DEFAULT_THRESHOLDS, curves=True)
-    runs = _filter(_with_names(runs, args), args)
+    runs = _comparable(_filter(_with_names(runs, args), args), targets, args)
     if not targets:
         print("note: no targets: no problem here has a finite test loss (give --targets)", file=sys.stderr)
     times = time_to_target(runs, targets)
@@ -214,7 +279,7 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     )
     print(format_table(times, with_ratio=bool(args.profile)))
     if args.plot:
-        print(f"curves: {plot_curves(runs[runs['status'].isin(('completed', 'diverged'))], curves, args.plot)}")
+        print(f"curves: {plot_curves(runs, curves, args.plot)}")
     if args.profile and len(times):
         pairs = len(times[["problem", "target"]].drop_duplicates())
         taus = profile_taus(times)
@@ -310,7 +375,10 @@ def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) 
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
     # GN/HIG/LM runs: how ill-conditioned their steps were (shown when some run recorded it)
     conditioning = [c for c in CONDITIONING_SHOWN if c in df and pd.to_numeric(df[c], errors="coerce").notna().any()]
-    shown = SUMMARY_COLUMNS + times + conditioning + [c for c in (args.columns or "").split(",") if c]
+    summary = [*SUMMARY_COLUMNS]
+    if "setup" in df:  # --best: what each row is the best of
+        summary.insert(summary.index("optimizer.name") + 1, "setup")
+    shown = summary + times + conditioning + [c for c in (args.columns or "").split(",") if c]
     if args.best and args.metric not in shown:
         shown.insert(shown.index("final_test_loss"), args.metric)
     missing = [c for c in shown if c not in df.columns]

@@ -11,7 +11,9 @@ clock at the end: evaluations excluded), ``final_test_loss``,
 test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
 ``cond_kept_median``, ``cond_kept_max``, ``sv_dropped_mean`` (GN/HIG/LM: the steps'
 conditioning, ``higbench.results.spectrum``; NaN for other runs),
-``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``).
+``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``),
+``setting_config`` (what makes its optimizer setting: ``setting_config``; seeds of one
+setting share it).
 
 This is the one run index: ``make figures`` finds its runs here too (``one_per_config``,
 ``DONE_STATUSES``). Files are read through ``higbench.runfile.read_tables``.
@@ -59,8 +61,14 @@ _OWN_COLUMNS = {
     "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
-    "config_id", "parallel_jobs", *CONDITIONING_COLUMNS,
+    "config_id", "parallel_jobs", "setting_config", *CONDITIONING_COLUMNS,
 }  # fmt: skip
+
+# Config keys that never make a different optimizer setting: the seed is what a comparison's
+# median runs over, the budget and the evaluation schedule are what settings are compared
+# within, and the schema's cosmetic keys (threads, progress, tensorboard, checkpoints, ...:
+# identity=False) change no result. Everything else does (problem.gamma, dtype, amsgrad, ...).
+NOT_SETTING_KEYS = ("seed", "budget", "eval_every", "eval_unit", *COSMETIC_KEYS)
 
 
 def config_id(config: dict, parent_id: str | None = None) -> str:
@@ -74,6 +82,19 @@ def config_id(config: dict, parent_id: str | None = None) -> str:
         c["init_from"] = {"run": parent_id or f"path:{c['init_from']}"}
     text = json.dumps(c, sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def setting_config(config: dict, device: str | None = None) -> str:
+    """A run's setting: its flattened config without ``NOT_SETTING_KEYS``, as sorted JSON.
+
+    ``device`` is the device the run used (the environment's), which replaces the config's
+    (``auto`` resolves to ``cpu`` on a CPU-only machine: the same setting as ``device=cpu``).
+    Runs with equal strings are seeds of one setting (``profile.setting_labels``).
+    """
+    kept = {k: v for k, v in config.items() if k not in NOT_SETTING_KEYS}
+    if device:
+        kept["device"] = device.split(":")[0]
+    return json.dumps(_flatten(kept), sort_keys=True, default=str)
 
 
 def threshold_column(threshold: float) -> str:
@@ -235,6 +256,8 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
     row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
     row.update(conditioning(_cut({k: raw[k] for k in UPDATE_SPECTRUM_COLUMNS if k in raw})[0]))  # else NaN
     row.update(run.memory)
+    if isinstance(config, dict):
+        row["setting_config"] = setting_config(config, run.env.get("device"))
     for key, value in run.env.items():
         row[f"env.{key}"] = value
     # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their
