@@ -62,7 +62,7 @@ def test_published_causes_do_not_contradict_their_rows():
 
 def test_committed_report_is_assembled_from_the_committed_rows(tmp_path):
     """REPORT.md is regenerated, never hand-edited: `--report-only` on docs/results gives it back."""
-    for path in RESULTS.glob("*.json"):
+    for path in [*RESULTS.glob("*.json"), *RESULTS.glob("*.csv")]:  # rows, runs listed, plotted data (the seed spread)
         (tmp_path / path.name).write_text(path.read_text())
     generated = re.compile(r"^Generated .*$", re.M)
     again = generated.sub("", write_report(tmp_path, list(registry.figures())).read_text())

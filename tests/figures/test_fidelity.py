@@ -161,8 +161,9 @@ def test_report_judges_the_stored_rows_again_and_shows_the_reference(tmp_path):
     assert "| **partly** | hardware |" in text  # the table stays scannable; the cause's text is under it
     assert "- **osc-4** (partly): rule. Cause (hardware): HIG stays below Adam from t = 8 s, before" in text
     assert "older revision" not in text  # the cause is this revision's, rendered from the stored values
-    claim |= {"rule_verdict": "reproduced", "seeds": 1}  # the seed gate, applied again
-    (tmp_path / "fig2b.json").write_text(json.dumps({"id": "fig2b", "preset": "quick", "claims": [claim], "runs": []}))
+    claim |= {"rule_verdict": "reproduced", "seeds": 3}  # the seed gate, applied again: seeds counted from the runs listed
+    one_seed = [{"sweep": "best", "seed": 0, "overrides": ["optimizer=hig", "seed=0"], "status": "completed", "path": "r"}]
+    (tmp_path / "fig2b.json").write_text(json.dumps({"id": "fig2b", "preset": "quick", "claims": [claim], "runs": one_seed}))
     assert "| **partly** | seeds |" in write_report(tmp_path, list(registry.figures())).read_text()
     assert "## Beside the authors' code" in text and "| adam | 60 | 0.0083 | 0.001 |" in text
     assert OSCILLATOR_CURVES["hig"]["points"][-1] == (265.0, 2.1e-3)
