@@ -79,7 +79,8 @@ def collect(out_dir: Path) -> list[dict]:
     for cid, c in claims().items():
         if cid in rows:
             seeds = sidecar_seeds(infos[f] for f in c.figures if f in infos)  # from the runs listed, not the row
-            again = {**rows[cid], "why": rule_why(rows[cid]["why"]), "seeds": seeds, **spread}
+            declared = {"statement": c.statement, "paper": c.paper, "figures": list(c.figures)}  # this revision's
+            again = {**rows[cid], **declared, "why": rule_why(rows[cid]["why"]), "seeds": seeds, **spread}
             out.append(finish(c, again))
         else:
             blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-", "why": f"{c.figures[0]} not drawn yet"}
@@ -162,7 +163,8 @@ def _claim_row(r: dict) -> list[str]:
 def _evidence(r: dict) -> str:
     """A claim's rule, gate and cause under the table (the table stays scannable)."""
     cause = f" Cause ({r['cause'][0]}): {r['cause'][1]}." if r.get("cause") else ""
-    return f"- **{r['id']}** ({r['verdict']}): {r['why']}.{cause}".replace("..", ".")
+    again = f" ({r['remeasured']}.)" if r.get("remeasured") else ""
+    return f"- **{r['id']}** ({r['verdict']}): {r['why']}.{cause}{again}".replace("..", ".")
 
 
 def _provenance(info: dict) -> str:

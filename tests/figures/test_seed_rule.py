@@ -39,7 +39,8 @@ def test_no_claim_escapes_the_seed_rule(cid):
     c = registry.claims()[cid]
     capped = finish(c, _row(cid, 1, spread=2.0))
     assert capped["verdict"] == PARTLY and capped["cause"][0] == "seeds", capped
-    assert finish(c, _row(cid, 1, {"margin": 15.0}, spread=2.0))["verdict"] == PARTLY  # 15x is within 10 x 2x
+    if c.decide is None:  # a rule decided from stored values needs all of them: margin alone is no row of it
+        assert finish(c, _row(cid, 1, {"margin": 15.0}, spread=2.0))["verdict"] == PARTLY  # 15x is within 10 x 2x
     assert finish(c, _row(cid, REQUIRED_SEEDS, spread=2.0))["verdict"] == REPRODUCED
     assert finish(c, _row(cid, NO_RUNS))["verdict"] == REPRODUCED  # a benchmark table: no runs, no seeds
 
