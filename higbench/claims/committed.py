@@ -144,6 +144,11 @@ class CommittedFigure:
         return cls(info, pd.read_csv(path) if path.is_file() else pd.DataFrame(columns=["run"]), updates or {})
 
     @property
+    def frame(self) -> pd.DataFrame:
+        """A table's measured values (<id>.csv of a table: the benchmark's frame as the table drew it)."""
+        return self.table
+
+    @property
     def budgets(self) -> dict[str, str]:
         return self.info.get("budgets", {})
 

@@ -605,3 +605,44 @@ def test_dip7_reads_runs_too_short_to_oscillate_as_showing_nothing():
     runs = [_Run([1.0, s], **{"optimizer.lr": lr, "batch_size": 16}) for lr, s in ((1e-4, 0.9), (1e-3, 0.1), (1e-2, 0.01))]
     _, verdict, _, values = _measure("dip-7", {"fig8": _Fig(adam=runs)})
     assert verdict == "not" and values["shaky_b"] == 0 and "wobble_most" not in values, values
+
+
+def test_added_claims_on_synthetic_runs():
+    """The paper's statements added as rows: each rule passes and fails where it should."""
+
+    class ByBatch(_Fig):
+        def runs(self, sweep=None, batch_size=None, **where):
+            return [r for r in self.by_sweep.get(sweep, []) if batch_size is None or r.cfg("batch_size") == batch_size]
+
+    fig2c = ByBatch(hig=[_Run([1.0, v], batch_size=b) for b, v in ((32, 2e-7), (64, 8e-8), (128, 8e-7))])
+    assert _measure("osc-8", {"fig2c": fig2c})[1] == "reproduced"  # b=64 10x below the largest b
+    fig2c = ByBatch(hig=[_Run([1.0, v], batch_size=b) for b, v in ((32, 2e-6), (64, 8e-7), (128, 1e-7))])
+    assert _measure("osc-8", {"fig2c": fig2c})[1] == "not"
+    kappa = [_Run([1.0] + [1e-3] * 20, **{"optimizer.kappa": 0.5}), _Run([1.0, 1e-3], **{"optimizer.kappa": 0.0})]
+    kappa.append(_Run([1.0, 1e-6], **{"optimizer.kappa": -0.5}))
+    assert _measure("abl-5", {"fig12": _Fig(kappa=kappa)})[1] == "reproduced"  # κ=0.5 flat, κ<0 1000x below κ=0
+    kappa[0] = _Run([1.0 / (i + 1) for i in range(21)], **{"optimizer.kappa": 0.5})  # still falling
+    assert _measure("abl-5", {"fig12": _Fig(kappa=kappa)})[1] == "partly"
+    times = [float(t) for t in range(0, 110, 10)]
+    slow = [_Run([1.0] + [0.4] * 10, times=times, **{"optimizer.lr": lr}) for lr in (1e-3, 1e-2)]  # fast, then flat
+    small = _Run([10 ** (-t / 50) for t in times], times=times, **{"optimizer.lr": 1e-4})  # keeps falling, ends lower
+    assert _measure("poi-6", {"fig3b": _Fig(adam=[small, *slow])})[1] == "reproduced"
+
+
+def test_dip9_reads_the_low_energy_loss_while_the_high_energy_one_is_on_its_plateau():
+    import pandas as pd
+
+    def run(he, le):
+        r = _Run([h + e for h, e in zip(he, le)])
+        r.curves = pd.concat([r.curves, pd.DataFrame({"test_high_energy_loss": he, "test_low_energy_loss": le})], axis=1)
+        return r
+
+    adam = [run([0.46, 0.43, 0.41, 0.01], [0.53, 0.06, 0.10, 0.001])] * 3  # LE up 1.7x while HE >= 0.4
+    hig = [run([0.46, 0.45, 0.2, 0.01], [0.53, 0.4, 0.1, 0.01])] * 3
+    measured, verdict, _, values = _measure("dip-9", {"fig4c": _Fig(adam=adam, hig=hig)})
+    assert verdict == "reproduced" and values["adam_rise"] == pytest.approx(0.10 / 0.06), measured
+
+
+def test_the_report_lists_what_no_row_tests():
+    text = (RESULTS / "REPORT.md").read_text()
+    assert "## Statements of the paper no row tests" in text and "steepest descent" in text and "Appendix C" in text
