@@ -1535,8 +1535,8 @@ def ablation_tau(datas):
     cause=Cause(
         "budget",
         "a negative κ improves on zero {gain:.0f}x, but κ={falling_kappa} is still falling over the second half of its "
-        "{budget:g} s ({falling_change:+.2f} decades, noise {falling_noise:.2f}): it has not stagnated yet, where the authors' oscillator "
-        "scripts run an hour",
+        "{budget:g} s ({falling_change:+.2f} decades, noise {falling_noise:.2f}): it has not stagnated yet, where the "
+        "authors' oscillator scripts run an hour",
         {"the κ>0 run still falling": lambda v: falling(v["falling_change"], v["falling_noise"])},
     ),
 )
