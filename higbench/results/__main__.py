@@ -7,6 +7,7 @@ higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
 higbench-results outputs --optimizer hig --spectrum spectrum.png   # singular values of J over training
+higbench-results outputs/league --league          # integrated score, IQMs with intervals, P(HIG improves)
 """
 
 from __future__ import annotations
@@ -96,6 +97,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--spectrum",
         metavar="FILE",
         help=f"draw the singular values of each GN/HIG/LM step against updates, one panel per run (at most {MAX_PANELS})",
+    )
+    p.add_argument(
+        "--league",
+        action="store_true",
+        help="the league (scripts/league.py): performance profiles in seconds and updates with the integrated score,"
+        " IQMs with 95%% bootstrap intervals per task, P(HIG improves); tuning-seed runs left out",
     )
     p.add_argument(
         "--targets",
@@ -226,6 +233,17 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     return 0
 
 
+def _league(args: argparse.Namespace, roots: list[Path]) -> int:
+    """--league: the scores of the runs (targets from their problem configs)."""
+    from higbench.results.league import all_spaces, format_league
+
+    args.figure_runs = True  # the league's runs are launched as the figures' are (higbench.jobs.launch)
+    runs, curves = _load(args, roots, DEFAULT_THRESHOLDS, curves=True)
+    runs = _filter(_with_names(runs, args), args)
+    print(format_league(runs, curves, all_spaces()))
+    return 0
+
+
 def _spectrum(args: argparse.Namespace, df: pd.DataFrame, roots: list[Path]) -> int:
     """--spectrum: one panel per selected run that recorded a spectrum; exit 2 if none did."""
     from higbench.results.plot import plot_spectrum
@@ -276,6 +294,8 @@ def _main(argv: list[str] | None = None) -> int:
             code = _spectrum(args, df, roots)
             if code or not (args.plot or args.profile):
                 return code
+        if args.league:
+            return _league(args, roots)
         if args.plot or args.profile:
             if not args.spectrum:
                 _summary_line(df, total, roots, args)
