@@ -142,12 +142,21 @@ def calibration() -> dict:
 
 def report(root: Path, out: Path, manifest: dict) -> str:
     from higbench.results.__main__ import main as results_main
+    from higbench.results.index import load_runs
 
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):
         results_main([str(root), "--league"])
     text = buffer.getvalue()
     out.mkdir(parents=True, exist_ok=True)
+    runs, curves = load_runs(root, curves=True, figure_runs=True)
+    scored, reached, _ = league.league_frames(runs, curves, league.all_spaces())
+    if len(scored):
+        league.plot_league(reached, league.interval_table(scored, reached), out)
+        identities = scored[["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps",
+                             "train_time_s", "config_id", "path"]].copy()  # fmt: skip
+        identities["path"] = identities["path"].map(lambda p: str(Path(p).resolve().relative_to(root.resolve())))
+        identities.sort_values(["task", "league_setting", "seed"]).to_csv(out / "runs.csv", index=False)
     (out / "league.txt").write_text(text)
     (out / "league.json").write_text(json.dumps(manifest, indent=1, default=str) + "\n")
     return text

@@ -24,6 +24,7 @@ from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files
 from higbench.results.profile import (
     all_targets,
     budget_labels,
+    configured_targets,
     default_targets,
     format_table,
     parse_targets,
@@ -108,7 +109,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--targets",
         nargs="+",
         metavar="PROBLEM=LOSS,...",
-        help="target test losses per problem for --plot/--profile (default: decades that separate the settings)",
+        help="target test losses per problem for --plot/--profile (default: the problem config's problem.targets,"
+        " else decades that separate the settings)",
     )
     p.add_argument(
         "--setting",
@@ -195,7 +197,8 @@ def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
-    targets = parse_targets(args.targets) if args.targets else default_targets(df)
+    # --targets, else the problem configs' (problem.targets), else the decades that separate the settings
+    targets = parse_targets(args.targets) if args.targets else {**default_targets(df), **configured_targets(df)}
     unknown = sorted(set(targets) - set(df["problem.name"].dropna())) if len(df) else []
     if unknown and args.targets:
         print(f"note: --targets: no runs of {', '.join(unknown)} here", file=sys.stderr)

@@ -126,6 +126,15 @@ def iqm(values: Sequence[float]) -> float:
     return float(stats.trim_mean(x, 0.25))
 
 
+def _iqm_rows(matrix: np.ndarray) -> np.ndarray:
+    """``iqm`` of every row at once (the bootstrap's replicates)."""
+    m = np.sort(matrix, axis=1)
+    cut = int(0.25 * m.shape[1])
+    kept = m[:, cut : m.shape[1] - cut]
+    with np.errstate(invalid="ignore"):
+        return kept.mean(axis=1)  # inf stays inf (a run that never reached the target)
+
+
 def bootstrap_ci(
     strata: Sequence[Sequence[float]],
     statistic: Callable[[np.ndarray], float],
@@ -136,14 +145,15 @@ def bootstrap_ci(
     """(point, low, high): ``statistic`` of all values, and the percentile interval of the
     stratified bootstrap: each replicate resamples every stratum (a problem) with replacement, in
     its own size, and pools them (rliable's ``StratifiedBootstrap``)."""
-    groups = [np.asarray(s, dtype=float) for s in strata if len(s)]
+    groups = [g[~np.isnan(g)] for g in (np.asarray(s, dtype=float) for s in strata)]
+    groups = [g for g in groups if len(g)]
     if not groups:
         return math.nan, math.nan, math.nan
     point = statistic(np.concatenate(groups))
     rng = np.random.default_rng(seed)
-    draws = np.empty(reps)
-    for r in range(reps):
-        draws[r] = statistic(np.concatenate([g[rng.integers(0, len(g), len(g))] for g in groups]))
+    # reps x n: each row one replicate, every stratum resampled in its own size
+    matrix = np.concatenate([g[rng.integers(0, len(g), (reps, len(g)))] for g in groups], axis=1)
+    draws = _iqm_rows(matrix) if statistic is iqm else np.apply_along_axis(statistic, 1, matrix)
     # inverted_cdf: an observed replicate at each end, never inf - inf between two of them
     lo, hi = np.quantile(draws, [(1 - confidence) / 2, (1 + confidence) / 2], method="inverted_cdf")
     return float(point), float(lo), float(hi)
@@ -357,15 +367,20 @@ def _ci(cell) -> str:
     return f"{point:.3g} [{lo:.3g}, {hi:.3g}]"
 
 
+def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=TUNING_SEEDS):
+    """(scored runs, seconds and updates to each target per scored run, targets per task)."""
+    scored = league_runs(runs, spaces, tuning_seeds)
+    targets = task_targets(scored) if len(scored) else {}
+    return scored, reach_table(scored, curves, targets), targets
+
+
 def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=TUNING_SEEDS) -> str:
     """The league as text: both profile views with the integrated score, the IQM table with
     intervals per task, and the probability that HIG improves on each other setting."""
-    scored = league_runs(runs, spaces, tuning_seeds)
+    scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds)
     tuning = int(pd.to_numeric(runs["seed"], errors="coerce").isin(tuning_seeds).sum()) if len(runs) else 0
     if scored.empty:
         return f"no scored runs (done, not on a tuning seed {list(tuning_seeds)}); {tuning} tuning run(s) left out"
-    targets = task_targets(scored)
-    reached = reach_table(scored, curves, targets)
     out = [
         f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings,"
         f" seeds {sorted(set(pd.to_numeric(scored['seed']).astype(int)))}); {tuning} tuning run(s) left out",
@@ -396,3 +411,88 @@ def all_spaces(directory: Path | None = None) -> dict[str, dict]:
     """Every shipped search space: optimizer name -> space (conf/search/*.yaml)."""
     d = directory or search_dir()
     return {p.stem: load_space(p.stem, d) for p in sorted(d.glob("*.yaml"))}
+
+
+# -- figures ---------------------------------------------------------------------------------
+
+
+def profile_band(reached: pd.DataFrame, unit: str, taus: Sequence[float], reps: int = 100, seed: int = 0) -> dict:
+    """rho(tau) per setting, and its 95% band from resampling each (task, setting)'s seeds with
+    replacement (the stratified bootstrap; the fastest setting of a pair is found again in each
+    replicate): {setting: (rho, low, high)} on ``taus``."""
+    from higbench.results.profile import performance_profile
+
+    point = performance_profile(profile_times(reached, unit), taus)
+    rng = np.random.default_rng(seed)
+    rows = reached.reset_index(drop=True)
+    # per (task, setting): the row numbers of each of its seeds (all targets of that run)
+    blocks = [[np.asarray(ix) for ix in g.groupby("seed").groups.values()] for _, g in rows.groupby(["task", "setting"])]
+    draws: dict[str, list] = {name: [] for name in point.columns}
+    for _ in range(reps):
+        picked = [block[i] for block in blocks for i in rng.integers(0, len(block), len(block))]
+        rho = performance_profile(profile_times(rows.iloc[np.concatenate(picked)], unit), taus)
+        for name in draws:
+            draws[name].append(rho[name].to_numpy() if name in rho else np.zeros(len(taus)))
+    return {
+        name: (point[name].to_numpy(), *np.quantile(np.array(draws[name]), [0.025, 0.975], axis=0, method="inverted_cdf"))
+        for name in point.columns
+    }
+
+
+def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: float = TAU_MAX) -> list[Path]:
+    """profile.png (rho in seconds and in updates, with bands) and time_to_target.png (per task,
+    the IQM of seconds to each target with its interval, per setting)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    taus = np.linspace(1.0, tau_max, 61)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for ax, unit in zip(axes, ("seconds", "updates")):
+        for name, (rho, lo, hi) in sorted(profile_band(reached, unit, taus).items()):
+            (line,) = ax.step(taus, rho, where="post", label=name, lw=1.6)
+            ax.fill_between(taus, lo, hi, step="post", color=line.get_color(), alpha=0.12)
+        ax.set_xlabel(f"tau ({unit} to target over the fastest)")
+        ax.set_title(f"equal {'wall clock' if unit == 'seconds' else 'updates'}")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("rho(tau): fraction of (task, target) pairs")
+    axes[1].legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    paths = [out / "profile.png"]
+    fig.savefig(paths[0], dpi=120)
+    plt.close(fig)
+
+    tasks = sorted(table["task"].unique())
+    fig, axes = plt.subplots(1, len(tasks), figsize=(3.6 * len(tasks), 4), squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        rows = table[table["task"] == task]
+        cols = sorted((c for c in rows.columns if c.startswith("seconds_to_")), key=lambda c: -float(c.split("_to_")[1]))
+        for k, (_, row) in enumerate(rows.iterrows()):
+            xs, ys, los, his = [], [], [], []
+            for j, c in enumerate(cols):
+                cell = row[c]
+                if isinstance(cell, tuple) and math.isfinite(cell[0]):
+                    xs.append(j + 0.08 * (k - len(rows) / 2))
+                    ys.append(cell[0])
+                    los.append(cell[0] - cell[1])
+                    his.append((cell[2] if math.isfinite(cell[2]) else cell[0]) - cell[0])
+            if xs:
+                ax.errorbar(xs, ys, yerr=[los, his], fmt="o", ms=4, capsize=2, label=row["setting"])
+        ax.set_xticks(range(len(cols)), [c.split("_to_")[1] for c in cols])
+        if ax.has_data():
+            ax.set_yscale("log")
+        else:
+            ax.text(0.5, 0.5, "no setting reached a target", ha="center", transform=ax.transAxes, fontsize=8)
+        ax.set_title(task, fontsize=9)
+        ax.set_xlabel("test-loss target")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("seconds to target (IQM, 95% interval)")
+    if axes[0][-1].has_data():
+        axes[0][-1].legend(fontsize=6)
+    fig.tight_layout()
+    paths.append(out / "time_to_target.png")
+    fig.savefig(paths[1], dpi=120)
+    plt.close(fig)
+    return paths

@@ -155,3 +155,21 @@ def test_results_league_prints_scores_and_leaves_tuning_runs_out(tmp_path, capsy
     assert "P(hig ends below X)" in out and "adam" in out.split("P(hig ends below X)")[1]
     assert "0.00123 [0.00123, 0.00123]" not in out  # the test loss, not the val loss (1.1x), is the table's
     assert "0.001 [0.001, 0.001]" in out
+
+
+def test_the_bootstraps_row_wise_iqm_matches_iqm():
+    rng = np.random.default_rng(0)
+    matrix = rng.lognormal(size=(50, 7))
+    matrix[3, 2] = math.inf  # one cut, and a row where inf stays
+    matrix[4, :5] = math.inf
+    np.testing.assert_allclose(league._iqm_rows(matrix), [league.iqm(row) for row in matrix], rtol=1e-12)
+
+
+def test_profile_targets_come_from_the_problem_configs():
+    from higbench.results.profile import configured_targets
+
+    runs = pd.DataFrame(
+        {"problem.name": ["toy", "toy", "poisson"], "problem.targets": [(1e-2, 1e-3), None, None],
+         "started": ["2026-01-01T00:00:00+0000"] * 3}
+    )  # fmt: skip
+    assert configured_targets(runs) == {"toy": [1e-2, 1e-3]}  # poisson's runs predate the key: absent
