@@ -144,6 +144,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("curves", "wall_time"): ("s", "training clock at this evaluation (evaluations excluded; start-up included)"),
     ("curves", "train_loss"): ("loss", "mean mini-batch loss since the previous evaluation (NaN at step 0)"),
     ("curves", "test_loss"): ("loss", "mean loss over the test set"),
+    ("curves", "val_loss"): ("loss", "mean loss over the validation set (problem.val_size; what tuning reads)"),
     ("curves", "rss_mb"): ("MB", "resident memory of the process at this evaluation"),
     ("logs", "neuron_mean"): ("activation", "per hidden neuron: mean activation over the validation inputs"),
     ("logs", "neuron_std"): ("activation", "per hidden neuron: standard deviation of the activation over the validation inputs"),

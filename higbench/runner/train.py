@@ -331,6 +331,7 @@ class TrainingRun:
         self.cfg, self.run_path, self.problem, self.model, self.update = cfg, run_path, problem, model, update
         self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
         self.test = problem.test_set()
+        self.val = problem.val_set()  # its loss is the curve val_loss (what tuning reads)
         self.memory = MemoryMonitor(device)
         self.cpu = CpuUse(torch.get_num_threads())
         self.shuffle = torch.Generator().manual_seed(cfg.seed)
@@ -379,6 +380,8 @@ class TrainingRun:
         self.last_eval_step = self.step
         self.model.eval()
         metrics = evaluate(self.problem, self.model, self.test)
+        if self.val is not None:
+            metrics["val_loss"] = evaluate(self.problem, self.model, self.val)["test_loss"]
         self.model.train()
         train_loss = float(np.mean(self.batch_losses)) if self.batch_losses else math.nan
         self.batch_losses.clear()
