@@ -118,7 +118,8 @@ def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_F
         if r.is_file():
             found.add(r)
         elif r.is_dir():
-            found.update(p for p in r.rglob(pattern) if p.is_file())
+            inside = r.resolve()  # a link to a file outside the tree given is never followed
+            found.update(p for p in r.rglob(pattern) if p.is_file() and (not p.is_symlink() or inside in p.resolve().parents))
         else:
             raise FileNotFoundError(f"{r}: no such file or directory")
     return sorted(found)

@@ -30,8 +30,10 @@ Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
 
 from __future__ import annotations
 
+import contextlib
 import math
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -252,7 +254,15 @@ def choose_placement(cfg: DictConfig, state: dict | None) -> placement.Placement
     return placement.place(lambda device: _update_cost(cfg, device))
 
 
-def preflight(cfg: DictConfig) -> None:
+def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, update, cfg: DictConfig, run_path: Path) -> None:
+    """A resumed run's checkpoint against the network and optimizer its stored config builds
+    (``checkpoint.check_fits``); ConfigError on ``resume`` when any part of it does not fit."""
+    train_set = getattr(problem, "train", None)
+    per_epoch = len(train_set) // int(cfg.batch_size) if train_set is not None else None
+    checkpoint.check_fits(state, model, update.optimizer, per_epoch, str(run_path), checkpoint.checkpoint_path(run_path))
+
+
+def preflight(cfg: DictConfig, resume_from: Path | None = None) -> None:
     """Build the problem and network once and run the checks that need them (no file written).
 
     Raises ConfigError for an ``init_from`` run whose weights do not fit this network and
@@ -276,6 +286,8 @@ def preflight(cfg: DictConfig) -> None:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
+    if resume_from is not None:  # read once per process: train() gets the same state back
+        check_checkpoint(checkpoint.load(resume_from), problem, model, update, cfg, Path(resume_from))
     if cfg.get("tensorboard"):
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
@@ -321,7 +333,11 @@ def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
         return []
     from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
 
-    return [TensorBoardSink(run_path.parent / "tensorboard")]
+    try:
+        return [TensorBoardSink(run_path.parent)]
+    except OSError as exc:  # its directory became a file or a link after the checks: a view, not the run
+        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
+        return []
 
 
 class TrainingRun:
@@ -538,7 +554,8 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
     run.file.close_failed(exc, run.step, write_pending)
     for sink in run.sinks.sinks:
         if sink is not run.file:
-            sink.close("failed", str(exc), run.step)
+            with contextlib.suppress(Exception):  # a side sink's failure must not hide the run's
+                sink.close("failed", str(exc), run.step)
     signals.restore()
 
 
@@ -560,6 +577,8 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     if cfg.get("init_from") and not resume:
         load_initial_weights(model, cfg.init_from, cfg.problem.name)
     update = build_update(problem, model, cfg.optimizer)
+    if state is not None:  # all of it fits this network and optimizer, before the run file is touched
+        check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
