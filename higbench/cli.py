@@ -54,7 +54,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
-from higbench.errors import EXIT_BAD_INPUT, ConfigError, quiet_broken_pipe
+from higbench.errors import EXIT_BAD_INPUT, ConfigError, output_never_fails, quiet_broken_pipe
 from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
 
@@ -408,8 +408,9 @@ def main(argv: list[str] | None = None) -> None:
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
     _SWEEP.update(jobs=0, failed=0)
     try:
-        while argv is not None:
-            argv = _run_app(argv)
+        with output_never_fails():  # `higbench ... | head -3`: the output stops, the training goes on
+            while argv is not None:
+                argv = _run_app(argv)
     except RecursionError:
         value = given_value(argv, "hydra.run.dir") or "?"
         refuse(ConfigError("hydra.run.dir", value, "nested too deep (Python's recursion limit)"))

@@ -73,7 +73,7 @@ COSMETIC_KEYS = keys_where(RunConfig, "identity", False)  # not part of a run's 
 RESUMABLE_KEYS = keys_where(RunConfig, "resumable")  # may change on resume=
 JOB_DIR_EXCLUDED_KEYS = keys_where(RunConfig, "in_job_dir", False, nested=True)  # conf/config.yaml exclude_keys
 SIZING_KEYS = keys_where(RunConfig, "sizing")  # what the pre-flight's network build depends on
-OPTIMIZER_META = ("name", "_target_", "kind")  # optimizer keys that are not constructor arguments
+OPTIMIZER_META = ("name", "_target_", "kind", "extra")  # optimizer keys that are not constructor arguments
 
 
 def optimizer_kwargs(opt_cfg: Any) -> dict:
@@ -165,6 +165,10 @@ def validate(cfg: DictConfig | dict) -> None:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
             raise ConfigError("batch_size", top["batch_size"], why)
     check_optimizer(data.get("optimizer"), device)
+    if getattr(optimizer_class(data["optimizer"]), "needs_inverse_simulator", False):  # SIP
+        if not problem_class(data["problem"]).has_inverse_simulator():
+            name = data["optimizer"].get("name", data["optimizer"]["_target_"])
+            raise ConfigError("optimizer", name, f"problem {problem['name']} has no inverse simulator")
 
     if device.startswith("cuda"):
         import torch
@@ -214,7 +218,10 @@ def problem_class(problem: dict) -> type:
     try:
         cls = locate(target)
     except (ImportError, AttributeError) as exc:
-        raise ConfigError("problem._target_", target, f"cannot import this problem class ({type(exc).__name__}: {exc})") from None
+        why = f"cannot import this problem class ({type(exc).__name__}: {exc})"
+        if isinstance(exc, ImportError) and not str(target).startswith("higbench."):
+            why += f"; is the folder of its module {str(target).rpartition('.')[0]!r} on PYTHONPATH?"
+        raise ConfigError("problem._target_", target, why) from None
     if not (isinstance(cls, type) and issubclass(cls, Problem)):
         raise ConfigError("problem._target_", target, "is not a higbench.problems.base.Problem subclass")
     return cls
@@ -253,7 +260,12 @@ def optimizer_class(opt: Any) -> type:
     target = opt.get("_target_")
     try:
         cls = locate(target)
-    except (ImportError, AttributeError) as exc:
+    except ImportError as exc:
+        if opt.get("extra"):  # a third-party optimizer: its YAML names the optional extra that installs it
+            why = f'{target} comes with the {opt["extra"]} extra: pip install -e ".[{opt["extra"]}]"'
+            raise ConfigError("optimizer", opt.get("name", target), why) from None
+        raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
+    except AttributeError as exc:
         raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
     if not (isinstance(cls, type) and issubclass(cls, torch.optim.Optimizer)):
         raise ConfigError("optimizer._target_", target, "is not a torch.optim.Optimizer subclass")

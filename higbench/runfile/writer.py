@@ -164,6 +164,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("curves", "wall_time"): ("s", "training clock at this evaluation (evaluations excluded; start-up included)"),
     ("curves", "train_loss"): ("loss", "mean mini-batch loss since the previous evaluation (NaN at step 0)"),
     ("curves", "test_loss"): ("loss", "mean loss over the test set"),
+    ("curves", "val_loss"): ("loss", "mean loss over the validation set (problem.val_size; what tuning reads)"),
     ("curves", "rss_mb"): ("MB", "resident memory of the process at this evaluation"),
     ("logs", "neuron_mean"): ("activation", "per hidden neuron: mean activation over the validation inputs"),
     ("logs", "neuron_std"): ("activation", "per hidden neuron: standard deviation of the activation over the validation inputs"),
@@ -179,6 +180,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("updates", "sv_max"): ("singular value", "GN/HIG/LM: largest singular value of this update's Jacobian"),
     ("updates", "sv_min_kept"): ("singular value", "GN/HIG/LM: smallest singular value kept by the truncation tau"),
     ("updates", "sv_dropped"): ("count", "GN/HIG/LM: singular values the truncation tau dropped"),
+    ("updates", "step_error"): ("relative", "GN/HIG solver=krylov: estimated relative error of the step (NaN: exact route)"),
     ("logs", "sv_quantiles"): ("singular value", "GN/HIG/LM: 11 quantiles (0, 0.1, ..., 1) of the last update's singular values"),
 }
 

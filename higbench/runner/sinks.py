@@ -142,9 +142,16 @@ class Sinks(Sink):
 SPECTRUM_QUANTILES = np.linspace(0.0, 1.0, 11)
 
 
+SPECTRUM_COLUMNS = ("sv_max", "sv_min_kept", "sv_dropped", "step_error")
+
+
 def spectrum_columns(spectrum: dict) -> dict[str, float]:
-    """Per-update columns of a GN/HIG/LM spectrum (NaN when the update recorded none)."""
-    return {k: float(spectrum.get(k, math.nan)) for k in ("sv_max", "sv_min_kept", "sv_dropped")}
+    """Per-update columns of a GN/HIG/LM spectrum (NaN when the update recorded none).
+
+    ``step_error``: the estimated relative error of the step on the approximate (krylov)
+    route; NaN on the exact routes.
+    """
+    return {k: float(spectrum.get(k, math.nan)) for k in SPECTRUM_COLUMNS}
 
 
 def spectrum_quantiles(spectrum: dict) -> np.ndarray:

@@ -51,6 +51,7 @@ from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
+from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
@@ -200,6 +201,8 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
         device=str(problem.device),
         limit_mb=cfg.get("memory_limit_mb"),
         jacobian="structured" if getattr(update, "structured", False) else "naive",
+        krylov_steps=opt.group.get("krylov_steps", 200),
+        factor_values=mlp_factor_values(model),
     )
 
 
@@ -352,6 +355,7 @@ class TrainingRun:
         self.cfg, self.run_path, self.problem, self.model, self.update = cfg, run_path, problem, model, update
         self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
         self.test = problem.test_set()
+        self.val = problem.val_set()  # its loss is the curve val_loss (what tuning reads)
         self.memory = MemoryMonitor(device)
         self.cpu = CpuUse(torch.get_num_threads())
         self.shuffle = torch.Generator().manual_seed(cfg.seed)
@@ -400,6 +404,8 @@ class TrainingRun:
         self.last_eval_step = self.step
         self.model.eval()
         metrics = evaluate(self.problem, self.model, self.test)
+        if self.val is not None:
+            metrics["val_loss"] = evaluate(self.problem, self.model, self.val)["test_loss"]
         self.model.train()
         train_loss = float(np.mean(self.batch_losses)) if self.batch_losses else math.nan
         self.batch_losses.clear()
@@ -471,6 +477,7 @@ class TrainingRun:
         self.batch_losses.append(result.loss)
         t = result.timings
         row = {"step": self.step, "wall_time": self.clock(), "loss": result.loss, "update_s": sum(t.values()), **t}
+        row.update(result.metrics)  # an optimizer's own values (SIP: proxy_loss)
         if self.records_spectrum:
             row.update(spectrum_columns(result.spectrum))
         self.sinks.on_update(row)

@@ -67,12 +67,18 @@ def fast_jacobian(name):
     return {"oscillator": oscillator_fast.solver_jacobian, "dipole": dipole_fast.solver_jacobian}[name]
 
 
-@pytest.mark.parametrize("problem", ["oscillator", "dipole", "poisson"])
-def test_a_hig_update_on_the_gpu_equals_the_cpu_s(problem):
+@pytest.mark.parametrize(
+    "problem, solver",
+    [("oscillator", "auto"), ("dipole", "auto"), ("poisson", "auto"), ("oscillator", "krylov"), ("poisson", "krylov")],
+)
+def test_a_hig_update_on_the_gpu_equals_the_cpu_s(problem, solver):
+    """The GPU's update equals the CPU's: the exact routes, and the Krylov route with as many
+    Lanczos steps as rows (exact up to round-off)."""
     from higbench.runner import train as train_mod
     from higbench.runner.updates import build_update
 
-    cfg = config(f"problem={problem}", "optimizer=hig", "dtype=float64", "batch_size=4")
+    krylov = ["+optimizer.krylov_steps=1024"] if solver == "krylov" else []
+    cfg = config(f"problem={problem}", "optimizer=hig", "dtype=float64", "batch_size=4", f"optimizer.solver={solver}", *krylov)
     params = []
     for device in (torch.device("cpu"), CUDA):
         _device, p = train_mod._setup(cfg, device=device)
