@@ -233,3 +233,21 @@ def test_the_log_opener_refuses_a_link_planted_once_the_job_runs(planted, tmp_pa
     fresh.write("a line\n")
     fresh.close()
     assert (tmp_path / "own.log").read_text() == "a line\n"
+
+
+def test_a_continued_run_never_opens_the_file_its_stored_init_from_names(completed, tmp_path, monkeypatch, capsys):
+    """A run started from another run's weights, interrupted, then that file is gone (or
+    someone's private file now): resume takes the weights from the checkpoint and opens only
+    its own directory."""
+    from rel_helpers import stopped_run
+
+    source = completed("source")
+    run = tmp_path / "run" / "run.h5"
+    run.parent.mkdir()
+    stopped_run(run, monkeypatch, overrides=[f"init_from={source}"])
+    source.unlink()
+    source.mkdir()  # where the file was, something no reader could open
+    cli.main([f"resume={run.parent}", "progress=false", "threads=1"])
+    from higbench.runfile.reader import read_head
+
+    assert read_head(run).status == "completed"
