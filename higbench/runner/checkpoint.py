@@ -392,6 +392,8 @@ def _check_optimizer_state(saved: dict, optimizer, refuse) -> None:
 
 def _same_kind(value, mine) -> bool:
     numbers = (int, float)
+    if mine is None or value is None:  # set as it runs (LM's damping lam starts unset)
+        return value is None or (type(value) in numbers and math.isfinite(value)) or type(value) in (str, bool)
     if type(mine) in numbers and type(value) in numbers:
         return math.isfinite(value)
     if isinstance(mine, (tuple, list)) and isinstance(value, (tuple, list)):
@@ -402,6 +404,8 @@ def _same_kind(value, mine) -> bool:
 def _state_value_fits(v, param, flat: int) -> bool:
     import torch
 
+    if v is None:  # L-BFGS before its first direction (al, d)
+        return True
     if type(v) in (int, float):
         return math.isfinite(v) or v != v  # L-BFGS keeps prev_loss; NaN is a value it may hold
     if not isinstance(v, torch.Tensor):
