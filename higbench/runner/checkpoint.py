@@ -279,7 +279,7 @@ def check_fields(state: dict, refuse) -> None:
         "last_eval_step": (lambda v: type(v) is int and v >= -1, "an integer >= -1"),
         "batch_losses": (lambda v: type(v) is list and all(type(x) in (int, float) for x in v), "a list of numbers"),
         "model": (lambda v: isinstance(v, dict) and all(isinstance(k, str) for k in v), "a mapping of weights"),
-        "optimizer": (lambda v: isinstance(v, dict) and {"state", "param_groups"} <= set(v), "an optimizer state"),
+        "optimizer": (lambda v: isinstance(v, dict), "an optimizer state"),
         "shuffle_epoch_start": (lambda v: _rng_state(v, torch.Generator().get_state()), "a torch generator state"),
         "torch_rng": (lambda v: _rng_state(v, torch.get_rng_state()), "a torch generator state"),
         "rows": (_rows, "{group: {table: rows}} with integer counts"),
@@ -338,7 +338,42 @@ def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, res
             raise refuse(f"has {key}={_brief(t)}; the network has {mine.dtype} {tuple(mine.shape)}")
     if batches_per_epoch is not None and state["position"] > batches_per_epoch:
         raise refuse(f"has position={state['position']}, beyond the {batches_per_epoch} batches of an epoch")
-    _check_optimizer_state(state["optimizer"], optimizer, refuse)
+    if _standard_layout(optimizer):
+        _check_optimizer_state(state["optimizer"], optimizer, refuse)
+    else:  # another layout (a split optimizer, Shampoo's preconditioners): plain values, bounded sizes
+        params = [p for g in optimizer.param_groups for p in g["params"]]
+        largest = max([p.numel() for p in params] + [d for p in params for d in p.shape] + [1])
+        _check_plain_tree(state["optimizer"], 4 * max(sum(p.numel() for p in params), largest**2), refuse)
+
+
+def _standard_layout(optimizer) -> bool:
+    """torch.optim's classes and higbench's Jacobian-power family: torch's state_dict layout,
+    per-parameter state shaped as the parameter (or scalars, or L-BFGS's flat histories)."""
+    return type(optimizer).__module__.startswith("torch.optim") or hasattr(optimizer, "last_spectrum")
+
+
+def _check_plain_tree(node, max_numel: int, refuse, depth: int = 0, key: str = "optimizer") -> None:
+    """Containers of plain values and dense real tensors of at most ``max_numel`` elements."""
+    import torch
+
+    if depth > 16:
+        raise refuse(f"nests its {key} more than 16 levels")
+    if isinstance(node, dict):
+        items = node.items()
+    elif isinstance(node, (list, tuple)):
+        items = enumerate(node)
+    elif isinstance(node, torch.Tensor):
+        if node.layout != torch.strided or node.device.type == "meta" or node.is_complex() or node.numel() > max_numel:
+            raise refuse(f"has {key}={_brief(node)}, not a dense real tensor of at most {max_numel:,} elements")
+        return
+    elif node is None or type(node) in (bool, int, float, str) or isinstance(node, torch.dtype):
+        return
+    else:
+        raise refuse(f"has {key} of type {type(node).__name__}")
+    if len(node) > 100_000:
+        raise refuse(f"has {key} with {len(node):,} entries")
+    for k, v in items:
+        _check_plain_tree(v, max_numel, refuse, depth + 1, f"{key}.{k}")
 
 
 def _dense_like(t, dtype, shape) -> bool:
@@ -359,6 +394,8 @@ def _check_optimizer_state(saved: dict, optimizer, refuse) -> None:
     L-BFGS's flat vectors and bounded histories)."""
     import torch
 
+    if not {"state", "param_groups"} <= set(saved):
+        raise refuse("has an optimizer state without state or param_groups")
     fresh = optimizer.state_dict()
     groups = saved["param_groups"]
     if not isinstance(groups, list) or len(groups) != len(fresh["param_groups"]):

@@ -343,7 +343,8 @@ def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
 
     try:
         return [TensorBoardSink(run_path.parent)]
-    except OSError as exc:  # its directory became a file or a link after the checks: a view, not the run
+    except (OSError, AttributeError) as exc:  # its directory became a file or a link after the checks; a
+        # TensorBoard whose writer's internals moved (tensorboard._hold_event_file): a view, not the run
         print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
         return []
 

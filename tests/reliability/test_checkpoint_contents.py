@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from rel_helpers import sha256, stopped_run
+from rel_helpers import FAST, sha256, stopped_run
 from test_front_door_security import refused
 
 from higbench import cli
@@ -174,3 +174,21 @@ def test_a_good_checkpoint_still_resumes(stopped, tmp_path, monkeypatch):
     run_dir = _copy(stopped, tmp_path)
     cli.main([f"resume={run_dir}", "progress=false", "threads=1"])
     assert read_head(run_dir / "run.h5").status == "completed"
+
+
+SHIPPED = sorted(p.stem for p in (Path(cli.config_dir()) / "optimizer").glob("*.yaml"))
+FAST_LAYOUTS = ("muon", "soap")  # checkpoints in layouts other than torch's per-parameter state
+
+
+@pytest.mark.parametrize("optimizer", [o if o in FAST_LAYOUTS else pytest.param(o, marks=pytest.mark.slow) for o in SHIPPED])
+def test_every_shipped_optimizers_checkpoint_passes_the_check(optimizer, tmp_path, monkeypatch):
+    """The check refuses what does not fit, never a real checkpoint of a shipped optimizer."""
+    from rel_helpers import compose_here, train_here
+
+    run = tmp_path / "run.h5"
+    stopped_run(run, monkeypatch, overrides=[f"optimizer={optimizer}"], after=9)
+    checkpoint._LOADED = None
+    cfg = compose_here(
+        ["problem=toy", f"optimizer={optimizer}", "budget.max_updates=12", "eval_unit=updates", "eval_every=5", *FAST]
+    )
+    assert train_here(cfg, run, resume=True).status == "completed"
