@@ -151,6 +151,8 @@ def validate(cfg: DictConfig | dict) -> None:
         raise ConfigError("device", device, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)")
     if not (threads is None or threads == "auto" or (type(threads) is int and threads >= 1)):
         raise ConfigError("threads", threads, "must be auto, null or an integer >= 1")
+    if type(threads) is int and threads > max_threads():  # libgomp would fail to allocate them (a traceback)
+        raise ConfigError("threads", threads, f"must be at most {max_threads()} (8 per core of this machine, at least 256)")
     if not (resume is None or isinstance(resume, bool) or (isinstance(resume, str) and resume)):
         raise ConfigError("resume", resume, "must be null, true, false, or the path of a run directory or run file")
     if top["init_from"] == "":
@@ -162,7 +164,7 @@ def validate(cfg: DictConfig | dict) -> None:
         if isinstance(size, int) and top["batch_size"] > size:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
             raise ConfigError("batch_size", top["batch_size"], why)
-    check_optimizer(data.get("optimizer"))
+    check_optimizer(data.get("optimizer"), device)
     if getattr(optimizer_class(data["optimizer"]), "needs_inverse_simulator", False):  # SIP
         if not problem_class(data["problem"]).has_inverse_simulator():
             name = data["optimizer"].get("name", data["optimizer"]["_target_"])
@@ -175,6 +177,32 @@ def validate(cfg: DictConfig | dict) -> None:
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
     if top["init_from"]:
         check_init_from_file(top["init_from"], problem["name"])
+
+
+def max_threads() -> int:
+    """The most threads a run may ask for: beyond a few per core they only oversubscribe."""
+    import os
+
+    return max(256, 8 * (os.cpu_count() or 1))
+
+
+BOOL_KEYS = tuple(f.name for f in dataclasses.fields(RunConfig) if f.type in (bool, "bool"))
+
+
+def check_bool_overrides(overrides: list[str]) -> None:
+    """``progress=2``: OmegaConf would take any number for true; a switch is true or false."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    for line in overrides:
+        key = line.partition("=")[0].lstrip("+~")
+        if key not in BOOL_KEYS or "=" not in line:
+            continue
+        try:
+            given = OverridesParser.create().parse_override(line).value()
+        except Exception:  # noqa: BLE001 - Hydra's own composition says what does not parse
+            continue
+        if not isinstance(given, bool):
+            raise ConfigError(key, line.partition("=")[2], "must be true or false")
 
 
 def problem_class(problem: dict) -> type:
@@ -190,7 +218,10 @@ def problem_class(problem: dict) -> type:
     try:
         cls = locate(target)
     except (ImportError, AttributeError) as exc:
-        raise ConfigError("problem._target_", target, f"cannot import this problem class ({type(exc).__name__}: {exc})") from None
+        why = f"cannot import this problem class ({type(exc).__name__}: {exc})"
+        if isinstance(exc, ImportError) and not str(target).startswith("higbench."):
+            why += f"; is the folder of its module {str(target).rpartition('.')[0]!r} on PYTHONPATH?"
+        raise ConfigError("problem._target_", target, why) from None
     if not (isinstance(cls, type) and issubclass(cls, Problem)):
         raise ConfigError("problem._target_", target, "is not a higbench.problems.base.Problem subclass")
     return cls
@@ -257,7 +288,7 @@ def _check_number_types(cls: type, kwargs: dict) -> None:
             raise ConfigError(f"optimizer.{key}", given, f"must be a number (the default is {default})")
 
 
-def check_optimizer(opt: Any) -> None:
+def check_optimizer(opt: Any, device: str = "cpu") -> None:
     """Build the optimizer on a dummy parameter: its constructor checks its own arguments.
 
     When it refuses, each argument is left out in turn to find the one it refuses (a pair
@@ -269,9 +300,15 @@ def check_optimizer(opt: Any) -> None:
     kwargs = optimizer_kwargs(opt)
     _check_number_types(cls, kwargs)
 
+    trial_step = cls.__module__.startswith("torch.optim")  # ours (GN/HIG/LM) need a problem to step
+    trial_device = device if device.startswith("cuda") and torch.cuda.is_available() else "cpu"  # capturable: CUDA only
+
     def refusal(args: dict) -> Exception | None:
         try:
-            cls([torch.nn.Parameter(torch.zeros(1))], **args)
+            param = torch.nn.Parameter(torch.ones(2, device=trial_device))
+            optimizer = cls([param], **args)
+            if trial_step:  # some arguments fail only when used (L-BFGS history_size=0, Adam capturable)
+                optimizer.step(lambda: _dummy_loss(optimizer, param))
         except Exception as exc:  # noqa: BLE001 - ValueError, TypeError, IndexError: whatever the class raises
             return exc
         return None
@@ -287,6 +324,17 @@ def check_optimizer(opt: Any) -> None:
     shown = opt[culprit]
     why = why.split(": ", 1)[1] if why.startswith(f"{culprit}=") and ": " in why else why  # "lr=-1: must be > 0"
     raise ConfigError(f"optimizer.{culprit}", shown, f"refused by {target}: {why}")
+
+
+def _dummy_loss(optimizer, param):
+    """The closure of ``check_optimizer``'s trial step: a quadratic on the dummy parameter."""
+    import torch
+
+    with torch.enable_grad():
+        optimizer.zero_grad()
+        loss = (param**2).sum()
+        loss.backward()
+    return loss
 
 
 def check_init_from_file(path: str, problem_name: str) -> None:

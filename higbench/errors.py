@@ -91,3 +91,51 @@ def quiet_broken_pipe():
         with contextlib.suppress(OSError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         sys.exit(0)
+
+
+class _OutputThatNeverFails:
+    """A text stream whose writes never raise: once its reader is gone (``| head`` closed the
+    pipe) or the stream fails, the rest of the output goes to the null device. Everything
+    else (``isatty``, ``encoding``, ``fileno``) is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self._stream, self.lost = stream, False
+
+    def _lose(self) -> None:
+        self.lost = True
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # what is still buffered goes nowhere, too
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+
+    def write(self, text: str) -> int:
+        if not self.lost:
+            try:
+                return self._stream.write(text)
+            except OSError:
+                self._lose()
+        return len(text)
+
+    def writelines(self, lines) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        if not self.lost:
+            try:
+                self._stream.flush()
+            except OSError:
+                self._lose()
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def output_never_fails():
+    """Inside the block, a failed write to stdout or stderr (a closed pipe: ``make run | head -3``)
+    stops the output, never the work: training goes on and its run file says how it ended."""
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _OutputThatNeverFails(sys.stdout), _OutputThatNeverFails(sys.stderr)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = saved

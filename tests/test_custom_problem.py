@@ -94,3 +94,13 @@ def test_a_multirun_checks_its_jobs_before_the_sweep_starts(heat_cli, tmp_path):
     proc = heat_cli("-m", "optimizer=adam", "problem.alpha=0.1,0.9")
     assert proc.returncode == 2 and "problem.alpha=0.9: must be a number in (0, 0.5]" in proc.stderr, proc.stderr
     assert sorted(tmp_path.rglob("*")) == []
+
+
+def test_a_problem_module_off_the_path_names_pythonpath():
+    """The recipe's trap: `--cfg job` finds the YAML, the run cannot import the module."""
+    import pytest
+
+    from higbench.config import ConfigError, problem_class
+
+    with pytest.raises(ConfigError, match="'my_heat_problem' on PYTHONPATH"):
+        problem_class({"_target_": "my_heat_problem.Heat"})

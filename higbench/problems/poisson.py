@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from higbench.physics.poisson import DATA, laplace, laplace_matrix, sample_potential
-from higbench.problems.base import Batch, Problem, ProblemConfig, register
+from higbench.problems.base import Batch, Problem, ProblemConfig, draw_validation, register
 from higbench.problems.networks import ACTIVATIONS, mlp
 from higbench.schema import value
 
@@ -48,8 +48,11 @@ class Poisson(Problem):
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         self.n = int(cfg.grid)
-        # The evaluation set comes from data_seed; training samples from the run seed.
-        self.test = self._sample(int(cfg.test_size), torch.Generator().manual_seed(int(cfg.data_seed)))
+        # The evaluation sets come from data_seed (test first, then validation); training samples
+        # from the run seed.
+        gen = torch.Generator().manual_seed(int(cfg.data_seed))
+        self.test = self._sample(int(cfg.test_size), gen)
+        self.val = draw_validation(self, gen)
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         phi = sample_potential(n, gen, n=self.n, modes=int(self.cfg.modes), dtype=torch.float64, data=str(self.cfg.data))

@@ -7,6 +7,7 @@ higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
 higbench-results outputs --optimizer hig --spectrum spectrum.png   # singular values of J over training
+higbench-results outputs/league --league          # integrated score, IQMs with intervals, P(HIG improves)
 """
 
 from __future__ import annotations
@@ -19,10 +20,21 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.errors import quiet_broken_pipe
-from higbench.results.index import DEFAULT_THRESHOLDS, best_runs, find_run_files, load_runs, threshold_column, under_figure_runs
+from higbench.results.index import (
+    DEFAULT_THRESHOLDS,
+    DONE_STATUSES,
+    best_runs,
+    find_run_files,
+    load_runs,
+    one_per_config,
+    threshold_column,
+    under_figure_runs,
+)
 from higbench.results.profile import (
+    BEST_OVER,
     all_targets,
     budget_labels,
+    configured_targets,
     default_targets,
     format_table,
     parse_targets,
@@ -78,8 +90,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--metric", default="final_test_loss", help="what --best and the sort minimise (default: final_test_loss)")
     p.add_argument(
         "--by",
-        help="grouping of --best, comma-separated (default: problem.name,problem.model,optimizer.name;"
-        " problem.model only where runs have it)",
+        help="grouping of --best, comma-separated (default: per problem, every key that changes a result except"
+        f" {' and '.join(BEST_OVER)}, which --best selects over: column setup)",
     )
     p.add_argument("--threshold", action="append", type=float, help="add a time_to_<t> column (repeatable)")
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
@@ -98,10 +110,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help=f"draw the singular values of each GN/HIG/LM step against updates, one panel per run (at most {MAX_PANELS})",
     )
     p.add_argument(
+        "--league",
+        action="store_true",
+        help="the league (scripts/league.py): performance profiles in seconds and updates with the integrated score,"
+        " IQMs with 95%% bootstrap intervals per task, P(HIG improves); tuning-seed runs left out",
+    )
+    p.add_argument(
         "--targets",
         nargs="+",
         metavar="PROBLEM=LOSS,...",
-        help="target test losses per problem for --plot/--profile (default: decades that separate the settings)",
+        help="target test losses per problem for --plot/--profile (default: the problem config's problem.targets,"
+        " else decades that separate the settings)",
     )
     p.add_argument(
         "--setting",
@@ -161,9 +180,36 @@ def _with_names(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
     return df.assign(budget=budget_labels(df), setting=setting_labels(df, keys or None))
 
 
+def _problem_variant(name: str) -> dict[str, object] | None:
+    """A shipped problem config that is another problem with other keys (``dipole_cnn``: the
+    dipole with ``problem.model=cnn``) as {column: value}; None for any other name."""
+    import yaml
+
+    from higbench.config import config_dir
+
+    path = Path(config_dir()) / "problem" / f"{name}.yaml"
+    if not path.is_file():
+        return None
+    conf = yaml.safe_load(path.read_text()) or {}
+    bases = [d for d in conf.get("defaults", []) if isinstance(d, str) and d != "_self_"]
+    keys = {f"problem.{k}": v for k, v in (conf.get("problem") or {}).items() if k != "name" and not isinstance(v, dict)}
+    return {"problem.name": bases[0], **keys} if len(bases) == 1 and keys else None
+
+
 def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
+    problems = _values(args.problem)
+    variants = [v for v in map(_problem_variant, problems) if v]
+    if variants and len(df):  # --problem dipole_cnn: its runs are problem.name dipole with problem.model cnn
+        match = pd.Series(False, index=df.index)
+        for name in problems:
+            wanted = _problem_variant(name) or {"problem.name": name}
+            hit = pd.Series(True, index=df.index)
+            for column, value in wanted.items():
+                hit &= df[column].astype(str) == str(value) if column in df else False
+            match |= hit
+        df, problems = df[match], []
     for key, wanted in (
-        ("problem.name", _values(args.problem)),
+        ("problem.name", problems),
         ("optimizer.name", _values(args.optimizer)),
         ("status", _values(args.status)),
     ):
@@ -173,13 +219,16 @@ def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
-    """The best run per group, at equal budget: the budget is always one of the group keys,
-    so a 30 s run never competes with a 5 s one (a note says when budgets were mixed)."""
-    by = (
-        [k for k in args.by.split(",") if k]
-        if args.by
-        else [k for k in ("problem.name", "problem.model", "optimizer.name") if k in df]
-    )
+    """The best run per setup, at equal budget: a setup is every key that changes a result
+    except those --best selects over (``BEST_OVER``: the learning rate and the batch size), so
+    GN at gamma=0.01 never sits beside HIG at gamma=1, nor an amsgrad run beside plain Adam
+    (column ``setup``). The budget is always one of the group keys, so a 30 s run never
+    competes with a 5 s one (a note says when budgets were mixed). --by: the whole grouping."""
+    if args.by:
+        by = [k for k in args.by.split(",") if k]
+    else:
+        df = df.assign(setup=setting_labels(df, leave_out=BEST_OVER))
+        by = [k for k in ("problem.name", "setup") if k in df]
     if "budget" not in by:
         by.append("budget")
     if len(df) and df.groupby("problem.name")["budget"].nunique().max() > 1:
@@ -188,11 +237,37 @@ def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
-    targets = parse_targets(args.targets) if args.targets else default_targets(df)
+    # --targets, else the problem configs' (problem.targets), else the decades that separate the settings
+    targets = parse_targets(args.targets) if args.targets else {**default_targets(df), **configured_targets(df)}
     unknown = sorted(set(targets) - set(df["problem.name"].dropna())) if len(df) else []
     if unknown and args.targets:
         print(f"note: --targets: no runs of {', '.join(unknown)} here", file=sys.stderr)
     return targets
+
+
+def _comparable(runs: pd.DataFrame, targets: dict[str, list[float]], args: argparse.Namespace) -> pd.DataFrame:
+    """The runs --plot and --profile compare: one per configuration (a run found twice, e.g.
+    a sweep directory inside another, or a job run again, counts once), done runs only; a
+    note on stderr says what was left out and why."""
+    notes = []
+    done = runs[runs["status"].isin(DONE_STATUSES)]
+    not_done = runs["status"][~runs["status"].isin(DONE_STATUSES)].value_counts()
+    if len(not_done):
+        counts = ", ".join(f"{n} {s}" for s, n in not_done.items())
+        notes.append(f"{counts} run(s) left out: not results (resume interrupted ones with resume=<run dir>)")
+    unique = one_per_config(done) if "config_id" in done and done["config_id"].notna().all() else done
+    if len(unique) < len(done):
+        notes.append(
+            f"{len(done) - len(unique)} duplicate run(s) left out: same configuration and seed as another run"
+            " (the newest counts once; a sweep directory inside another?)"
+        )
+    if args.targets:
+        for problem, n in unique["problem.name"].value_counts().sort_index().items():
+            if problem not in targets:
+                notes.append(f"{problem}: {n} run(s) in the plot but not in the table: no --targets {problem}=...")
+    for line in notes:
+        print(f"note: {line}", file=sys.stderr)
+    return unique
 
 
 def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int:
@@ -201,7 +276,7 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
 
     targets = _targets(args, df)
     runs, curves = _load(args, roots, all_targets(targets) or DEFAULT_THRESHOLDS, curves=True)
-    runs = _filter(_with_names(runs, args), args)
+    runs = _comparable(_filter(_with_names(runs, args), args), targets, args)
     if not targets:
         print("note: no targets: no problem here has a finite test loss (give --targets)", file=sys.stderr)
     times = time_to_target(runs, targets)
@@ -214,7 +289,7 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     )
     print(format_table(times, with_ratio=bool(args.profile)))
     if args.plot:
-        print(f"curves: {plot_curves(runs[runs['status'].isin(('completed', 'diverged'))], curves, args.plot)}")
+        print(f"curves: {plot_curves(runs, curves, args.plot)}")
     if args.profile and len(times):
         pairs = len(times[["problem", "target"]].drop_duplicates())
         taus = profile_taus(times)
@@ -223,6 +298,17 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
             at = {t: float(performance_profile(times, [t])[name].iloc[0]) for t in (1.0, 2.0, 4.0)}
             print(f"rho {name}: " + ", ".join(f"tau={t:g}: {v:.2f}" for t, v in at.items()))
         print(f"profile: {plot_profile(rho, args.profile, pairs)}")
+    return 0
+
+
+def _league(args: argparse.Namespace, roots: list[Path]) -> int:
+    """--league: the scores of the runs (targets from their problem configs)."""
+    from higbench.results.league import all_spaces, format_league
+
+    args.figure_runs = True  # the league's runs are launched as the figures' are (higbench.jobs.launch)
+    runs, curves = _load(args, roots, DEFAULT_THRESHOLDS, curves=True)
+    runs = _filter(_with_names(runs, args), args)
+    print(format_league(runs, curves, all_spaces()))
     return 0
 
 
@@ -276,6 +362,8 @@ def _main(argv: list[str] | None = None) -> int:
             code = _spectrum(args, df, roots)
             if code or not (args.plot or args.profile):
                 return code
+        if args.league:
+            return _league(args, roots)
         if args.plot or args.profile:
             if not args.spectrum:
                 _summary_line(df, total, roots, args)
@@ -310,7 +398,10 @@ def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) 
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
     # GN/HIG/LM runs: how ill-conditioned their steps were (shown when some run recorded it)
     conditioning = [c for c in CONDITIONING_SHOWN if c in df and pd.to_numeric(df[c], errors="coerce").notna().any()]
-    shown = SUMMARY_COLUMNS + times + conditioning + [c for c in (args.columns or "").split(",") if c]
+    summary = [*SUMMARY_COLUMNS]
+    if "setup" in df:  # --best: what each row is the best of
+        summary.insert(summary.index("optimizer.name") + 1, "setup")
+    shown = summary + times + conditioning + [c for c in (args.columns or "").split(",") if c]
     if args.best and args.metric not in shown:
         shown.insert(shown.index("final_test_loss"), args.metric)
     missing = [c for c in shown if c not in df.columns]

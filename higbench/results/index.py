@@ -11,7 +11,9 @@ clock at the end: evaluations excluded), ``final_test_loss``,
 test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
 ``cond_kept_median``, ``cond_kept_max``, ``sv_dropped_mean`` (GN/HIG/LM: the steps'
 conditioning, ``higbench.results.spectrum``; NaN for other runs),
-``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``).
+``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``),
+``setting_config`` (what makes its optimizer setting: ``setting_config``; seeds of one
+setting share it).
 
 This is the one run index: ``make figures`` finds its runs here too (``one_per_config``,
 ``DONE_STATUSES``). Files are read through ``higbench.runfile.read_tables``.
@@ -34,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
+from higbench.problems.base import ProblemConfig
 from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLUMNS, conditioning
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
@@ -44,7 +47,9 @@ from higbench.runfile.reader import (
     read_tables,
     run_file_path,
 )
+from higbench.schema import keys_where
 
+PROBLEM_COSMETIC_KEYS = keys_where(ProblemConfig, "identity", False)  # problem.* keys outside config_id
 DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # The one status rule. A done run ended by its own rule and is a result: never run again
 # (a diverged run is a result too). Only completed runs compete in ``best_runs`` (a diverged
@@ -56,11 +61,17 @@ RUN_STATUSES_DONE = ("completed",)  # the statuses ``best_runs`` selects from
 # Columns the index computes; a config key of the same name is stored as "config.<key>".
 _OWN_COLUMNS = {
     "path", "status", "status_reason", "status_step", "error", "problem", "optimizer", "overrides",
-    "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
+    "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss", "final_val_loss", "best_val_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
-    "config_id", "parallel_jobs", *CONDITIONING_COLUMNS,
+    "config_id", "parallel_jobs", "setting_config", *CONDITIONING_COLUMNS,
 }  # fmt: skip
+
+# Config keys that never make a different optimizer setting: the seed is what a comparison's
+# median runs over, the budget and the evaluation schedule are what settings are compared
+# within, and the schema's cosmetic keys (threads, progress, tensorboard, checkpoints, ...:
+# identity=False) change no result. Everything else does (problem.gamma, dtype, amsgrad, ...).
+NOT_SETTING_KEYS = ("seed", "budget", "eval_every", "eval_unit", *COSMETIC_KEYS)
 
 
 def config_id(config: dict, parent_id: str | None = None) -> str:
@@ -70,10 +81,25 @@ def config_id(config: dict, parent_id: str | None = None) -> str:
     from, so a continued run keeps its identity wherever its parent's file lies.
     """
     c = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
+    if isinstance(c.get("problem"), dict):  # the problem's own such keys (validation size, targets, ...)
+        c["problem"] = {k: v for k, v in c["problem"].items() if k not in PROBLEM_COSMETIC_KEYS}
     if c.get("init_from"):
         c["init_from"] = {"run": parent_id or f"path:{c['init_from']}"}
     text = json.dumps(c, sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def setting_config(config: dict, device: str | None = None) -> str:
+    """A run's setting: its flattened config without ``NOT_SETTING_KEYS``, as sorted JSON.
+
+    ``device`` is the device the run used (the environment's), which replaces the config's
+    (``auto`` resolves to ``cpu`` on a CPU-only machine: the same setting as ``device=cpu``).
+    Runs with equal strings are seeds of one setting (``profile.setting_labels``).
+    """
+    kept = {k: v for k, v in config.items() if k not in NOT_SETTING_KEYS}
+    if device:
+        kept["device"] = device.split(":")[0]
+    return json.dumps(_flatten(kept), sort_keys=True, default=str)
 
 
 def threshold_column(threshold: float) -> str:
@@ -92,7 +118,8 @@ def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_F
         if r.is_file():
             found.add(r)
         elif r.is_dir():
-            found.update(p for p in r.rglob(pattern) if p.is_file())
+            inside = r.resolve()  # a link to a file outside the tree given is never followed
+            found.update(p for p in r.rglob(pattern) if p.is_file() and (not p.is_symlink() or inside in p.resolve().parents))
         else:
             raise FileNotFoundError(f"{r}: no such file or directory")
     return sorted(found)
@@ -149,7 +176,7 @@ def _mean(values: np.ndarray | None) -> float:
     return float(np.mean(values))
 
 
-_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss")  # what the row needs (curves=False)
+_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  # what the row needs (curves=False)
 _UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
@@ -210,6 +237,10 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
             row["final_step"] = int(steps[-1])
         if "train_loss" in curves:
             row["final_train_loss"] = float(curves["train_loss"][-1])
+        if "val_loss" in curves:  # the validation split (what tuning reads): final and best
+            val = curves["val_loss"]
+            row["final_val_loss"] = float(val[-1])
+            row["best_val_loss"] = float(np.nanmin(val)) if np.isfinite(val).any() else math.nan
         for name, values in curves.items():  # extra metrics: final_test_<metric>
             if name.startswith("test_") and name != "test_loss":
                 row[f"final_{name}"] = float(values[-1])
@@ -235,6 +266,8 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
     row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
     row.update(conditioning(_cut({k: raw[k] for k in UPDATE_SPECTRUM_COLUMNS if k in raw})[0]))  # else NaN
     row.update(run.memory)
+    if isinstance(config, dict):
+        row["setting_config"] = setting_config(config, run.env.get("device"))
     for key, value in run.env.items():
         row[f"env.{key}"] = value
     # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their

@@ -23,43 +23,58 @@ from higbench.results.spectrum import RunSpectrum, conditioning  # noqa: E402
 GRID_POINTS = 200
 
 
-def seed_band(curves: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def seed_band(
+    curves: list[tuple[np.ndarray, np.ndarray]], diverged: list[bool] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(time grid, median, min, max) over runs of (time, loss) curves.
 
     Each curve is interpolated in log(loss) onto a common grid up to the earliest end among
-    the runs, so every point of the band has every seed behind it.
+    the runs that ran out their budget, so every point of the band has every seed behind it.
+    A diverged run (``diverged[i]``) stopped early for its own reason: after its end it counts
+    as an infinite loss, so it neither cuts its setting's line short nor lowers the median
+    (the median goes where more than half the seeds diverged, the band's top where one did).
     """
-    ends = [t[-1] for t, _ in curves if len(t)]
+    diverged = list(diverged) if diverged is not None else [False] * len(curves)
+    ends = [t[-1] for (t, _), gone in zip(curves, diverged) if len(t) and not gone]
+    if not ends:  # every seed diverged: up to the last of them
+        ends = [max(t[-1] for t, _ in curves if len(t))] if any(len(t) for t, _ in curves) else []
     grid = np.linspace(0.0, min(ends), GRID_POINTS) if ends else np.empty(0)
     logs = []
-    for t, loss in curves:
+    for (t, loss), gone in zip(curves, diverged):
         ok = np.isfinite(loss) & (loss > 0)
         if ok.sum() < 1:
             continue
-        logs.append(np.interp(grid, t[ok], np.log10(loss[ok])))
+        log = np.interp(grid, t[ok], np.log10(loss[ok]))
+        logs.append(np.where(grid > t[-1], np.inf, log) if gone else log)
     if not logs:
         return grid, *(np.full(len(grid), np.nan) for _ in range(3))
     stack = np.vstack(logs)
-    return grid, 10 ** np.median(stack, axis=0), 10 ** stack.min(axis=0), 10 ** stack.max(axis=0)
+    finite = lambda a: np.where(np.isfinite(a), 10**a, np.nan)  # noqa: E731 - inf: not drawn
+    return grid, finite(np.median(stack, axis=0)), finite(stack.min(axis=0)), finite(stack.max(axis=0))
 
 
-def plot_curves(runs: pd.DataFrame, curves: pd.DataFrame, path: str | Path, setting: str = "setting") -> Path:
-    """Test loss against the training clock: one panel per problem, one line per setting
-    (median over its seeds) with a band from the lowest to the highest seed; log y."""
+def plot_curves(runs: pd.DataFrame, curves: pd.DataFrame, path: str | Path, setting: str = "setting", columns: int = 3) -> Path:
+    """Test loss against the training clock: one panel per problem (at most ``columns`` per
+    row), one line per setting (median over its seeds) with a band from the lowest to the
+    highest seed; log y."""
     problems = sorted(runs["problem.name"].dropna().unique())
-    fig, axes = plt.subplots(1, max(len(problems), 1), figsize=(6.0 * max(len(problems), 1), 4.2), squeeze=False)
+    n = max(len(problems), 1)
+    rows, cols = -(-n // columns), min(columns, n)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 4.2 * rows), squeeze=False)
+    for ax in axes.flat[len(problems) :]:
+        ax.set_visible(False)
     by_path = {p: g for p, g in curves.groupby("path", observed=True)}
-    for ax, problem in zip(axes[0], problems):
+    for ax, problem in zip(axes.flat, problems):
         group = runs[runs["problem.name"] == problem]
         for name, runs_of_setting in group.groupby(setting, sort=True):
-            parts = [
-                (c["wall_time"].to_numpy(dtype=float), c["test_loss"].to_numpy(dtype=float))
-                for p in runs_of_setting["path"]
-                if (c := by_path.get(p)) is not None and len(c)
-            ]
+            parts, diverged = [], []
+            for p, status in zip(runs_of_setting["path"], runs_of_setting["status"]):
+                if (c := by_path.get(p)) is not None and len(c):
+                    parts.append((c["wall_time"].to_numpy(dtype=float), c["test_loss"].to_numpy(dtype=float)))
+                    diverged.append(status == "diverged")
             if not parts:
                 continue
-            grid, median, low, high = seed_band(parts)
+            grid, median, low, high = seed_band(parts, diverged)
             (line,) = ax.plot(grid, median, label=f"{name} ({len(parts)} seed{'s' * (len(parts) != 1)})")
             if len(parts) > 1:
                 ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2, linewidth=0)

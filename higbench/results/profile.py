@@ -16,6 +16,7 @@ scoring uses the same profile).
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
 
@@ -23,35 +24,84 @@ import numpy as np
 import pandas as pd
 
 from higbench.results.index import DONE_STATUSES, threshold_column
+from higbench.results.index import NOT_SETTING_KEYS as INDEX_NOT_SETTING_KEYS
 
-# Override keys that do not make a different optimizer setting: the seed is what the
-# median runs over, the problem and the budget are what a setting is compared within.
-NOT_SETTING_KEYS = ("seed", "problem", "budget.seconds", "budget.max_updates", "threads", "progress",
-                    "checkpoint_every", "resume", "memory_limit_mb", "eval_every", "eval_unit")  # fmt: skip
+# Override keys that do not make a different setting (for runs without a ``setting_config``,
+# e.g. a hand-made table): index.NOT_SETTING_KEYS, and the problem (what panels split by).
+NOT_SETTING_KEYS = ("problem", *(k for k in INDEX_NOT_SETTING_KEYS if k not in ("budget",)), "budget.seconds",
+                    "budget.max_updates")  # fmt: skip
+# Keys compared within one optimizer: the per-(problem, optimizer) defaults differ between
+# optimizers by design (conf/problem_optimizer), so only a value that varies among one
+# optimizer's runs names a setting. Any other key that varies within a problem (problem.gamma,
+# dtype, device) is named on every setting of that problem.
+PER_OPTIMIZER_KEYS = ("optimizer.", "batch_size")
+# What --best selects over within a setup (the paper's table 2 tunes the learning rate and the
+# batch size); every other key that changes a result makes a setup of its own.
+BEST_OVER = ("optimizer.lr", "batch_size")
 
 
-def setting_labels(runs: pd.DataFrame, keys: Sequence[str] | None = None) -> pd.Series:
-    """A label per run naming its optimizer setting.
+def setting_labels(runs: pd.DataFrame, keys: Sequence[str] | None = None, leave_out: Sequence[str] = ()) -> pd.Series:
+    """A label per run naming its optimizer setting: the one setting key of --plot, --profile
+    and --best (runs with one label are seeds of one setting).
 
     keys: config columns that define a setting (e.g. ``optimizer.name,optimizer.lr``);
-    default: the run's command-line overrides without seed, problem, budget and the keys
-    that do not change a result (``adam lr=0.001``), or the optimizer's
-    name when nothing else was overridden.
+    default: every config key that changes a result (``index.setting_config``: all but the
+    seed, the budget, the evaluation schedule and the cosmetic keys), labelled by the
+    optimizer's name and the keys whose values differ (``adam lr=0.001``,
+    ``gn problem.gamma=0.01``). Runs without a ``setting_config`` column are labelled from
+    their command-line overrides instead.
+    leave_out: config keys that do not count either (--best's setups leave out the keys it
+    selects over, ``BEST_OVER``).
     """
+    if not len(runs):
+        return pd.Series([], dtype=object)
     if keys:
         return runs[list(keys)].astype(str).agg(" ".join, axis=1)
+    if "setting_config" in runs and runs["setting_config"].notna().all():
+        return _labels_from_config(runs, leave_out)
+    return runs.apply(lambda row: _label_from_overrides(row, leave_out), axis=1)
 
-    def from_overrides(row: pd.Series) -> str:
-        name, kept = str(row.get("optimizer.name")), []
-        for item in str(row.get("overrides") or "").split():
-            key, _, value = item.lstrip("+~").partition("=")
-            if key == "optimizer":
-                name = value
-            elif key not in NOT_SETTING_KEYS and not key.startswith("hydra."):
-                kept.append(item.lstrip("+").removeprefix("optimizer."))
-        return " ".join([name, *kept])
 
-    return runs.apply(from_overrides, axis=1) if len(runs) else pd.Series([], dtype=object)
+def _label_from_overrides(row: pd.Series, leave_out: Sequence[str] = ()) -> str:
+    name, kept = str(row.get("optimizer.name")), []
+    for item in str(row.get("overrides") or "").split():
+        key, _, value = item.lstrip("+~").partition("=")
+        if key == "optimizer":
+            name = value
+        elif key not in NOT_SETTING_KEYS and key not in leave_out and not key.startswith("hydra."):
+            kept.append(item.lstrip("+").removeprefix("optimizer."))
+    return " ".join([name, *kept])
+
+
+def _value(v: object) -> str:
+    return f"{v:g}" if isinstance(v, float) else json.dumps(v) if isinstance(v, list) else str(v)
+
+
+def _labels_from_config(runs: pd.DataFrame, leave_out: Sequence[str] = ()) -> pd.Series:
+    """Per problem: the optimizer's name, then key=value for each key that tells settings apart."""
+    configs = runs["setting_config"].map(lambda text: {k: v for k, v in json.loads(text).items() if k not in leave_out})
+    ids = configs.map(lambda c: json.dumps(c, sort_keys=True))
+    problems = runs.get("problem.name", pd.Series("", index=runs.index)).astype(str)
+    optimizers = configs.map(lambda c: str(c.get("optimizer.name")))
+    labels = pd.Series("", index=runs.index, dtype=object)
+    for _, idx in problems.groupby(problems).groups.items():
+        keys = sorted({k for c in configs[idx] for k in c} - {"optimizer.name", "problem.name"})
+
+        def varies(key: str, among: pd.Index) -> bool:
+            return len({json.dumps(configs[i].get(key), default=str) for i in among}) > 1
+
+        for opt, among in optimizers[idx].groupby(optimizers[idx]).groups.items():
+            shown = [k for k in keys if varies(k, among if k.startswith(PER_OPTIMIZER_KEYS) else idx)]
+            for i in among:
+                parts = [f"{k.removeprefix('optimizer.')}={_value(configs[i].get(k))}" for k in shown]
+                labels[i] = " ".join([opt, *parts])
+        # Settings that still share a label (a key only one setting has, shown nowhere): numbered
+        for label, same in labels[idx].groupby(labels[idx]).groups.items():
+            distinct = list(dict.fromkeys(ids[same]))
+            if len(distinct) > 1:
+                for i in same:
+                    labels[i] = f"{label} #{distinct.index(ids[i]) + 1}"
+    return labels
 
 
 def budget_labels(runs: pd.DataFrame) -> pd.Series:
@@ -106,6 +156,17 @@ def default_targets(runs: pd.DataFrame, setting: str = "setting", most: int = 3)
     return targets
 
 
+def configured_targets(runs: pd.DataFrame) -> dict[str, list[float]]:
+    """Per problem, the targets its config owns (``problem.targets``, recorded in every run's
+    config): those of its newest run that has them. Problems whose runs predate the key are absent."""
+    if "problem.targets" not in runs or runs.empty:
+        return {}
+    have = runs[runs["problem.targets"].notna()]
+    if "started" in have:
+        have = have.sort_values("started", na_position="first")
+    return {str(p): [float(t) for t in g["problem.targets"].iloc[-1]] for p, g in have.groupby("problem.name")}
+
+
 def all_targets(targets: Mapping[str, Sequence[float]]) -> tuple[float, ...]:
     """Every target level once: the thresholds ``load_runs`` computes columns for."""
     return tuple(sorted({t for levels in targets.values() for t in levels}, reverse=True))
@@ -126,11 +187,16 @@ def _reach_times(group: pd.DataFrame, column: str, horizon: float) -> np.ndarray
 def comparison_horizon(runs: pd.DataFrame) -> float:
     """The training clock that every run of a problem had: inf when all share one time budget,
     else the clock at which the shortest-budget runs stopped (a run may overshoot its budget by
-    up to one update). Targets reached after it do not count, so a longer budget buys nothing."""
+    up to one update). Targets reached after it do not count, so a longer budget buys nothing.
+
+    Only runs that ran out their budget (``completed``) set it: a diverged run stopped early
+    for its own reason, and its short clock must not cut the others' comparison short (it
+    simply never reaches the later targets)."""
     seconds = pd.to_numeric(runs.get("budget.seconds", pd.Series(np.nan, index=runs.index)), errors="coerce")
     if seconds.nunique(dropna=False) <= 1:
         return math.inf
-    shortest = runs[seconds == seconds.min()]
+    status = runs.get("status", pd.Series("completed", index=runs.index))
+    shortest = runs[(seconds == seconds.min()) & (status == "completed")]
     clock = pd.to_numeric(shortest.get("train_time_s", pd.Series(dtype=float)), errors="coerce").dropna()
     return float(clock.min()) if len(clock) else float(seconds.min())
 

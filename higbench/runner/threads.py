@@ -27,10 +27,10 @@ from __future__ import annotations
 import os
 import time
 
-# Gram rows from which a second thread pays for the eigen-solve: `python -m higbench.bench.threads`
-# on an idle 2-core machine gave 2/1-thread time ratios of 0.98 at 512 rows, 1.08 at 1024, 0.81 at
-# 1536, 0.68 at 2048 and 0.57 at 4096 (docs/benchmarks.md, "Threads").
-PARALLEL_MIN_ROWS = 1536
+from higbench.optim.threads import PARALLEL_MIN_ROWS, fit_to_work  # the size rule, shared with the optimizers
+
+__all__ = ["PARALLEL_MIN_ROWS", "available_cores", "fit_to_work", "idle_cores", "resolve_threads"]
+
 IDLE_INTERVAL_S = 0.2
 
 
@@ -96,10 +96,3 @@ def resolve_threads(value) -> int | None:
             return min(int(share), cores)
         return _free_cores(cores)
     return int(value)
-
-
-def fit_to_work(threads: int, gram_rows: int | None) -> int:
-    """``auto`` threads for a step of this size: 1 below ``PARALLEL_MIN_ROWS`` Gram rows."""
-    if gram_rows is not None and gram_rows < PARALLEL_MIN_ROWS:
-        return 1
-    return threads

@@ -103,4 +103,6 @@ class Update:
 def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig) -> Update:
     """The optimizer class comes from ``optimizer._target_``; its arguments from the rest."""
     optimizer = get_class(opt_cfg._target_)(model.parameters(), **optimizer_kwargs(opt_cfg))
+    if hasattr(optimizer, "threads"):  # the run's `threads` key sets them (train._setup), not the optimizer
+        optimizer.threads = None
     return Update(problem, model, optimizer)

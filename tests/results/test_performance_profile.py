@@ -130,3 +130,20 @@ def test_setting_labels_drop_seed_problem_and_budget():
     )
     assert setting_labels(runs).tolist() == ["adam lr=0.01", "hig", "hig"]
     assert setting_labels(runs.assign(x=[1, 2, 2]), ["optimizer.name", "x"]).tolist() == ["adam 1", "hig 2", "hig 2"]
+
+
+def test_a_diverged_run_does_not_cut_the_comparison_short():
+    """The issue's case: GN diverges at 0.04 s of a 10 s budget, HIG (10 s) reaches the target
+    at 8 s, Adam has 20 s. The horizon is HIG's 10 s, not GN's 0.04 s."""
+    runs = _runs(
+        [
+            ("a", "gn", 0, NAN, NAN, 10, "diverged"),
+            ("a", "hig", 0, 8.0, NAN, 10),
+            ("a", "adam", 0, 15.0, NAN, 20),
+        ]
+    ).assign(train_time_s=[0.04, 10.01, 20.0])
+    times = time_to_target(runs, {"a": [1.0]})
+    assert _cell(times, "a", 1.0, "hig", "time_s") == 8.0
+    assert _cell(times, "a", 1.0, "hig", "horizon_s") == 10.01
+    assert math.isinf(_cell(times, "a", 1.0, "adam", "time_s"))  # 15 s: after the horizon
+    assert math.isinf(_cell(times, "a", 1.0, "gn", "time_s"))
