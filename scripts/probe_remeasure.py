@@ -4,7 +4,7 @@
     python scripts/probe_remeasure.py --dry-run       # print the new rows only
 
 The run files behind docs/results are not committed; their plotted data are (<id>.csv: every
-evaluation of a run up to 1,000 of them). ``higbench.claims.committed`` rebuilds the runs from
+evaluation of a run up to 1,000 of them). ``higbench.figures.committed`` rebuilds the runs from
 those files and the claim's own measurement code runs on them, as a fresh build would on the run
 files. Where the plotted data count time only (oscillator runs evaluate by time), the update
 counts come from the row that was measured on the run files (stated in the row). A claim whose
@@ -19,10 +19,10 @@ import argparse
 import json
 from pathlib import Path
 
-from higbench.claims.committed import extend, remeasure, store
 from higbench.claims.paper import gn_small_tau_by_time
 from higbench.claims.report import write_report
 from higbench.figures import registry
+from higbench.figures.committed import extend, remeasure, store
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 # Claims whose measurement changed and which the plotted data hold entirely.

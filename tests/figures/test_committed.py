@@ -1,4 +1,4 @@
-"""A claim measured again from the committed results (``higbench.claims.committed``) gives what its
+"""A claim measured again from the committed results (``higbench.figures.committed``) gives what its
 measurement gave on the run files: the plotted data are the runs' evaluations. No training."""
 
 import json
@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from higbench.claims.committed import CommittedFigure, parse_overrides, remeasure
 from higbench.claims.report import sidecars
 from higbench.figures import registry
+from higbench.figures.committed import CommittedFigure, parse_overrides, remeasure
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 # Claims measured from the run files whose measurement this revision kept: the same text and verdict again.

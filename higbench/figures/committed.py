@@ -26,6 +26,7 @@ import pandas as pd
 import yaml
 
 from higbench.claims.rules import OPTIMIZER_NAMES, budget_of, finish, judge, num, rule_why
+from higbench.errors import dotted_get
 
 GROUPS = {"optimizer": "optimizer.name", "problem": "problem.name"}  # a config group's choice, as the config names it
 SYMBOL_KEYS = ("optimizer.lr", "optimizer.tau", "batch_size")
@@ -59,22 +60,28 @@ class CommittedRun:
     figure: str
     points: pd.DataFrame  # its rows of <id>.csv
     updates: int | None = None  # the updates it made, where a row measured from its run file stored them
+    resolved: dict = field(default_factory=dict)  # its config as the CLI composes its overrides (``resolve``)
     config: dict = field(init=False)
 
     def __post_init__(self):
         self.config = parse_overrides(self.entry["overrides"])
         searched = self.entry["sweep"].endswith("/search")
         self.job = SimpleNamespace(
-            figure=self.figure, sweep=self.entry["sweep"], seed=self.entry["seed"], search=[] if searched else None
+            figure=self.figure, sweep=self.entry["sweep"], seed=self.entry["seed"], search=[] if searched else None, parent=None
         )
         self.job.overrides = {k: v for k, v in self.config.items() if k != "init_from"}
 
+    meta: dict = field(init=False, default_factory=dict)  # the run file's metadata: not committed
     path = property(lambda self: self.entry["path"])
     seed = property(lambda self: self.entry["seed"])
     status = property(lambda self: self.entry["status"])
+    ok = property(lambda self: self.entry["status"] in ("completed", "diverged"))
 
     def cfg(self, key: str, default: Any = None) -> Any:
-        return self.config.get(key, default)
+        """An override's value, else the composed config's (the default the run had)."""
+        if key in self.config:
+            return self.config[key]
+        return dotted_get(self.resolved, key, default)
 
     @property
     def curves(self) -> pd.DataFrame:
@@ -123,6 +130,21 @@ class CommittedRun:
         return " ".join(parts)
 
 
+def resolve_configs(entries: list[dict]) -> list[dict]:
+    """Each run's config as the CLI composes its overrides (Hydra, ``higbench.jobs.compose``); {} for
+    a run whose overrides no longer compose (a key since removed): its overrides alone then."""
+    from higbench.jobs import compose, hydra_conf
+
+    out = []
+    with hydra_conf():
+        for e in entries:
+            try:
+                out.append(compose(tuple(o for o in e["overrides"] if not o.startswith("init_from="))))
+            except Exception:  # noqa: BLE001 - an old override: fall back to the overrides
+                out.append({})
+    return out
+
+
 def _match(value: Any, want: Any) -> bool:
     if isinstance(want, float) and isinstance(value, (int, float)):
         return math.isclose(value, want, rel_tol=1e-9)
@@ -164,13 +186,17 @@ class CommittedFigure:
         if "_cache" not in self.__dict__:
             by_run = dict(tuple(self.table.groupby("run"))) if "run" in self.table else {}
             empty = self.table.iloc[:0]
+            entries = self.info.get("runs", [])
+            resolved = resolve_configs(entries)
             runs = [
-                CommittedRun(e, self.info["id"], by_run.get(e["path"], empty), self.updates.get(e["path"]))
-                for e in self.info.get("runs", [])
+                CommittedRun(e, self.info["id"], by_run.get(e["path"], empty), self.updates.get(e["path"]), cfg)
+                for e, cfg in zip(entries, resolved)
             ]
             for r in runs:  # init_from names the parent's run file where it was run: the parent as listed here
                 parent = str(r.config.get("init_from") or "")
-                r.config["init_from"] = next((p.path for p in runs if parent.endswith("/" + p.path)), parent or None)
+                found = next((p for p in runs if parent.endswith("/" + p.path)), None)
+                r.config["init_from"] = found.path if found else (parent or None)
+                r.job.parent = found.job if found else None
             self.__dict__["_cache"] = runs
         return self.__dict__["_cache"]
 
