@@ -61,6 +61,7 @@ class CommittedRun:
     points: pd.DataFrame  # its rows of <id>.csv
     updates: int | None = None  # the updates it made, where a row measured from its run file stored them
     resolved: dict = field(default_factory=dict)  # its config as the CLI composes its overrides (``resolve``)
+    parent_end: float | None = None  # where its parent's plotted curve ends (the continued run is drawn after it)
     config: dict = field(init=False)
 
     def __post_init__(self):
@@ -90,13 +91,14 @@ class CommittedRun:
         rows = self.points[~self.points["panel"].str.startswith(TRAJECTORY)]
         frames = []
         for x_name, g in rows.groupby("x_name", sort=False):
-            wide = g.pivot_table(index="x", columns="y_name", values="y", aggfunc="first").sort_index()
+            # pivot, not pivot_table: a diverged run's NaN evaluation stays (its final loss is then inf, as in a build)
+            wide = g.drop_duplicates(["x", "y_name"]).pivot(index="x", columns="y_name", values="y").sort_index()
             frames.append(wide.rename_axis(None, axis=1).reset_index().rename(columns={"x": x_name}))
         if not frames:
             return pd.DataFrame({"wall_time": [], "step": [], "test_loss": []})
         c = max(frames, key=len)
-        if "wall_time" in c and "init_from" in self.config:
-            c["wall_time"] -= c["wall_time"].iloc[0]  # a continued run is drawn after its parent
+        if "wall_time" in c and self.config.get("init_from"):  # a continued run is drawn after its parent
+            c["wall_time"] -= self.parent_end if self.parent_end is not None else c["wall_time"].iloc[0]
         if "step" not in c and self.config.get("eval_unit") == "updates" and len(c) < 1000:
             c["step"] = np.arange(len(c)) * int(self.config.get("eval_every", 1))  # every evaluation plotted
         elif "step" not in c and self.updates and "wall_time" in c and len(c):
@@ -197,6 +199,11 @@ class CommittedFigure:
                 found = next((p for p in runs if parent.endswith("/" + p.path)), None)
                 r.config["init_from"] = found.path if found else (parent or None)
                 r.job.parent = found.job if found else None
+            for r in runs:
+                if r.job.parent is not None:
+                    parent = next(p for p in runs if p.job is r.job.parent)
+                    rows = parent.points[parent.points["x_name"] == "wall_time"]
+                    r.parent_end = float(rows["x"].max()) if len(rows) else None
             self.__dict__["_cache"] = runs
         return self.__dict__["_cache"]
 
@@ -252,5 +259,43 @@ def store(out_dir: Path, row: dict) -> Path:
     info["claims"] = [row if c["id"] == row["id"] else c for c in claims]
     if row["id"] not in {c["id"] for c in claims}:
         info["claims"].append(row)
+    path.write_text(json.dumps(info, indent=1, default=str) + "\n")
+    return path
+
+
+# Figures whose every panel is drawn from what the plotted data hold (curves; fig. 1's neurons, fig. 7's epoch axis,
+# the trajectories of 2a, 3a, 4a and the reference comparison need the run files).
+REDRAWABLE = ("fig2b", "fig2c", "fig3b", "fig3c", "fig4b", "fig4c", "fig5", "fig6", "fig8", "fig9", "fig10", "fig11")
+REDRAWABLE += ("fig12", "fig13")
+
+
+def redraw(out_dir: Path, fid: str) -> Path:
+    """Draw figure ``fid`` again from its committed data files, by this revision's plotting code: its
+    picture and its plotted data (<id>.png, .pdf, .csv); its data file keeps its runs and claims, and
+    records the drawing (revision, date, machine, load) beside when its runs were made."""
+    from higbench.figures import plot, registry
+    from higbench.figures.build import provenance
+    from higbench.figures.data import FigureData
+    from higbench.figures.spec import Preset
+
+    if fid not in REDRAWABLE:
+        raise ValueError(f"{fid}: drawn from what the run files hold, not the plotted data (redrawable: {REDRAWABLE})")
+    committed = CommittedFigure.load(out_dir, fid)
+
+    class Data(FigureData):
+        def runs(self, sweep=None, only_ok=True, **where):
+            return committed.runs(sweep, only_ok, **where)
+
+        def missing(self):
+            return []
+
+    figure = registry.figures()[fid]
+    data = Data(figure, Preset(committed.info["preset"]), Path(out_dir), committed.jobs, budgets=committed.budgets)
+    data.notes = list(committed.info.get("notes", []))
+    (figure.plot or plot.draw)(data)
+    data.write_data()
+    info = dict(committed.info)
+    info["made"] = {**info.get("made", {}), **provenance(), "redrawn": "from the committed plotted data"}
+    path = Path(out_dir) / f"{fid}.json"
     path.write_text(json.dumps(info, indent=1, default=str) + "\n")
     return path
