@@ -196,7 +196,7 @@ class CommittedFigure:
             ]
             for r in runs:  # init_from names the parent's run file where it was run: the parent as listed here
                 parent = str(r.config.get("init_from") or "")
-                found = next((p for p in runs if parent.endswith("/" + p.path)), None)
+                found = next((p for p in runs if parent == p.path or parent.endswith("/" + p.path)), None)
                 r.config["init_from"] = found.path if found else (parent or None)
                 r.job.parent = found.job if found else None
             for r in runs:
