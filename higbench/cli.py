@@ -38,6 +38,7 @@ import math
 import os
 import shlex
 import signal
+import stat
 import sys
 import time
 import traceback
@@ -81,6 +82,33 @@ def claim_dir(output_dir: Path, key: str) -> None:
         os.close(fd)
         return
     _CLAIMS.append(fd)
+
+
+def hold_log_files(output_dir: Path, key: str) -> None:
+    """Open the job's log file now, never through a link, and keep the descriptor.
+
+    Hydra's handler opens ``higbench.log`` by path at its first line (``delay: true``), so a
+    link planted in the directory after the checks would be followed. Opened here with
+    ``O_NOFOLLOW`` (and refused with a second hard link), the handler writes to this file only.
+    """
+    for owner in [logging.getLogger(), *[logging.getLogger(n) for n in list(logging.root.manager.loggerDict)]]:
+        for handler in getattr(owner, "handlers", []):
+            filename = getattr(handler, "baseFilename", None)
+            if not filename or handler.stream is not None or Path(filename).parent != Path(output_dir).absolute():
+                continue
+            flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK
+            try:
+                fd = os.open(filename, flags, 0o644)
+            except OSError as exc:
+                why = "is a symbolic link; higbench never writes through links" if os.path.islink(filename) else exc.strerror
+                raise ConfigError(key, str(output_dir), f"{filename} {why}") from None
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+                os.close(fd)
+                what = "is not a regular file" if not stat.S_ISREG(st.st_mode) else f"has {st.st_nlink} hard links"
+                raise ConfigError(key, str(output_dir), f"{filename} {what}; higbench writes only its own files")
+            os.set_blocking(fd, True)
+            handler.stream = os.fdopen(fd, "a", encoding=getattr(handler, "encoding", None) or "utf-8")
 
 
 def release_dirs() -> None:
@@ -161,11 +189,10 @@ def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: D
     if not plan.resume and not plan.restart and os.path.lexists(plan.run_path):  # made after the plan
         raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
     if plan.restart and not plan.resume:
-        aside = checkpoint.move_aside(plan.run_path, "empty")
-        print(
-            f"higbench: {plan.run_path} recorded nothing ({plan.restart}); moved to {aside.name}, starting the run again",
-            file=sys.stderr,
-        )
+        stopped = plan.restart.startswith("stopped")  # checkpoint.stopped_without_checkpoint
+        aside = checkpoint.move_aside(plan.run_path, "stopped" if stopped else "empty")
+        what = plan.restart if stopped else f"recorded nothing ({plan.restart})"
+        print(f"higbench: {plan.run_path} {what}; moved to {aside.name}, starting the run again", file=sys.stderr)
     if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
         aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
         print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
@@ -327,6 +354,7 @@ def _hydra_main(cfg: DictConfig) -> float:
     _SWEEP["jobs"] += 1
     made: list[Path] = []
     try:
+        hold_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
             return _report_kept_run(plan.run_path, plan.kept)
@@ -335,7 +363,12 @@ def _hydra_main(cfg: DictConfig) -> float:
     except ConfigError as exc:  # refused before its run file: nothing of it stays
         remove_job_files(made)
         remove_hydra_outputs(output_dir, None)
-        refuse(exc)
+        if not multirun:
+            refuse(exc)
+        # One job of a sweep refused: it fails alone (one line), the others run; the sweep says how many failed.
+        print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
+        _SWEEP["failed"] += 1
+        raise JobFailed(str(exc), written=False) from None
     except JobFailed as exc:
         if not exc.written:
             remove_job_files(made)
@@ -439,7 +472,7 @@ def _print_sweep_configs(argv: list[str]) -> None:
 
 # Hydra's flags (``higbench --hydra-help``): those taking a value, and those that do not.
 _VALUE_FLAGS = ("-c", "--cfg", "-p", "--package", "-cp", "--config-path", "-cn", "--config-name", "-cd", "--config-dir")
-_VALUE_FLAGS += ("--experimental-rerun",)
+_UNPICKLING_FLAGS = ("--experimental-rerun",)  # Hydra unpickles the file it names: never accepted
 _PLAIN_FLAGS = ("-h", "--help", "--hydra-help", "--version", "--resolve", "-r", "--run", "-m", "--multirun", "-sc")
 _PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
 _INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
@@ -461,6 +494,10 @@ def _refuse_early(argv: list[str]) -> ConfigError | None:
     """Command lines Hydra's argparse would answer with its usage text: one line instead."""
     for i, arg in enumerate(argv):
         name = arg.split("=", 1)[0]
+        if name in _UNPICKLING_FLAGS:  # the file would be unpickled (run as code) before any check
+            value = arg.partition("=")[2] or (argv[i + 1] if i + 1 < len(argv) else "<missing>")
+            why = "refused: Hydra would unpickle that file, which can run code; higbench reruns from resume=<run dir>"
+            return ConfigError(name, value, why)
         if arg.startswith("-") and name not in (*_VALUE_FLAGS, *_PLAIN_FLAGS):
             return ConfigError("option", arg, "not an option of higbench (higbench --help lists them)")
         if arg in _VALUE_FLAGS and (i + 1 == len(argv) or argv[i + 1].startswith("-")):

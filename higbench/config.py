@@ -73,7 +73,7 @@ COSMETIC_KEYS = keys_where(RunConfig, "identity", False)  # not part of a run's 
 RESUMABLE_KEYS = keys_where(RunConfig, "resumable")  # may change on resume=
 JOB_DIR_EXCLUDED_KEYS = keys_where(RunConfig, "in_job_dir", False, nested=True)  # conf/config.yaml exclude_keys
 SIZING_KEYS = keys_where(RunConfig, "sizing")  # what the pre-flight's network build depends on
-OPTIMIZER_META = ("name", "_target_", "kind")  # optimizer keys that are not constructor arguments
+OPTIMIZER_META = ("name", "_target_", "kind", "extra")  # optimizer keys that are not constructor arguments
 
 
 def optimizer_kwargs(opt_cfg: Any) -> dict:
@@ -151,6 +151,8 @@ def validate(cfg: DictConfig | dict) -> None:
         raise ConfigError("device", device, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)")
     if not (threads is None or threads == "auto" or (type(threads) is int and threads >= 1)):
         raise ConfigError("threads", threads, "must be auto, null or an integer >= 1")
+    if type(threads) is int and threads > max_threads():  # libgomp would fail to allocate them (a traceback)
+        raise ConfigError("threads", threads, f"must be at most {max_threads()} (8 per core of this machine, at least 256)")
     if not (resume is None or isinstance(resume, bool) or (isinstance(resume, str) and resume)):
         raise ConfigError("resume", resume, "must be null, true, false, or the path of a run directory or run file")
     if top["init_from"] == "":
@@ -162,7 +164,11 @@ def validate(cfg: DictConfig | dict) -> None:
         if isinstance(size, int) and top["batch_size"] > size:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
             raise ConfigError("batch_size", top["batch_size"], why)
-    check_optimizer(data.get("optimizer"))
+    check_optimizer(data.get("optimizer"), device)
+    if getattr(optimizer_class(data["optimizer"]), "needs_inverse_simulator", False):  # SIP
+        if not problem_class(data["problem"]).has_inverse_simulator():
+            name = data["optimizer"].get("name", data["optimizer"]["_target_"])
+            raise ConfigError("optimizer", name, f"problem {problem['name']} has no inverse simulator")
 
     if device.startswith("cuda"):
         import torch
@@ -171,6 +177,32 @@ def validate(cfg: DictConfig | dict) -> None:
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
     if top["init_from"]:
         check_init_from_file(top["init_from"], problem["name"])
+
+
+def max_threads() -> int:
+    """The most threads a run may ask for: beyond a few per core they only oversubscribe."""
+    import os
+
+    return max(256, 8 * (os.cpu_count() or 1))
+
+
+BOOL_KEYS = tuple(f.name for f in dataclasses.fields(RunConfig) if f.type in (bool, "bool"))
+
+
+def check_bool_overrides(overrides: list[str]) -> None:
+    """``progress=2``: OmegaConf would take any number for true; a switch is true or false."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    for line in overrides:
+        key = line.partition("=")[0].lstrip("+~")
+        if key not in BOOL_KEYS or "=" not in line:
+            continue
+        try:
+            given = OverridesParser.create().parse_override(line).value()
+        except Exception:  # noqa: BLE001 - Hydra's own composition says what does not parse
+            continue
+        if not isinstance(given, bool):
+            raise ConfigError(key, line.partition("=")[2], "must be true or false")
 
 
 def problem_class(problem: dict) -> type:
@@ -228,7 +260,12 @@ def optimizer_class(opt: Any) -> type:
     target = opt.get("_target_")
     try:
         cls = locate(target)
-    except (ImportError, AttributeError) as exc:
+    except ImportError as exc:
+        if opt.get("extra"):  # a third-party optimizer: its YAML names the optional extra that installs it
+            why = f'{target} comes with the {opt["extra"]} extra: pip install -e ".[{opt["extra"]}]"'
+            raise ConfigError("optimizer", opt.get("name", target), why) from None
+        raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
+    except AttributeError as exc:
         raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
     if not (isinstance(cls, type) and issubclass(cls, torch.optim.Optimizer)):
         raise ConfigError("optimizer._target_", target, "is not a torch.optim.Optimizer subclass")
@@ -251,7 +288,7 @@ def _check_number_types(cls: type, kwargs: dict) -> None:
             raise ConfigError(f"optimizer.{key}", given, f"must be a number (the default is {default})")
 
 
-def check_optimizer(opt: Any) -> None:
+def check_optimizer(opt: Any, device: str = "cpu") -> None:
     """Build the optimizer on a dummy parameter: its constructor checks its own arguments.
 
     When it refuses, each argument is left out in turn to find the one it refuses (a pair
@@ -263,9 +300,15 @@ def check_optimizer(opt: Any) -> None:
     kwargs = optimizer_kwargs(opt)
     _check_number_types(cls, kwargs)
 
+    trial_step = cls.__module__.startswith("torch.optim")  # ours (GN/HIG/LM) need a problem to step
+    trial_device = device if device.startswith("cuda") and torch.cuda.is_available() else "cpu"  # capturable: CUDA only
+
     def refusal(args: dict) -> Exception | None:
         try:
-            cls([torch.nn.Parameter(torch.zeros(1))], **args)
+            param = torch.nn.Parameter(torch.ones(2, device=trial_device))
+            optimizer = cls([param], **args)
+            if trial_step:  # some arguments fail only when used (L-BFGS history_size=0, Adam capturable)
+                optimizer.step(lambda: _dummy_loss(optimizer, param))
         except Exception as exc:  # noqa: BLE001 - ValueError, TypeError, IndexError: whatever the class raises
             return exc
         return None
@@ -281,6 +324,17 @@ def check_optimizer(opt: Any) -> None:
     shown = opt[culprit]
     why = why.split(": ", 1)[1] if why.startswith(f"{culprit}=") and ": " in why else why  # "lr=-1: must be > 0"
     raise ConfigError(f"optimizer.{culprit}", shown, f"refused by {target}: {why}")
+
+
+def _dummy_loss(optimizer, param):
+    """The closure of ``check_optimizer``'s trial step: a quadratic on the dummy parameter."""
+    import torch
+
+    with torch.enable_grad():
+        optimizer.zero_grad()
+        loss = (param**2).sum()
+        loss.backward()
+    return loss
 
 
 def check_init_from_file(path: str, problem_name: str) -> None:

@@ -38,6 +38,7 @@ from omegaconf.errors import OmegaConfBaseException, ValidationError
 
 from higbench.config import (
     SIZING_KEYS,
+    check_bool_overrides,
     check_hydra_references,
     config_dir,
     constructor_args,
@@ -215,6 +216,22 @@ def check_stored_targets(stored: dict, composed: dict, resume_value) -> None:
             raise ConfigError("resume", resume_value, why)
 
 
+PATH_KEYS = ("init_from",)  # config keys naming a file higbench opens
+
+
+def check_stored_paths(stored: dict, overrides: list[str], resume_value) -> None:
+    """A stored config (someone else's file) never makes higbench open a file: a path it
+    names must be given again on this command line, where the user names what is opened."""
+    for key in PATH_KEYS:
+        path = stored.get(key)
+        if path and given_value(overrides, key) != str(path):
+            why = (
+                f"its stored config names {key}={path}; a stored config never makes higbench open a file: "
+                f"give {key}={path} on the command line to start it again from that file"
+            )
+            raise ConfigError("resume", resume_value, why)
+
+
 def _targets(node, prefix: str = ""):
     if isinstance(node, dict):
         for k, v in node.items():
@@ -253,6 +270,21 @@ def check_no_links(out: Path, key: str) -> None:
             raise ConfigError(key, str(out), why)
 
 
+def check_tensorboard_dir(task: dict, out: Path, key: str) -> None:
+    """``tensorboard=true``: its directory in the run dir is absent or a real directory (a link
+    would take the event files elsewhere; a file or a dangling link would fail mid-run)."""
+    from higbench.runner.tensorboard import TENSORBOARD_DIR
+
+    path = Path(out) / TENSORBOARD_DIR
+    if not task.get("tensorboard") or not os.path.lexists(path):
+        return
+    if path.is_symlink():
+        why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
+        raise ConfigError(key, str(out), why)
+    if not path.is_dir():
+        raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
+
+
 def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool) -> RunPlan:
     """The one decision about a job's directory (ConfigError when it must not run)."""
     from higbench.runner import checkpoint
@@ -264,10 +296,12 @@ def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bo
         check_output_dir(run_path.parent, "resume")
         check_no_links(run_path.parent, "resume")
         merged, continues, empty = resume_plan(task, run_path, overrides, multirun=multirun)
+        check_tensorboard_dir(merged, run_path.parent, "resume")
         return RunPlan(merged, run_path, resume=continues, restart=empty)
     run_path = output_dir / RUN_FILE
     check_output_dir(output_dir, "hydra.run.dir", RUN_FILE)
     check_no_links(output_dir, "hydra.run.dir")
+    check_tensorboard_dir(task, output_dir, "hydra.run.dir")
     if not os.path.lexists(run_path):
         return RunPlan(task, run_path)
     empty = checkpoint.recorded_nothing(run_path)
@@ -295,6 +329,10 @@ def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: b
 
     if multirun and not run_path.exists():
         return {**task, "resume": None}, False, None
+    if multirun:  # a job stopped before its first checkpoint (killed with its sweep): run it again
+        lost = checkpoint.stopped_without_checkpoint(run_path)
+        if lost:
+            return {**task, "resume": None}, False, lost
     empty = checkpoint.recorded_nothing(run_path)
     if empty:
         stored = task if multirun else _parse_stored(_stored_config(run_path, task["resume"]), task["resume"])
@@ -303,7 +341,11 @@ def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: b
         stored = _parse_stored(stored_yaml, task["resume"])
     check_stored_targets(stored, task, task["resume"])  # before anything of it is built
     merged = checkpoint.resume_config(stored, task, overrides)
-    validate(merged)
+    if empty:  # started again from its stored config: it would read the file its init_from names
+        check_stored_paths(stored, overrides, task["resume"])
+        validate(merged)
+    else:  # continued: the weights are the checkpoint's; the stored init_from is a record, never opened
+        validate({**merged, "init_from": None})
     if not empty:
         checkpoint.check_owner(checkpoint.load(run_path), run_path, task["resume"])  # readable, of this run
     return merged, not empty, empty
@@ -361,6 +403,7 @@ def _checked_task(config: DictConfig) -> dict:
     with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
         HydraConfig.instance().set_config(config)
     check_hydra_references(config)
+    check_bool_overrides(list(config.hydra.overrides.task))
     task = to_plain(config)
     if not task.get("resume"):
         validate(task)
@@ -389,7 +432,8 @@ def check_run(config: DictConfig) -> RunPlan:
     announce(task.get("progress", True), start_text(plan.start_config()) + " - checking", transient=True)
     from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
 
-    preflight(OmegaConf.create({**plan.task, "init_from": None} if plan.resume else plan.task))  # weights: the checkpoint's
+    task = {**plan.task, "init_from": None} if plan.resume else plan.task  # weights: the checkpoint's
+    preflight(OmegaConf.create(task), resume_from=plan.run_path if plan.resume else None)
     return plan
 
 

@@ -52,7 +52,7 @@ def test_it_is_two_files_outside_higbench():
     assert not any("heat" in p.name for p in package.rglob("*")), "the test problem leaked into higbench/"
 
 
-@pytest.mark.parametrize("optimizer", ["hig", "adam"])
+@pytest.mark.parametrize("optimizer", ["hig", "adam", "sip"])  # sip: through its regularised inverse simulator
 def test_the_custom_problem_trains_through_the_cli(heat_cli, tmp_path, optimizer):
     proc = heat_cli(f"optimizer={optimizer}")
     assert proc.returncode == 0, proc.stderr

@@ -29,6 +29,7 @@ class Heat(FixedDataProblem):
         steps: int = value(ge=1)
         alpha: float = value(gt=0, le=0.5)  # explicit Euler is stable up to 1/2
         hidden: list[int] = value(ge=1)
+        inverse_regularization: float = value(1e-3, gt=0)  # lambda of the inverse simulator (SIP)
 
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
@@ -52,3 +53,23 @@ class Heat(FixedDataProblem):
 
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return 0.5 * ((y - targets) ** 2).sum(dim=1)
+
+    def inverse_simulator(self, inputs, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """A regularised local inverse (for optimizer=sip): diffusion damps the high modes by
+        factors down to (1 - 4 alpha)^steps, so an exact inverse would amplify noise as much.
+        Tikhonov towards the current guess u0 instead, with lambda = inverse_regularization:
+
+            u = argmin |A u - y*|^2 + lambda |u - u0|^2 = u0 + (A^T A + lambda I)^-1 A^T (y* - A u0)
+
+        (A: the linear diffusion operator of ``physics``). Modes with singular value well above
+        sqrt(lambda) are inverted exactly; the others stay near u0.
+        """
+        if getattr(self, "_inverse_parts", None) is None:
+            eye = torch.eye(self.cfg.points, dtype=torch.float64)
+            a = self.physics(None, eye).T  # physics is linear: row i of physics(I) is A e_i
+            normal = a.T @ a + self.cfg.inverse_regularization * eye
+            self._inverse_parts = (a.to(self.device), torch.linalg.cholesky(normal).to(self.device))
+        a, factor = self._inverse_parts
+        u0 = u0.to(torch.float64)
+        residual = y_target.to(torch.float64) - u0 @ a.T
+        return (u0 + torch.cholesky_solve(a.T @ residual.T, factor).T).to(y_target.dtype)

@@ -32,6 +32,7 @@ Examples (``python scripts/bench_step.py`` and ``make bench`` are the same entry
 
     python -m higbench.bench.step --problem oscillator --optimizer adam hig --batch-size 128 512
     python -m higbench.bench.step --problem poisson --optimizer hig --batch-size 16 --jacobian structured naive --solver gram svd
+    python -m higbench.bench.step --problem poisson --optimizer hig --batch-size 64 --solver gram krylov  # exact vs Lanczos
     python -m higbench.bench.step --paper-tables --out outputs/bench      # tables 3-5 (+ naive path)
     python -m higbench.bench.step --paper-tables --device cuda --out docs/results/probes/gpu
 
@@ -74,7 +75,7 @@ class Config:
     optimizer: str
     batch_size: int
     jacobian: str = "-"  # structured | naive for GN/HIG, "-" for first-order optimizers
-    solver: str = "-"  # auto | gram | svd for GN/HIG
+    solver: str = "-"  # auto | gram | svd | krylov for GN/HIG
     overrides: tuple[str, ...] = ()
 
     @property
@@ -488,7 +489,7 @@ def main(argv=None) -> None:
         help="optimizer/batch-size pairs instead of --optimizer x --batch-size (e.g. adam:256 hig:16)",
     )
     parser.add_argument("--jacobian", nargs="+", default=["structured"], choices=["structured", "naive"])
-    parser.add_argument("--solver", nargs="+", default=["auto"], choices=["auto", "gram", "svd"])
+    parser.add_argument("--solver", nargs="+", default=["auto"], choices=["auto", "gram", "svd", "krylov"])
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra Hydra overrides for every configuration")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--warmup", type=int, default=2)

@@ -49,6 +49,9 @@ class LossClosure:
     moves (the runner sets it, so a diverging step is recorded and never applied).
     outputs_fn: y computed some other way (a problem with its own ``outputs``); the
     Jacobian-power optimizers then differentiate through it generically.
+    inverse: the problem's inverse simulator with this batch's inputs bound,
+    ``inverse(y_target, u0) -> u`` (``Problem.inverse_simulator``); None where the problem has
+    none. The SIP optimizer (``higbench.optim.sip``) needs it; the others ignore it.
 
     Calling it returns the objective with its gradients set, as torch.optim expects (a line
     search compares these values). ``first_mean`` keeps the batch-mean loss of the first
@@ -64,6 +67,7 @@ class LossClosure:
     reduction: str = "mean"
     guard: bool = False
     outputs_fn: Callable[[], torch.Tensor] | None = None
+    inverse: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None
     derivative_s: float = field(default=0.0, init=False)
     calls: int = field(default=0, init=False)
     first_mean: torch.Tensor | None = field(default=None, init=False)

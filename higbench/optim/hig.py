@@ -34,6 +34,7 @@ from higbench.dtypes import DTYPES
 from higbench.optim.closure import LossClosure, reduce_loss
 from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, jacobian_power
 from higbench.optim.jacobians import per_sample_jacobian
+from higbench.optim.krylov import krylov_direction
 from higbench.optim.solver_choice import choose_solver
 from higbench.optim.structured import (
     GraphJacobian,
@@ -44,7 +45,7 @@ from higbench.optim.structured import (
 )
 from higbench.optim.threads import check_threads, update_threads
 
-SOLVERS = ("auto", "gram", "svd")
+SOLVERS = ("auto", "gram", "svd", "krylov")
 JACOBIANS = ("structured", "naive")
 
 
@@ -58,14 +59,19 @@ class JacobianPower(torch.optim.Optimizer):
         beta: exponent of the prefactor max(s)^beta (paper appendix C).
         tau: truncation; singular values s < tau*max(s) (relative) or s < tau (absolute) dropped.
         truncation: "relative" (default, as the reference code) or "absolute".
-        solver: "gram" (eigh of J J^T + one J^T product), "svd" (SVD of J) or "auto"
-            (gram for wide J unless tau is too small for it in float64; svd for tall J).
+        solver: "gram" (eigh of J J^T + one J^T product), "svd" (SVD of J), "auto"
+            (gram for wide J unless tau is too small for it in float64; svd for tall J) or
+            "krylov" (Lanczos on products with J J^T, K never formed: ``higbench.optim.krylov``;
+            approximate unless krylov_steps reaches the rows of J).
         precision: dtype of the inversion ("float64" by default; float32 cannot resolve
             tau below ~1e-3 on the Gram route).
         jacobian: "structured" (solver and network differentiated apart, see
             ``higbench.optim.structured``) or "naive" (torch.func Jacobian through
             network and solver per sample, J always materialised; the reference). Used by
             ``step_structured`` (which the runner calls); ``step`` follows its closure.
+        krylov_steps: solver="krylov": most Lanczos steps per update (memory rows x steps).
+        krylov_tol: solver="krylov": stop early once the estimated relative error of the
+            direction is below it (0: always take krylov_steps).
         threads: torch's threads during an update (``higbench.optim.threads``): "auto"
             (default) runs updates of fewer than 1,536 Gram rows (b·|y|) on one thread,
             which is faster for them even on an idle machine and avoids the collapse of
@@ -84,6 +90,8 @@ class JacobianPower(torch.optim.Optimizer):
         solver: str = "auto",
         precision: str | torch.dtype = "float64",
         jacobian: str = "structured",
+        krylov_steps: int = 200,
+        krylov_tol: float = 0.0,
         threads: int | str | None = "auto",
     ):
         check_threads(threads)
@@ -101,12 +109,25 @@ class JacobianPower(torch.optim.Optimizer):
             raise ValueError(f"solver={solver!r}: expected one of {SOLVERS}")
         if jacobian not in JACOBIANS:
             raise ValueError(f"jacobian={jacobian!r}: expected one of {JACOBIANS}")
+        if isinstance(krylov_steps, bool) or int(krylov_steps) != krylov_steps or krylov_steps < 1:
+            raise ValueError(f"krylov_steps={krylov_steps}: must be an integer >= 1")
+        if not 0 <= krylov_tol < 1:
+            raise ValueError(f"krylov_tol={krylov_tol}: must be a number in [0, 1)")
         if isinstance(precision, str):
             if precision not in DTYPES:
                 raise ValueError(f"precision={precision!r}: expected one of {tuple(DTYPES)}")
             precision = DTYPES[precision]
         defaults = dict(
-            lr=lr, kappa=kappa, beta=beta, tau=tau, truncation=truncation, solver=solver, precision=precision, jacobian=jacobian
+            lr=lr,
+            kappa=kappa,
+            beta=beta,
+            tau=tau,
+            truncation=truncation,
+            solver=solver,
+            precision=precision,
+            jacobian=jacobian,
+            krylov_steps=int(krylov_steps),
+            krylov_tol=float(krylov_tol),
         )
         super().__init__(params, defaults)
         if len(self.param_groups) != 1:
@@ -119,7 +140,8 @@ class JacobianPower(torch.optim.Optimizer):
         self.last_timings: dict[str, float] = {}
         self.last_finite: bool = True
         self.last_reason: str = ""
-        # The spectrum of the last inversion: sv_max, sv_min_kept, sv_dropped, singular_values.
+        # The spectrum of the last inversion: sv_max, sv_min_kept, sv_dropped, singular_values;
+        # on the Krylov route also step_error (estimated relative error of the direction).
         self.last_spectrum: dict = {}
         # b when the objective is the batch mean, 1 for the sum (Levenberg-Marquardt models the sum).
         self.samples_averaged: int = 1
@@ -143,15 +165,18 @@ class JacobianPower(torch.optim.Optimizer):
         return dict(kappa=g["kappa"], beta=g["beta"], tau=g["tau"], truncation=g["truncation"])
 
     def resolved_solver(self, rows: int | None = None, n_params: int | None = None) -> str:
-        """``gram`` or ``svd`` for a J of rows x n_params (``higbench.optim.solver_choice.choose_solver``)."""
+        """``gram``, ``svd`` or ``krylov`` for a J of rows x n_params (``higbench.optim.solver_choice.choose_solver``)."""
         g = self.group
         return choose_solver(g["solver"], rows, n_params, g["tau"], g["precision"], g["truncation"])
 
     def _derivative_tail(self, J: torch.Tensor | StructuredJacobian):
-        """(route, J, K): the end of the derivative phase, K = J J^T for the Gram route, else J as a matrix."""
+        """(route, J, K): the end of the derivative phase, K = J J^T for the Gram route, J
+        as it is for the Krylov route (products only), else J as a matrix."""
         precision = self.group["precision"]
         if isinstance(J, StructuredJacobian):
             route = self.resolved_solver(J.rows, J.n_params)
+            if route == "krylov":
+                return route, J, None
             return (route, J, J.gram()) if route == "gram" else (route, J.matrix().to(precision), None)
         J = J.to(precision)
         route = self.resolved_solver(*J.shape)
@@ -159,6 +184,8 @@ class JacobianPower(torch.optim.Optimizer):
 
     def _inversion(self, route: str, J, K, grad_y: torch.Tensor) -> torch.Tensor:
         g = grad_y.reshape(-1)
+        if route == "krylov":
+            return self._krylov(J, g)
         if route == "gram":
             try:
                 n_params = J.n_params if isinstance(J, StructuredJacobian) else J.shape[1]
@@ -171,6 +198,21 @@ class JacobianPower(torch.optim.Optimizer):
                 warnings.warn(f"Gram route failed ({exc}); retrying with the SVD of J", RuntimeWarning, stacklevel=2)
                 J = J.matrix().to(self.group["precision"]) if isinstance(J, StructuredJacobian) else J
         return jacobian_power(J, g.to(J.dtype), **self._opts(), on_spectrum=self._record_spectrum)
+
+    def _krylov(self, J, g: torch.Tensor) -> torch.Tensor:
+        """The direction from Lanczos on J J^T; its estimated relative error joins ``last_spectrum``."""
+        group = self.group
+        d, result = krylov_direction(
+            J,
+            g.to(group["precision"]),
+            **self._opts(),
+            steps=group["krylov_steps"],
+            tol=group["krylov_tol"],
+            on_spectrum=self._record_spectrum,
+        )
+        self.last_spectrum["step_error"] = result.step_error
+        self.last_spectrum["krylov_steps"] = result.steps
+        return d
 
     def direction(self, J: torch.Tensor | StructuredJacobian, grad_y: torch.Tensor) -> torch.Tensor:
         """max(s)^beta V diag(s^kappa) U^T g in ``precision``.
@@ -223,7 +265,8 @@ class JacobianPower(torch.optim.Optimizer):
         accepts or rejects its step with it).
         """
         route, J, K = self._derivative_tail(J)
-        if not torch.isfinite(K if K is not None else J).all():
+        # (The Krylov route never forms K or J: a non-finite J shows in the direction.)
+        if route != "krylov" and not torch.isfinite(K if K is not None else J).all():
             return self._refuse("non-finite Jacobian")
         self._sync()
         t1 = time.perf_counter()

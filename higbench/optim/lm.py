@@ -49,6 +49,8 @@ class LevenbergMarquardt(JacobianPower):
             raise ValueError(f"damping={damping}: must be a number > 0")
         if int(max_tries) != max_tries or max_tries < 1:
             raise ValueError(f"max_tries={max_tries}: must be an integer >= 1")
+        if kwargs.get("solver") == "krylov":  # its trials reuse one eigen-decomposition of K
+            raise ValueError("solver='krylov': Levenberg-Marquardt needs gram, svd or auto")
         super().__init__(params, lr=lr, kappa=-1.0, beta=0.0, **kwargs)
         self.group.update(damping=damping, max_tries=int(max_tries), lam=None, nu=2.0)
 

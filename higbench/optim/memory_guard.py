@@ -55,6 +55,8 @@ def estimate_bytes(
     jacobian: str = "naive",
     tau: float = 1e-6,
     truncation: str = "relative",
+    krylov_steps: int = 200,
+    factor_values: int | None = None,
 ) -> Estimate:
     """Peak bytes of one Jacobian-power update.
 
@@ -65,11 +67,17 @@ def estimate_bytes(
     then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
+    krylov_steps: the Lanczos basis of the krylov route (rows x steps; no K, no J formed).
+    factor_values: values per row of J's per-layer factors where the structured route holds
+        those instead of J (MLPs, ``structured.mlp_factor_values``); counted on the krylov
+        route, which never forms J (the others do, or K, which dominates).
     """
     rows, p = batch_size * output_size, n_params
     e, e2 = _itemsize(dtype), _itemsize(precision)
     solver = choose_solver(solver, rows, p, tau, precision, truncation)
-    if jacobian == "structured":
+    if jacobian == "structured" and solver == "krylov" and factor_values is not None:
+        parts = {"jacobian_factors": rows * factor_values * e2, "jacobian_cast": 0}
+    elif jacobian == "structured":
         parts = {"jacobian": rows * p * e2, "jacobian_cast": 0}
     else:
         parts = {
@@ -77,7 +85,10 @@ def estimate_bytes(
             "jacobian": 2 * rows * p * e,
             "jacobian_cast": rows * p * e2 if e2 != e else 0,
         }
-    if solver == "gram":
+    if solver == "krylov":
+        # the Lanczos basis, its T_m eigenvectors (steps^2) and a few vectors of rows
+        parts["krylov_basis"] = (rows * (krylov_steps + 4) + krylov_steps * krylov_steps) * e2
+    elif solver == "gram":
         # K = J J^T, eigenvectors of K, LAPACK syevd workspace (~1 + 6n + 2n^2 doubles)
         parts["gram"] = rows * rows * e2
         parts["eigh"] = (3 * rows * rows + 6 * rows) * e2
@@ -88,7 +99,7 @@ def estimate_bytes(
         parts["svd_input"] = rows * p * e2
         parts["svd_factors"] = (rows * k + k * p) * e2
         parts["svd_work"] = (4 * k * k + max(rows, p) * k) * e2
-    return Estimate(sum(parts.values()), parts, solver, rows if solver == "gram" else min(rows, p))
+    return Estimate(sum(parts.values()), parts, solver, rows if solver in ("gram", "krylov") else min(rows, p))
 
 
 def available_bytes(device: str = "cpu") -> tuple[int, str]:
@@ -114,9 +125,17 @@ def largest_batch(
     jacobian: str = "naive",
     tau: float = 1e-6,
     truncation: str = "relative",
+    krylov_steps: int = 200,
+    factor_values: int | None = None,
 ) -> int:
     """Largest batch size whose estimate fits in ``limit`` bytes (0 if not even 1 fits)."""
-    route = {"jacobian": jacobian, "tau": tau, "truncation": truncation}
+    route = {
+        "jacobian": jacobian,
+        "tau": tau,
+        "truncation": truncation,
+        "krylov_steps": krylov_steps,
+        "factor_values": factor_values,
+    }
     if estimate_bytes(1, output_size, n_params, dtype, solver, precision, **route).total > limit:
         return 0
     lo, hi = 1, upper
@@ -141,9 +160,17 @@ def check(
     jacobian: str = "naive",
     tau: float = 1e-6,
     truncation: str = "relative",
+    krylov_steps: int = 200,
+    factor_values: int | None = None,
 ) -> Estimate:
     """Raise ConfigError if the step for ``batch_size`` does not fit; return the estimate."""
-    route = {"jacobian": jacobian, "tau": tau, "truncation": truncation}
+    route = {
+        "jacobian": jacobian,
+        "tau": tau,
+        "truncation": truncation,
+        "krylov_steps": krylov_steps,
+        "factor_values": factor_values,
+    }
     est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, **route)
     avail, source = available_bytes(device)
     if limit_mb is not None and limit_mb * 2**20 < avail:

@@ -35,16 +35,18 @@ def choose_solver(
     precision="float64",
     truncation: str = "relative",
 ) -> str:
-    """``gram`` or ``svd`` for a J of ``rows`` x ``n_params``.
+    """``gram``, ``svd`` or ``krylov`` for a J of ``rows`` x ``n_params``.
 
-    An explicit ``gram``/``svd`` is kept. ``auto``: the thin SVD of J when J is tall (rows >=
-    params, e.g. the toy's 512 x 30: cheaper than eigh of the rows x rows Gram matrix) or when
-    tau is too small for the Gram route in ``precision``; the Gram route otherwise.
+    An explicit ``gram``/``svd``/``krylov`` is kept (``krylov``: Lanczos on products with
+    J J^T, ``higbench.optim.krylov``; never chosen by ``auto``, being approximate).
+    ``auto``: the thin SVD of J when J is tall (rows >= params, e.g. the toy's 512 x 30:
+    cheaper than eigh of the rows x rows Gram matrix) or when tau is too small for the Gram
+    route in ``precision``; the Gram route otherwise.
     """
-    if solver in ("gram", "svd"):
+    if solver in ("gram", "svd", "krylov"):
         return solver
     if solver != "auto":
-        raise ValueError(f"solver={solver!r}: expected auto, gram or svd")
+        raise ValueError(f"solver={solver!r}: expected auto, gram, svd or krylov")
     if rows is not None and n_params is not None and rows >= n_params:
         return "svd"
     return "gram" if gram_is_accurate(tau, precision, truncation) else "svd"

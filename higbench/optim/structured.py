@@ -11,8 +11,8 @@ independent, so
 * the network part never needs du_i/dtheta (|u| rows per sample, 384 for the dipole): only
   the |y| rows of A_i @ du_i/dtheta, which are vector-Jacobian products of the network.
 
-Two network routes, both exposing the same three operations (``gram`` K = J J^T,
-``matrix`` J itself, ``transpose_apply`` J^T c):
+Two network routes, both exposing the same four operations (``gram`` K = J J^T,
+``matrix`` J itself, ``transpose_apply`` J^T c, ``apply`` J v):
 
 * ``MLPJacobian`` (stacks of ``nn.Linear`` and elementwise activations): the row of J for
   (sample i, output k) and layer l's weight is the outer product D_l[i,k] (x) h_{l-1,i} of
@@ -21,7 +21,8 @@ Two network routes, both exposing the same three operations (``gram`` K = J J^T,
       K = sum_l (D_l D_l^T) o (H_{l-1} H_{l-1}^T + 1)   (o: Hadamard, the "+1" is the bias)
 
   (an empirical NTK) without ever forming J; J^T c is one backward sweep of the
-  signals weighted by c. Memory: rows x rows for K plus rows x width per layer.
+  signals weighted by c, and J v one forward sweep (the Krylov route's products K v =
+  J (J^T v)). Memory: rows x rows for K plus rows x width per layer.
 * ``GenericJacobian`` (any network, e.g. the dipole CNN): J = vmap over samples of jacrev of
   theta -> A_i @ f(theta, z_i) (torch.func), materialised (rows x |theta|).
 
@@ -174,6 +175,14 @@ class StructuredJacobian:
         """J^T c for c (rows,), flat (|theta|,)."""
         raise NotImplementedError
 
+    def apply(self, v: torch.Tensor) -> torch.Tensor:
+        """J v for v (|theta|,), flat (rows,)."""
+        raise NotImplementedError
+
+    def gram_apply(self, v: torch.Tensor) -> torch.Tensor:
+        """K v = J (J^T v) for v (rows,), K never formed (the Krylov route's product)."""
+        return self.apply(self.transpose_apply(v))
+
 
 class GenericJacobian(StructuredJacobian):
     """Materialised J = blockdiag(A_i) N for any network, through torch.func (per-sample VJPs)."""
@@ -207,6 +216,9 @@ class GenericJacobian(StructuredJacobian):
 
     def transpose_apply(self, c: torch.Tensor) -> torch.Tensor:
         return self.J.T @ c.to(self.J.dtype)
+
+    def apply(self, v: torch.Tensor) -> torch.Tensor:
+        return self.J @ v.to(self.J.dtype)
 
 
 # Elementwise activations with their derivative from (input, output).
@@ -283,7 +295,7 @@ class MLPJacobian(StructuredJacobian):
                     S = S * item[:, None, :]  # type: ignore[index]
                 else:
                     layer, h_in = item  # type: ignore[misc]
-                    self.layers.append((layer, S, h_in))
+                    self.layers.append((layer, S.contiguous(), h_in))  # contiguous: fast batched products
                     S = S @ layer.weight.to(dtype)
             self.layers.reverse()
 
@@ -313,15 +325,55 @@ class MLPJacobian(StructuredJacobian):
         out = torch.empty(self.n_params, dtype=self.dtype, device=c.device)
         c = c.to(self.dtype).reshape(self.b, self.m)
         for layer, D, H in self.layers:
-            e = torch.einsum("bmo,bm->bo", D, c)  # (b, out): sum_k c_ik D_l[i, k]
+            e = torch.bmm(c[:, None, :], D)[:, 0, :]  # (b, out): sum_k c_ik D_l[i, k]
             out[self._slice(layer.weight)] = (e.T @ H).reshape(-1)
             if layer.bias is not None:
                 out[self._slice(layer.bias)] = e.sum(0)
         return out
 
+    def apply(self, v: torch.Tensor) -> torch.Tensor:
+        # Row (i, k) of layer l's block is D_l[i,k] (x) [h_{l-1,i}, 1]: its product with
+        # (V_l, v_bias) is D_l[i,k] . (V_l h_{l-1,i} + v_bias), one sweep over the layers.
+        v = v.to(self.dtype)
+        out = torch.zeros(self.b, self.m, dtype=self.dtype, device=v.device)
+        for layer, D, H in self.layers:
+            z = H @ v[self._slice(layer.weight)].view(layer.weight.shape).T  # (b, out)
+            if layer.bias is not None:
+                z += v[self._slice(layer.bias)]
+            out += torch.bmm(D, z[:, :, None])[:, :, 0]
+        return out.reshape(-1)
+
+    def gram_apply(self, v: torch.Tensor) -> torch.Tensor:
+        # Layer l's part of K is (D_l D_l^T) o G_l with G_l = H_{l-1} H_{l-1}^T + 1 (b x b):
+        # K v = sum_l D_l . (G_l (v . D_l)), never through parameter space. All layers' D
+        # side by side (one copy, made once) so each sweep is one batched product: the
+        # sweeps are memory-bound, this reads the factors twice per product.
+        if not hasattr(self, "_sweep"):
+            D = torch.cat([D for _, D, _ in self.layers], dim=2)  # (b, m, sum of widths)
+            G = [(H @ H.T + (1.0 if layer.bias is not None else 0.0)) for layer, _, H in self.layers]
+            self._sweep = D, G, [D_l.shape[2] for _, D_l, _ in self.layers]
+        D, G, widths = self._sweep
+        e = torch.bmm(v.to(self.dtype).reshape(self.b, 1, self.m), D)[:, 0, :]  # (b, sum of widths)
+        z = torch.cat([G_l @ e_l for G_l, e_l in zip(G, e.split(widths, dim=1))], dim=1)
+        return torch.bmm(D, z[:, :, None]).reshape(-1)
+
     def _slice(self, p: torch.Tensor) -> slice:
         start = self.offsets[self.position[id(p)]]
         return slice(start, start + p.numel())
+
+
+def mlp_factor_values(model: nn.Module) -> int | None:
+    """Values per row of J that ``MLPJacobian`` holds for the Krylov route (None: not an MLP).
+
+    Per row the back-propagated signals of every layer, twice (per layer and side by side
+    for ``gram_apply``), plus the layer inputs, counted per row (an upper bound: they are
+    per sample).
+    """
+    layers = mlp_layers(model)
+    if layers is None:
+        return None
+    linears = [m for m in layers if isinstance(m, nn.Linear)]
+    return sum(2 * m.out_features + m.in_features for m in linears)
 
 
 def network_jacobian(
@@ -366,3 +418,4 @@ class GraphJacobian(StructuredJacobian):
     gram = GenericJacobian.gram
     matrix = GenericJacobian.matrix
     transpose_apply = GenericJacobian.transpose_apply
+    apply = GenericJacobian.apply

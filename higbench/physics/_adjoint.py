@@ -15,12 +15,16 @@ style (``setup_context`` + ``vmap`` static methods), so that
 The kernels always compute in float64 (complex128): the result is cast back to the caller's
 dtype, so a float32 run gets float32 outputs and gradients that are float64-accurate.
 
-Only CPU tensors are handled here; the problems fall back to the reference torch solvers
-on other devices (``higbench.problems``: ``problem.solver``).
+The kernels run on the host. Tensors of a run on another device (a GPU) are copied to the
+host and the results back (``on_host``; autograd follows the copies): a time loop of a few
+hundred tiny steps is thousands of kernel launches on a GPU, which measured 5-8x slower than
+the compiled loop (docs/benchmarks.md, "On a GPU"). ``problem.solver=reference`` runs the torch
+solver on the run's device instead.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,8 +50,30 @@ def njit(fn):
 
 
 def available(*tensors: torch.Tensor) -> bool:
-    """Whether the fast path can take these tensors (numba present, all on the CPU)."""
-    return HAVE_NUMBA and all(t.device.type == "cpu" for t in tensors)
+    """Whether the fast path can take these tensors: numba is present (tensors on any device
+    are taken, through ``on_host``)."""
+    return HAVE_NUMBA
+
+
+HOST = torch.device("cpu")
+
+
+def on_host(fn: Callable) -> Callable:
+    """``fn`` (a fast solver's entry point) for tensor arguments on any device: they are copied
+    to the host, ``fn`` runs there, and its tensor results are copied back to the device of the
+    first argument. The copies are differentiable, so gradients reach the device's tensors."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        device = next((a.device for a in args if isinstance(a, torch.Tensor)), HOST)
+        if device.type == HOST.type:
+            return fn(*args, **kwargs)
+        out = fn(*(a.to(HOST) if isinstance(a, torch.Tensor) else a for a in args), **kwargs)
+        if isinstance(out, tuple):
+            return tuple(o.to(device) for o in out)
+        return out.to(device)
+
+    return wrapper
 
 
 def as_numpy64(t: torch.Tensor) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Fast dipole solver: the Crank-Nicolson loop of ``higbench.physics.dipole`` compiled, with its adjoint.
 
 Same scheme, arguments and results as ``dipole.simulate`` (the reference, kept for the tests
-and for non-CPU devices); equal to it to ~1e-13 relative in float64, outputs and gradients
+and for ``problem.solver=reference``); equal to it to ~1e-13 relative in float64, outputs and gradients
 (tests/physics/test_dipole.py runs every test on both).
 
 Each step solves M psi_new' = psi (Thomas algorithm: M = 1 + i dt/2 H is tridiagonal with
@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, run
+from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, on_host, run
 from higbench.physics.dipole import DT, DX
 from higbench.physics.dipole import simulate as simulate_reference
 
@@ -170,16 +170,18 @@ def _run_adjoint(
 KERNELS = Kernels("dipole", _run_forward, _run_adjoint, batch_dim=3)
 
 
+@on_host
 def simulate(psi0: torch.Tensor, u: torch.Tensor, dt: float = DT, return_trajectory: bool = False) -> torch.Tensor:
     """``dipole.simulate`` (same arguments, shapes, dtype) through the compiled loop.
 
-    Falls back to the reference for tensors off the CPU or without numba.
+    Runs on the host for tensors on any device (``on_host``); the reference runs without numba.
     """
     if not available(psi0, u):
         return simulate_reference(psi0, u, dt, return_trajectory)
     return run(KERNELS, psi0, u.to(psi0.dtype), (float(dt),), bool(return_trajectory))
 
 
+@on_host
 def solver_jacobian(psi0: torch.Tensor, u: torch.Tensor, dt: float = DT) -> tuple[torch.Tensor, torch.Tensor]:
     """Final states y (b, 28) (real/imaginary parts interleaved, as ``simulate(...).reshape(b, -1)``)
     and solver Jacobians A (b, 28, steps) = dy_i/du_i: one sweep with 28 seeds per sample."""

@@ -1,7 +1,7 @@
 """Fast oscillator solver: the RK4 loop of ``higbench.physics.oscillator`` compiled, with its adjoint.
 
 Same scheme, same arguments and results as ``oscillator.simulate`` (the reference, kept for
-the tests and for non-CPU devices); equal to it to ~1e-13 relative in float64, outputs and
+the tests and for ``problem.solver=reference``); equal to it to ~1e-13 relative in float64, outputs and
 gradients (tests/physics/test_oscillator.py runs every test on both).
 
 The state is s = (x1, x2, p1, p2), the right-hand side F(s) = (p, -a(x)) with the negated
@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, run
+from higbench.physics._adjoint import Kernels, as_numpy64, available, njit, on_host, run
 from higbench.physics.oscillator import CONTROL, DT
 from higbench.physics.oscillator import simulate as simulate_reference
 
@@ -187,6 +187,7 @@ def _run_adjoint(
 KERNELS = Kernels("oscillator", _run_forward, _run_adjoint, batch_dim=2)
 
 
+@on_host
 def simulate(
     x0: torch.Tensor,
     u: torch.Tensor,
@@ -197,7 +198,7 @@ def simulate(
 ) -> torch.Tensor:
     """``oscillator.simulate`` (same arguments, shapes, dtype) through the compiled loop.
 
-    Falls back to the reference for tensors off the CPU or without numba.
+    Runs on the host for tensors on any device (``on_host``); the reference runs without numba.
     """
     if not available(x0, u):
         return simulate_reference(x0, u, dt, coupling, control, return_trajectory)
@@ -205,6 +206,7 @@ def simulate(
     return run(KERNELS, x0, u.to(x0.dtype), (float(dt), float(coupling), c1, c2), bool(return_trajectory))
 
 
+@on_host
 def solver_jacobian(
     x0: torch.Tensor, u: torch.Tensor, dt: float = DT, coupling: float = 1.0, control: tuple[float, float] = CONTROL
 ) -> tuple[torch.Tensor, torch.Tensor]:

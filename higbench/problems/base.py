@@ -34,6 +34,16 @@ class ProblemConfig:
     data_seed: int = value(ge=0)
     init: str = value("glorot", choices=INIT_SCHEMES)
     loss_reduction: str = value("mean", choices=LOSS_REDUCTIONS)
+    # The keys below change neither training nor the test loss (identity=False: a run keeps its
+    # identity, results.index.config_id). The validation set is drawn after train and test, so
+    # those draws stay what every earlier run had; 0: no validation curve.
+    val_size: int = value(0, ge=0, identity=False)
+    # What the problem is judged by (the league, the profile, the progress line): test-loss targets,
+    # the league's budget in training-clock seconds, and the held-out variants the league never tunes on
+    # (each an override list, e.g. "problem.gamma=0.001").
+    targets: Optional[list[float]] = value(None, gt=0, identity=False)  # noqa: UP045
+    league_seconds: Optional[float] = value(None, gt=0, identity=False)  # noqa: UP045
+    held_out: Optional[list[str]] = value(None, identity=False)  # noqa: UP045
 
 
 @dataclass
@@ -100,6 +110,21 @@ class Problem(abc.ABC):
     def outputs(self, model: nn.Module, batch: Batch) -> torch.Tensor:
         return self.physics(batch.inputs, model(batch.net_inputs))
 
+    # -- optional: an inverse simulator (the SIP optimizer needs one) --
+    def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """u with physics(inputs, u) = y_target, or as close as the problem's inverse gets: P^-1(x, y*; u0).
+
+        Optional. A problem that overrides it declares an inverse simulator: exact where P is
+        invertible (toy, Poisson), else a local or regularised inverse near the current guess
+        ``u0`` (b, |u>) (the heat example). Batched like ``physics``: y_target (b, |y|) -> (b, |u|).
+        ``optimizer=sip`` refuses a problem that does not override it (``has_inverse_simulator``).
+        """
+        raise NotImplementedError(f"problem {self.name} has no inverse simulator")
+
+    @classmethod
+    def has_inverse_simulator(cls) -> bool:
+        return cls.inverse_simulator is not Problem.inverse_simulator
+
     # -- data --
     @abc.abstractmethod
     def train_size(self) -> int | None:
@@ -113,6 +138,11 @@ class Problem(abc.ABC):
     def test_set(self) -> Batch:
         """Held-out data for the curves (fixed for the run)."""
 
+    def val_set(self) -> Batch | None:
+        """Validation data, disjoint from train and test (``problem.val_size``; None: none).
+        Tuning reads only its curve (``val_loss``); the test loss is read for the table."""
+        return getattr(self, "val", None)
+
     def eval_logs(self, model: nn.Module) -> dict[str, np.ndarray]:
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
         return {}
@@ -125,17 +155,20 @@ class FixedDataProblem(Problem):
 
     train: Batch
     test: Batch
+    val: Batch | None = None
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         """``n`` samples drawn with ``gen``: each fixed-data problem's own."""
         raise NotImplementedError
 
     def sample_datasets(self) -> None:
-        """Set ``self.train`` and ``self.test`` from ``self._sample``, with one generator seeded by
-        ``data_seed``, train drawn first, then test (the order every run so far was made with)."""
+        """Set ``self.train``, ``self.test`` and ``self.val`` from ``self._sample``, with one generator
+        seeded by ``data_seed``: train drawn first, then test (the order every run so far was made
+        with), then the validation set (``problem.val_size``; after the others, so they stay as they were)."""
         gen = torch.Generator().manual_seed(int(self.cfg.data_seed))
         self.train = self._sample(int(self.cfg.train_size), gen)
         self.test = self._sample(int(self.cfg.test_size), gen)
+        self.val = draw_validation(self, gen)
 
     def train_size(self) -> int:
         return len(self.train)
@@ -148,6 +181,12 @@ class FixedDataProblem(Problem):
 
     def test_set(self) -> Batch:
         return self.test
+
+
+def draw_validation(problem: Problem, gen: torch.Generator) -> Batch | None:
+    """``problem.val_size`` samples from ``gen`` (the generator that drew the test set, after it), or None."""
+    n = int(problem.cfg.get("val_size") or 0)
+    return problem._sample(n, gen) if n else None
 
 
 _REGISTRY: dict[str, type[Problem]] = {}

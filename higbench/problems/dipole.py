@@ -8,7 +8,7 @@ Loss: 1 - |<Psi, Psi_target>|^2; extra curves: the low- and high-energy losses o
 figure 4c. Solver: ``higbench.physics.dipole.simulate`` (the reference, re-exported here) or,
 with ``problem.solver=fast`` (the default), ``higbench.physics.dipole_fast.simulate``: the
 same scheme compiled, with its hand-derived adjoint and a direct route for the structured
-path's solver Jacobians (``physics_jacobian``). Off the CPU the reference runs.
+path's solver Jacobians (``physics_jacobian``). On a GPU the compiled loop runs on the host.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ the squared distance of the final state to the target (sum over the 4 components
 The solver is ``higbench.physics.oscillator.simulate`` (the reference, re-exported here) or,
 with ``problem.solver=fast`` (the default), ``higbench.physics.oscillator_fast.simulate``:
 the same RK4 scheme compiled, with its hand-derived adjoint, and a direct route for the
-structured path's solver Jacobians (``physics_jacobian``). Off the CPU the reference runs.
+structured path's solver Jacobians (``physics_jacobian``). On a GPU the compiled loop runs on the host.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from higbench.physics.poisson import DATA, laplace, laplace_matrix, sample_potential
-from higbench.problems.base import Batch, Problem, ProblemConfig, register
+from higbench.problems.base import Batch, Problem, ProblemConfig, draw_validation, register
 from higbench.problems.networks import ACTIVATIONS, mlp
 from higbench.schema import value
 
@@ -48,8 +48,11 @@ class Poisson(Problem):
     def __init__(self, cfg, dtype, device, seed):
         super().__init__(cfg, dtype, device, seed)
         self.n = int(cfg.grid)
-        # The evaluation set comes from data_seed; training samples from the run seed.
-        self.test = self._sample(int(cfg.test_size), torch.Generator().manual_seed(int(cfg.data_seed)))
+        # The evaluation sets come from data_seed (test first, then validation); training samples
+        # from the run seed.
+        gen = torch.Generator().manual_seed(int(cfg.data_seed))
+        self.test = self._sample(int(cfg.test_size), gen)
+        self.val = draw_validation(self, gen)
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         phi = sample_potential(n, gen, n=self.n, modes=int(self.cfg.modes), dtype=torch.float64, data=str(self.cfg.data))
@@ -63,6 +66,15 @@ class Poisson(Problem):
     def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         b = u.shape[0]
         return laplace(u.reshape(b, self.n, self.n)).reshape(b, -1)
+
+    def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """Exact: the potential whose Laplacian is y_target, one linear Poisson solve (phi = 0 on
+        the boundary, as ``physics``); -Laplace is symmetric positive definite: one Cholesky factor."""
+        if getattr(self, "_neg_laplace_factor", None) is None:
+            minus_l = -laplace_matrix(self.n, self.n, dtype=torch.float64)
+            self._neg_laplace_factor = torch.linalg.cholesky(minus_l).to(self.device)
+        rhs = -y_target.reshape(len(y_target), -1).to(torch.float64).T  # (n*n, b)
+        return torch.cholesky_solve(rhs, self._neg_laplace_factor).T.to(y_target.dtype)
 
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return 0.5 * ((y - targets) ** 2).sum(dim=1)

@@ -46,6 +46,10 @@ class Toy(FixedDataProblem):
     def physics(self, inputs: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         return torch.stack([u[:, 0], self.cfg.gamma * u[:, 1]], dim=1)
 
+    def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
+        """Exact: u = (y1, y2 / gamma)."""
+        return torch.stack([y_target[:, 0], y_target[:, 1] / self.cfg.gamma], dim=1)
+
     def loss(self, y: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         return 0.5 * ((y - targets) ** 2).sum(dim=1)
 

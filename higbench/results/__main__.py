@@ -7,6 +7,7 @@ higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
 higbench-results outputs --optimizer hig --spectrum spectrum.png   # singular values of J over training
+higbench-results outputs/league --league          # integrated score, IQMs with intervals, P(HIG improves)
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from higbench.results.profile import (
     BEST_OVER,
     all_targets,
     budget_labels,
+    configured_targets,
     default_targets,
     format_table,
     parse_targets,
@@ -110,10 +112,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help=f"draw the singular values of each GN/HIG/LM step against updates, one panel per run (at most {MAX_PANELS})",
     )
     p.add_argument(
+        "--league",
+        action="store_true",
+        help="the league (scripts/league.py): performance profiles in seconds and updates with the integrated score,"
+        " IQMs with 95%% bootstrap intervals per task, P(HIG improves); tuning-seed runs left out",
+    )
+    p.add_argument(
         "--targets",
         nargs="+",
         metavar="PROBLEM=LOSS,...",
-        help="target test losses per problem for --plot/--profile (default: decades that separate the settings)",
+        help="target test losses per problem for --plot/--profile (default: the problem config's problem.targets,"
+        " else decades that separate the settings)",
     )
     p.add_argument(
         "--setting",
@@ -230,7 +239,8 @@ def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
-    targets = parse_targets(args.targets) if args.targets else default_targets(df)
+    # --targets, else the problem configs' (problem.targets), else the decades that separate the settings
+    targets = parse_targets(args.targets) if args.targets else {**default_targets(df), **configured_targets(df)}
     unknown = sorted(set(targets) - set(df["problem.name"].dropna())) if len(df) else []
     if unknown and args.targets:
         print(f"note: --targets: no runs of {', '.join(unknown)} here", file=sys.stderr)
@@ -293,6 +303,17 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     return 0
 
 
+def _league(args: argparse.Namespace, roots: list[Path]) -> int:
+    """--league: the scores of the runs (targets from their problem configs)."""
+    from higbench.results.league import all_spaces, format_league
+
+    args.figure_runs = True  # the league's runs are launched as the figures' are (higbench.jobs.launch)
+    runs, curves = _load(args, roots, DEFAULT_THRESHOLDS, curves=True)
+    runs = _filter(_with_names(runs, args), args)
+    print(format_league(runs, curves, all_spaces()))
+    return 0
+
+
 def _spectrum(args: argparse.Namespace, df: pd.DataFrame, roots: list[Path]) -> int:
     """--spectrum: one panel per selected run that recorded a spectrum; exit 2 if none did."""
     from higbench.results.plot import plot_spectrum
@@ -343,6 +364,8 @@ def _main(argv: list[str] | None = None) -> int:
             code = _spectrum(args, df, roots)
             if code or not (args.plot or args.profile):
                 return code
+        if args.league:
+            return _league(args, roots)
         if args.plot or args.profile:
             if not args.spectrum:
                 _summary_line(df, total, roots, args)

@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
+from higbench.problems.base import ProblemConfig
 from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLUMNS, conditioning
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
@@ -46,7 +47,9 @@ from higbench.runfile.reader import (
     read_tables,
     run_file_path,
 )
+from higbench.schema import keys_where
 
+PROBLEM_COSMETIC_KEYS = keys_where(ProblemConfig, "identity", False)  # problem.* keys outside config_id
 DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # The one status rule. A done run ended by its own rule and is a result: never run again
 # (a diverged run is a result too). Only completed runs compete in ``best_runs`` (a diverged
@@ -58,7 +61,7 @@ RUN_STATUSES_DONE = ("completed",)  # the statuses ``best_runs`` selects from
 # Columns the index computes; a config key of the same name is stored as "config.<key>".
 _OWN_COLUMNS = {
     "path", "status", "status_reason", "status_step", "error", "problem", "optimizer", "overrides",
-    "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss",
+    "started", "finished", "steps", "wall_time", "n_evals", "final_step", "final_train_loss", "final_val_loss", "best_val_loss",
     "best_test_loss", "best_step", "mean_update_s", "median_update_s", "mean_jacobian_s",
     "mean_inversion_s", "peak_rss_mb", "baseline_rss_mb", "cuda_peak_mb", "format_version", "resumes",
     "config_id", "parallel_jobs", "setting_config", *CONDITIONING_COLUMNS,
@@ -78,6 +81,8 @@ def config_id(config: dict, parent_id: str | None = None) -> str:
     from, so a continued run keeps its identity wherever its parent's file lies.
     """
     c = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
+    if isinstance(c.get("problem"), dict):  # the problem's own such keys (validation size, targets, ...)
+        c["problem"] = {k: v for k, v in c["problem"].items() if k not in PROBLEM_COSMETIC_KEYS}
     if c.get("init_from"):
         c["init_from"] = {"run": parent_id or f"path:{c['init_from']}"}
     text = json.dumps(c, sort_keys=True, default=str)
@@ -113,7 +118,8 @@ def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_F
         if r.is_file():
             found.add(r)
         elif r.is_dir():
-            found.update(p for p in r.rglob(pattern) if p.is_file())
+            inside = r.resolve()  # a link to a file outside the tree given is never followed
+            found.update(p for p in r.rglob(pattern) if p.is_file() and (not p.is_symlink() or inside in p.resolve().parents))
         else:
             raise FileNotFoundError(f"{r}: no such file or directory")
     return sorted(found)
@@ -170,7 +176,7 @@ def _mean(values: np.ndarray | None) -> float:
     return float(np.mean(values))
 
 
-_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss")  # what the row needs (curves=False)
+_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  # what the row needs (curves=False)
 _UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
@@ -231,6 +237,10 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
             row["final_step"] = int(steps[-1])
         if "train_loss" in curves:
             row["final_train_loss"] = float(curves["train_loss"][-1])
+        if "val_loss" in curves:  # the validation split (what tuning reads): final and best
+            val = curves["val_loss"]
+            row["final_val_loss"] = float(val[-1])
+            row["best_val_loss"] = float(np.nanmin(val)) if np.isfinite(val).any() else math.nan
         for name, values in curves.items():  # extra metrics: final_test_<metric>
             if name.startswith("test_") and name != "test_loss":
                 row[f"final_{name}"] = float(values[-1])

@@ -158,6 +158,17 @@ def default_targets(runs: pd.DataFrame, setting: str = "setting", most: int = 3)
     return targets
 
 
+def configured_targets(runs: pd.DataFrame) -> dict[str, list[float]]:
+    """Per problem, the targets its config owns (``problem.targets``, recorded in every run's
+    config): those of its newest run that has them. Problems whose runs predate the key are absent."""
+    if "problem.targets" not in runs or runs.empty:
+        return {}
+    have = runs[runs["problem.targets"].notna()]
+    if "started" in have:
+        have = have.sort_values("started", na_position="first")
+    return {str(p): [float(t) for t in g["problem.targets"].iloc[-1]] for p, g in have.groupby("problem.name")}
+
+
 def all_targets(targets: Mapping[str, Sequence[float]]) -> tuple[float, ...]:
     """Every target level once: the thresholds ``load_runs`` computes columns for."""
     return tuple(sorted({t for levels in targets.values() for t in levels}, reverse=True))

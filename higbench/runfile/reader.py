@@ -92,37 +92,77 @@ _COMPRESSION_RATIO = 1100  # deflate expands at most ~1032x; an uncompressed dat
 _SLACK_BYTES = 1 << 20  # a killed writer's resized table may lack its last chunk (read as fill)
 
 
-def check_contained(f: h5py.File, datasets: bool = True) -> None:
-    """Raise ``RefusedRunFile`` unless every object of ``f`` lives in ``f`` (see module doc).
+MAX_DEPTH = 16  # a run file nests 2 levels; HDF5's own recursive visit crashes near 10,000
+MAX_OBJECTS = 20_000  # links in one file (a run file holds a few hundred)
+_TOTAL_RATIO = 16  # all datasets of a file together declare at most this multiple of its size
 
-    ``datasets=False``: links only (a caller that checks each dataset it reads itself,
+
+def check_contained(f: h5py.File, datasets: bool = True) -> None:
+    """Raise ``RefusedRunFile`` unless every object of ``f`` lives in ``f`` (see module doc),
+    within ``MAX_DEPTH`` levels and ``MAX_OBJECTS`` links.
+
+    Walked here, one group at a time and never deeper than the bound (HDF5's recursive
+    ``H5Lvisit`` overflows the C stack on a file of 10,000 nested groups: a crash, not an
+    error). ``datasets=False``: links only (a caller that checks each dataset it reads itself,
     with ``check_dataset``: the run index, which reads a few of them per file).
     """
-    names: list[bytes] = []
+    size = f.id.get_filesize()
+    budget = ReadBudget(size)
+    seen: set[int] = set()
+    queue: list[tuple[h5py.h5g.GroupID, bytes, int]] = [(f.id, b"", 0)]
+    count = 0
+    while queue:
+        gid, prefix, depth = queue.pop()
+        entries = _links(gid, MAX_OBJECTS - count)
+        count += len(entries)
+        if count > MAX_OBJECTS:
+            raise RefusedRunFile(f"holds more than {MAX_OBJECTS:,} objects (a run file holds a few hundred)")
+        for name, kind in entries:
+            path = prefix + name
+            if kind != h5py.h5l.TYPE_HARD:
+                why = _LINK_KINDS.get(kind, "a user-defined link")
+                raise RefusedRunFile(f"{path.decode(errors='replace')} is {why}; run files hold hard links only")
+            info = h5py.h5o.get_info(gid, name)  # without opening it
+            if info.addr in seen:  # a second hard link to an object already checked
+                continue
+            seen.add(info.addr)
+            if info.type == h5py.h5o.TYPE_GROUP:
+                if depth + 1 >= MAX_DEPTH:
+                    raise RefusedRunFile(f"nests groups more than {MAX_DEPTH} levels deep (a run file: 2)")
+                queue.append((h5py.h5g.open(gid, name), path + b"/", depth + 1))
+            elif datasets and info.type == h5py.h5o.TYPE_DATASET:
+                check_dataset(path.decode(errors="replace"), h5py.h5d.open(gid, name), size, budget)
 
-    def visit(name: bytes, info):  # a value other than None stops the visit (raising here cannot)
-        if info.type != h5py.h5l.TYPE_HARD:
-            return name, info.type
-        names.append(name)
-        return None
 
-    foreign = f.id.links.visit(visit, info=True)
-    if foreign is not None:
-        name, kind = foreign
-        why = _LINK_KINDS.get(kind, "a user-defined link")
-        raise RefusedRunFile(f"{name.decode(errors='replace')} is {why}; run files hold hard links only")
-    if datasets:
-        size = f.id.get_filesize()
-        for name in names:
-            obj = h5py.h5o.open(f.id, name)
-            if isinstance(obj, h5py.h5d.DatasetID):
-                check_dataset(name.decode(errors="replace"), obj, size)
+def _links(gid: h5py.h5g.GroupID, limit: int) -> list[tuple[bytes, int]]:
+    """(name, link type) of a group's links, at most ``limit`` + 1 of them (the iteration stops)."""
+    entries: list[tuple[bytes, int]] = []
+
+    def take(name: bytes, info):
+        entries.append((name, info.type))
+        return True if len(entries) > limit else None  # a value other than None stops HDF5's iteration
+
+    gid.links.iterate(take, info=True)
+    return entries
+
+
+class ReadBudget:
+    """Bytes the datasets of one file may declare together (``_TOTAL_RATIO`` x its size): a
+    crafted file can point many datasets at the same stored bytes."""
+
+    def __init__(self, file_size: int):
+        self.left = _TOTAL_RATIO * file_size + _SLACK_BYTES
+
+    def take(self, name: str, declared: int) -> None:
+        self.left -= declared
+        if self.left < 0:
+            raise RefusedRunFile(f"its datasets declare more than {_TOTAL_RATIO}x the file's size together (at {name})")
 
 
 _LINK_KINDS = {h5py.h5l.TYPE_SOFT: "a soft link", h5py.h5l.TYPE_EXTERNAL: "an external link (to another file)"}
 
 
-def check_dataset(name: str, ds: h5py.h5d.DatasetID, file_size: int) -> None:
+def check_dataset(name: str, ds: h5py.h5d.DatasetID, file_size: int, budget: ReadBudget | None = None) -> None:
     """Refuse a dataset whose bytes would come from elsewhere, or more bytes than its file holds."""
     plist = ds.get_create_plist()
     if plist.get_layout() == h5py.h5d.VIRTUAL:
@@ -137,6 +177,8 @@ def check_dataset(name: str, ds: h5py.h5d.DatasetID, file_size: int) -> None:
     bound = file_size * (_COMPRESSION_RATIO if filters else 1) + _SLACK_BYTES
     if declared > bound:
         raise RefusedRunFile(f"{name} declares {declared:,} bytes in a {file_size:,}-byte file")
+    if budget is not None:
+        budget.take(name, declared)
 
 
 MAX_CONFIG_BYTES = 256 * 1024  # a run's resolved config is a few KB
@@ -302,7 +344,8 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
         with h5py.File(p, "r", locking=locking) as f:
             check_contained(f, datasets=False)  # _columns checks the datasets it reads
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            tables = {group: _columns(f, group, names) for group, names in columns.items()}
+            budget = ReadBudget(f.id.get_filesize())
+            tables = {group: _columns(f, group, names, budget) for group, names in columns.items()}
             memory = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
             env = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
         config = parse_config(str(attrs.get("config") or "{}"))
@@ -311,7 +354,7 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
     return RunTables(attrs, tables, memory, env, config)
 
 
-def _columns(f: h5py.File, group: str, names: Sequence[str] | None) -> dict[str, np.ndarray]:
+def _columns(f: h5py.File, group: str, names: Sequence[str] | None, budget: ReadBudget) -> dict[str, np.ndarray]:
     try:
         gid = h5py.h5g.open(f.id, group.encode())
     except KeyError:
@@ -327,7 +370,7 @@ def _columns(f: h5py.File, group: str, names: Sequence[str] | None) -> dict[str,
             continue
         if len(ds.shape) != 1 or ds.dtype.kind not in "fiub":
             continue
-        check_dataset(f"{group}/{name}", ds, size)
+        check_dataset(f"{group}/{name}", ds, size, budget)
         values = np.empty(ds.shape, dtype=ds.dtype)
         if values.size:
             ds.read(h5py.h5s.ALL, h5py.h5s.ALL, values)
@@ -421,4 +464,10 @@ def load_weights(path: str | Path) -> dict[str, np.ndarray]:
     with _open(path) as f:
         if not _check_weights(f):
             raise KeyError(f"{path}: no final weights stored (status {_attr(f.attrs.get('status', '?'))})")
-        return {name: ds[()] for name, ds in f["weights"].items()}
+        return {name: _native(ds[()]) for name, ds in f["weights"].items()}
+
+
+def _native(values: np.ndarray) -> np.ndarray:
+    """An array in this machine's byte order (torch takes no big-endian weights)."""
+    values = np.asarray(values)
+    return values if values.dtype.isnative else values.astype(values.dtype.newbyteorder("="))

@@ -90,6 +90,26 @@ class RunFileBusy(OSError):
     """Another process holds the run file open (a live writer)."""
 
 
+class RunFileShared(RunFileBusy):
+    """The opened file is not the run directory's own: reached through a link, or with a
+    second hard link (a snapshot made with ``cp -al``), which a write in place would change."""
+
+
+def check_own_file(f: h5py.File, path: Path) -> None:
+    """Raise RunFileShared unless the open ``f`` is the file at ``path`` itself, with one link
+    (checked on the opened descriptor, after the open: nothing planted meanwhile is written)."""
+    try:
+        opened = os.fstat(f.id.get_vfd_handle())
+        named = os.lstat(path)
+    except (OSError, ValueError, TypeError):  # a driver without a descriptor: the path checks stand
+        return
+    if (opened.st_dev, opened.st_ino) != (named.st_dev, named.st_ino):
+        raise RunFileShared(f"run file {path} was replaced by a link or another file; refusing to write through it")
+    if opened.st_nlink > 1:
+        why = f"has {opened.st_nlink} hard links (a snapshot shares it); refusing to write it in place"
+        raise RunFileShared(f"run file {path} {why}")
+
+
 class RunFileFault(OSError):
     """The file system cannot take the run's writes (full, gone, failing): the run stops (exit 1)."""
 
@@ -144,6 +164,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("curves", "wall_time"): ("s", "training clock at this evaluation (evaluations excluded; start-up included)"),
     ("curves", "train_loss"): ("loss", "mean mini-batch loss since the previous evaluation (NaN at step 0)"),
     ("curves", "test_loss"): ("loss", "mean loss over the test set"),
+    ("curves", "val_loss"): ("loss", "mean loss over the validation set (problem.val_size; what tuning reads)"),
     ("curves", "rss_mb"): ("MB", "resident memory of the process at this evaluation"),
     ("logs", "neuron_mean"): ("activation", "per hidden neuron: mean activation over the validation inputs"),
     ("logs", "neuron_std"): ("activation", "per hidden neuron: standard deviation of the activation over the validation inputs"),
@@ -159,6 +180,7 @@ DATASET_INFO: dict[tuple[str, str], tuple[str, str]] = {
     ("updates", "sv_max"): ("singular value", "GN/HIG/LM: largest singular value of this update's Jacobian"),
     ("updates", "sv_min_kept"): ("singular value", "GN/HIG/LM: smallest singular value kept by the truncation tau"),
     ("updates", "sv_dropped"): ("count", "GN/HIG/LM: singular values the truncation tau dropped"),
+    ("updates", "step_error"): ("relative", "GN/HIG solver=krylov: estimated relative error of the step (NaN: exact route)"),
     ("logs", "sv_quantiles"): ("singular value", "GN/HIG/LM: 11 quantiles (0, 0.1, ..., 1) of the last update's singular values"),
 }
 
@@ -236,6 +258,7 @@ class RunFileWriter:
             raise RunFileBusy(f"run file {self.path} is open in another process (is that run still going?)") from exc
         try:
             check_contained(self.f)  # nothing it writes may land in another file
+            check_own_file(self.f, self.path)
         except BaseException:
             self.f.close()
             raise

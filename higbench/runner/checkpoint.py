@@ -40,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import math
 import os
 import stat
 import tempfile
@@ -164,6 +165,7 @@ def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
         raise refuse(f"holds a {type(state).__name__}, not a checkpoint")
     if state.get("format") not in READABLE_FORMATS:
         raise refuse(f"has format {show(state.get('format'))}; this version reads {', '.join(map(str, READABLE_FORMATS))}")
+    check_fields(state, refuse)
     _check_run_id(state, Path(run_path), value)
     return state
 
@@ -189,6 +191,9 @@ def _deserialise(f, size: int, refuse) -> Any:
         raise refuse(f"is unreadable: not a checkpoint archive ({exc}); other formats are never unpickled") from None
     if any(r.compress_type != zipfile.ZIP_STORED for r in records) or sum(r.file_size for r in records) > size:
         raise refuse("is unreadable: compressed or oversized records (torch never writes them)")
+    foreign = _foreign_globals(f, records)
+    if foreign:  # e.g. builtins.bytearray: torch allows it, and 133 bytes of pickle make 1.5 GB of it
+        raise refuse(f"names {foreign}, which no checkpoint of higbench holds; refusing to load it")
     f.seek(0)
     try:
         return torch.load(f, map_location="cpu", weights_only=True)
@@ -197,6 +202,214 @@ def _deserialise(f, size: int, refuse) -> Any:
         raise refuse(f"holds objects other than tensors and plain containers; refusing to load it ({first})") from None
     except Exception as exc:  # noqa: BLE001 - truncated, damaged
         raise refuse(f"is unreadable ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
+
+
+def _allowed_global(module: str, name: str) -> bool:
+    """What ``torch.save`` writes for a checkpoint of plain tensors and containers."""
+    import torch
+
+    if module == "collections":
+        return name == "OrderedDict"
+    if module == "torch._utils":
+        return name == "_rebuild_tensor_v2"
+    if module == "torch":
+        return name.endswith("Storage") or isinstance(getattr(torch, name, None), torch.dtype)
+    return False
+
+
+def _foreign_globals(f, records) -> str:
+    """The first global (module.name) the archive's pickle names that is not ``_allowed_global``,
+    read from its opcodes without unpickling anything; '' when none."""
+    import pickletools
+
+    pickles = [r for r in records if r.filename.endswith("/data.pkl") or r.filename == "data.pkl"]
+    f.seek(0)
+    with zipfile.ZipFile(f) as archive:
+        for record in pickles:
+            strings: list[str] = []
+            try:
+                for op, arg, _pos in pickletools.genops(archive.read(record)):
+                    if op.name in ("SHORT_BINUNICODE", "BINUNICODE", "UNICODE", "BINUNICODE8"):
+                        strings.append(str(arg))
+                    elif op.name == "GLOBAL":
+                        module, _, name = str(arg).partition(" ")
+                    elif op.name == "STACK_GLOBAL":
+                        module, name = (strings[-2], strings[-1]) if len(strings) >= 2 else ("?", "?")
+                    elif op.name in ("INST", "OBJ", "NEWOBJ_EX", "EXT1", "EXT2", "EXT4"):  # torch never writes these
+                        return op.name
+                    else:
+                        continue
+                    if op.name in ("GLOBAL", "STACK_GLOBAL") and not _allowed_global(module, name):
+                        return f"{module}.{name}"
+            except Exception as exc:  # noqa: BLE001 - a damaged pickle: torch.load says what is wrong
+                return "" if isinstance(exc, ValueError) else f"an unreadable pickle ({type(exc).__name__})"
+    return ""
+
+
+# -- what a checkpoint must hold (checked before anything of the run is written) -------------
+
+_INT = "an integer >= 0"
+
+
+def _nonneg_int(v) -> bool:
+    return type(v) is int and v >= 0
+
+
+def _nonneg_number(v) -> bool:
+    return type(v) in (int, float) and math.isfinite(v) and v >= 0
+
+
+def _rng_state(v, like) -> bool:
+    import torch
+
+    return isinstance(v, torch.Tensor) and v.layout == torch.strided and v.dtype == torch.uint8 and v.shape == like.shape
+
+
+def check_fields(state: dict, refuse) -> None:
+    """Keys, types and ranges of a checkpoint's own fields (the network's are ``check_fits``);
+    ``refuse(why)`` makes the error. Nothing of it is used before this passes."""
+    import torch
+
+    rules = {
+        "step": (_nonneg_int, _INT),
+        "epoch": (_nonneg_int, _INT),
+        "position": (_nonneg_int, _INT),
+        "wall_time": (_nonneg_number, "a finite number >= 0"),
+        "next_eval": (_nonneg_number, "a finite number >= 0"),
+        "last_eval_step": (lambda v: type(v) is int and v >= -1, "an integer >= -1"),
+        "batch_losses": (lambda v: type(v) is list and all(type(x) in (int, float) for x in v), "a list of numbers"),
+        "model": (lambda v: isinstance(v, dict) and all(isinstance(k, str) for k in v), "a mapping of weights"),
+        "optimizer": (lambda v: isinstance(v, dict) and {"state", "param_groups"} <= set(v), "an optimizer state"),
+        "shuffle_epoch_start": (lambda v: _rng_state(v, torch.Generator().get_state()), "a torch generator state"),
+        "torch_rng": (lambda v: _rng_state(v, torch.get_rng_state()), "a torch generator state"),
+        "rows": (_rows, "{group: {table: rows}} with integer counts"),
+        "run_id": (lambda v: isinstance(v, str), "a string"),
+    }
+    for key, (ok, what) in rules.items():
+        if key not in state:
+            raise refuse(f"has no {key}")
+        if not ok(state[key]):
+            raise refuse(f"has {key}={_brief(state[key])}, not {what}")
+    cuda = state.get("cuda_rng")
+    if not (cuda is None or (_rng_state(cuda, cuda) and cuda.dim() == 1 and cuda.numel() <= 1 << 16)):
+        raise refuse(f"has cuda_rng={_brief(cuda)}, not a CUDA generator state")
+    if "peak_rss_mb" in state and not _nonneg_number(state["peak_rss_mb"]):
+        raise refuse(f"has peak_rss_mb={_brief(state['peak_rss_mb'])}, not a finite number >= 0")
+    step = state["step"]
+    for key, bound in (("epoch", step), ("position", step), ("last_eval_step", step)):
+        if state[key] > bound:
+            raise refuse(f"has {key}={state[key]}, beyond its step ({step})")
+    if len(state["batch_losses"]) > step:
+        raise refuse(f"holds {len(state['batch_losses'])} batch losses, more than its {step} updates")
+
+
+def _rows(v) -> bool:
+    return isinstance(v, dict) and all(
+        isinstance(g, str) and isinstance(t, dict) and all(isinstance(n, str) and _nonneg_int(c) for n, c in t.items())
+        for g, t in v.items()
+    )
+
+
+def _brief(v) -> str:
+    """A value as an error line shows it: a tensor by its type and shape, anything else short."""
+    import torch
+
+    if isinstance(v, torch.Tensor):
+        return f"<{v.layout} {v.dtype} tensor {tuple(v.shape)} on {v.device}>"
+    text = show(v) if isinstance(v, (int, float, str, bool, type(None))) else f"<{type(v).__name__}>"
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, resume_value: Any, path: Path) -> None:
+    """The checkpoint's weights and optimizer state fit the network and optimizer built from
+    the run's stored config: the same keys, dtypes and shapes, dense tensors, ranges. Run
+    before the run file is reopened; ``ConfigError`` on ``resume`` otherwise."""
+
+    def refuse(why: str) -> ConfigError:
+        return ConfigError("resume", resume_value, f"checkpoint {path.name} {why}")
+
+    ours = model.state_dict()
+    theirs = state["model"]
+    if set(theirs) != set(ours):
+        missing, extra = sorted(set(ours) - set(theirs)), sorted(set(theirs) - set(ours))
+        raise refuse(f"does not fit this run's network (missing {missing[:3]}, unknown {extra[:3]})")
+    for key, mine in ours.items():
+        t = theirs[key]
+        if not _dense_like(t, mine.dtype, mine.shape):
+            raise refuse(f"has {key}={_brief(t)}; the network has {mine.dtype} {tuple(mine.shape)}")
+    if batches_per_epoch is not None and state["position"] > batches_per_epoch:
+        raise refuse(f"has position={state['position']}, beyond the {batches_per_epoch} batches of an epoch")
+    _check_optimizer_state(state["optimizer"], optimizer, refuse)
+
+
+def _dense_like(t, dtype, shape) -> bool:
+    import torch
+
+    return (
+        isinstance(t, torch.Tensor)
+        and t.layout == torch.strided
+        and t.device.type != "meta"
+        and t.dtype == dtype
+        and t.shape == shape
+    )
+
+
+def _check_optimizer_state(saved: dict, optimizer, refuse) -> None:
+    """Param groups as the fresh optimizer's (the same parameters, hyper-parameters of the same
+    kinds), per-parameter state of real tensors shaped as their parameter (or scalars, or
+    L-BFGS's flat vectors and bounded histories)."""
+    import torch
+
+    fresh = optimizer.state_dict()
+    groups = saved["param_groups"]
+    if not isinstance(groups, list) or len(groups) != len(fresh["param_groups"]):
+        raise refuse("has an optimizer state of another optimizer (its parameter groups differ)")
+    params: dict[int, torch.Tensor] = {}
+    for mine, theirs in zip(fresh["param_groups"], groups, strict=True):
+        if not isinstance(theirs, dict) or set(theirs) != set(mine) or theirs["params"] != mine["params"]:
+            raise refuse("has an optimizer state of another optimizer (its parameter groups differ)")
+        for key, value in theirs.items():
+            if key != "params" and not _same_kind(value, mine[key]):
+                raise refuse(f"has optimizer {key}={_brief(value)}; this optimizer has {_brief(mine[key])}")
+    ordered = [p for g in optimizer.param_groups for p in g["params"]]
+    params = {i: p for i, p in enumerate(ordered)}
+    flat = sum(p.numel() for p in ordered)
+    history = max([int(g.get("history_size", 0) or 0) for g in groups] + [0]) + 1
+    state = saved["state"]
+    if not isinstance(state, dict) or not set(state) <= set(params):
+        raise refuse("has optimizer state for parameters this network does not have")
+    for index, entries in state.items():
+        param = params[index]
+        if not isinstance(entries, dict):
+            raise refuse(f"has optimizer state {index} of type {type(entries).__name__}")
+        for key, value in entries.items():
+            values = value if isinstance(value, list) else [value]
+            if isinstance(value, list) and len(value) > history:
+                raise refuse(f"has optimizer {key} with {len(value)} entries (at most {history})")
+            for v in values:
+                if not _state_value_fits(v, param, flat):
+                    raise refuse(f"has optimizer {key}={_brief(v)} for a parameter of shape {tuple(param.shape)}")
+
+
+def _same_kind(value, mine) -> bool:
+    numbers = (int, float)
+    if type(mine) in numbers and type(value) in numbers:
+        return math.isfinite(value)
+    if isinstance(mine, (tuple, list)) and isinstance(value, (tuple, list)):
+        return len(mine) == len(value) and all(_same_kind(a, b) for a, b in zip(value, mine, strict=True))
+    return type(value) is type(mine)
+
+
+def _state_value_fits(v, param, flat: int) -> bool:
+    import torch
+
+    if type(v) in (int, float):
+        return math.isfinite(v) or v != v  # L-BFGS keeps prev_loss; NaN is a value it may hold
+    if not isinstance(v, torch.Tensor):
+        return False
+    if v.layout != torch.strided or v.device.type == "meta" or v.is_complex() or v.dtype == torch.bool:
+        return False
+    return v.numel() == 1 or v.shape == param.shape or (v.dim() == 1 and v.numel() == flat)
 
 
 def _check_run_id(state: dict, run_file: Path, resume_value: Any) -> None:
@@ -240,6 +453,11 @@ def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> Non
         for name, n in names.items()
         if head.rows.get(group, {}).get(name, 0) < n
     ]
+    updates = max(head.rows.get("updates", {}).values(), default=0)
+    if state.get("step", 0) > updates:  # every update recorded before the checkpoint has its row
+        raise ConfigError(
+            "resume", resume_value, f"its checkpoint is at step {state['step']}, the run file records {updates} updates"
+        )
     if short:
         raise ConfigError(
             "resume", resume_value, f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
@@ -271,6 +489,10 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
         raise ConfigError("resume", resume_value, why)
     if not run_file.is_file():
         raise ConfigError("resume", resume_value, f"no run file {run_file}")
+    links = run_file.stat().st_nlink
+    if links > 1:  # resume writes it in place: a snapshot sharing its inode (cp -al) would change too
+        why = f"{run_file} has {links} hard links (a snapshot shares it); resume writes in place: copy it (cp, not cp -l) first"
+        raise ConfigError("resume", resume_value, why)
     try:  # with file locking: a live writer holds the file, and we must not write into it
         head = read_head(run_file, locking=True)
     except RunFileLocked:
@@ -372,6 +594,25 @@ def recorded_nothing(run_file: Path) -> str | None:
     status = str(head.attrs.get("status", ""))
     if status in RESUMABLE_STATUSES and head.n_updates == 0:
         return f"status {status}, no update recorded, no checkpoint"
+    return None
+
+
+def stopped_without_checkpoint(run_file: Path) -> str | None:
+    """Why a sweep job's run must run again from the start, or None: it stopped (status
+    running, interrupted or failed, no writer alive on this host) before its first
+    checkpoint, so nothing can continue it. A sweep stopped with Ctrl-C hard-kills the
+    parallel workers that were not yet writing one; the sweep's resume command reruns them
+    (the stopped file is moved aside, never deleted)."""
+    run_file = Path(run_file)
+    if not run_file.is_file() or checkpoint_path(run_file).exists():
+        return None
+    try:
+        head = read_head(run_file, locking=True)  # a live writer on this host holds the lock
+    except UnreadableRunFile:
+        return None
+    status = str(head.attrs.get("status", ""))
+    if status in RESUMABLE_STATUSES:
+        return f"stopped ({status}) after {head.n_updates} updates, before its first checkpoint"
     return None
 
 

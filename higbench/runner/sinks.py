@@ -8,7 +8,9 @@ arrays (neuron statistics, probe outputs, spectrum quantiles).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 
 import numpy as np
 
@@ -93,38 +95,63 @@ class ProgressSink(Sink):
 
 
 class Sinks(Sink):
-    """Several sinks in order; the run file first, so it holds a row before any display shows it."""
+    """Several sinks in order; the run file first, so it holds a row before any display shows it.
+
+    The run file is the record: its faults stop the run. A side sink (TensorBoard) that
+    fails is turned off with one line on stderr, and the run goes on without it.
+    """
 
     def __init__(self, *sinks: Sink):
         self.sinks = list(sinks)
 
+    def _each(self, method: str, *args) -> None:
+        for s in list(self.sinks):
+            if isinstance(s, (RunFileSink, ProgressSink)):
+                getattr(s, method)(*args)
+                continue
+            try:
+                getattr(s, method)(*args)
+            except Exception as exc:  # noqa: BLE001 - a view of the run, never worth the run itself
+                self.turn_off(s, exc)
+
+    def turn_off(self, sink: Sink, exc: BaseException) -> None:
+        if sink in self.sinks:
+            self.sinks.remove(sink)
+        name = getattr(sink, "name", type(sink).__name__)
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+        print(f"higbench: {name} turned off ({why}); the run goes on, its run file is the record", file=sys.stderr, flush=True)
+        with contextlib.suppress(Exception):
+            sink.close("failed", why)
+
     def on_update(self, row):
-        for s in self.sinks:
-            s.on_update(row)
+        self._each("on_update", row)
 
     def on_eval(self, row):
-        for s in self.sinks:
-            s.on_eval(row)
+        self._each("on_eval", row)
 
     def on_log(self, name, value):
-        for s in self.sinks:
-            s.on_log(name, value)
+        self._each("on_log", name, value)
 
     def flush(self):
-        for s in self.sinks:
-            s.flush()
+        self._each("flush")
 
     def close(self, status, reason="", step=-1):
-        for s in self.sinks:
-            s.close(status, reason, step)
+        self._each("close", status, reason, step)
 
 
 SPECTRUM_QUANTILES = np.linspace(0.0, 1.0, 11)
 
 
+SPECTRUM_COLUMNS = ("sv_max", "sv_min_kept", "sv_dropped", "step_error")
+
+
 def spectrum_columns(spectrum: dict) -> dict[str, float]:
-    """Per-update columns of a GN/HIG/LM spectrum (NaN when the update recorded none)."""
-    return {k: float(spectrum.get(k, math.nan)) for k in ("sv_max", "sv_min_kept", "sv_dropped")}
+    """Per-update columns of a GN/HIG/LM spectrum (NaN when the update recorded none).
+
+    ``step_error``: the estimated relative error of the step on the approximate (krylov)
+    route; NaN on the exact routes.
+    """
+    return {k: float(spectrum.get(k, math.nan)) for k in SPECTRUM_COLUMNS}
 
 
 def spectrum_quantiles(spectrum: dict) -> np.ndarray:

@@ -30,8 +30,10 @@ Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
 
 from __future__ import annotations
 
+import contextlib
 import math
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -49,10 +51,11 @@ from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError
 from higbench.optim import memory_guard
+from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
-from higbench.runner import checkpoint
+from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
 from higbench.runner.progress import Progress
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
@@ -198,6 +201,8 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
         device=str(problem.device),
         limit_mb=cfg.get("memory_limit_mb"),
         jacobian="structured" if getattr(update, "structured", False) else "naive",
+        krylov_steps=opt.group.get("krylov_steps", 200),
+        factor_values=mlp_factor_values(model),
     )
 
 
@@ -212,7 +217,52 @@ def _setup(cfg: DictConfig, device: torch.device | None = None):
     return device, problem
 
 
-def preflight(cfg: DictConfig) -> None:
+def _update_cost(cfg: DictConfig, device: torch.device) -> float:
+    """Seconds of one update of this run's optimizer and batch size on ``device`` (the least of
+    ``placement.TIMED_UPDATES`` after one untimed update; inf if it cannot fit in memory there).
+    Throwaway problem, network and optimizer; the caller's random streams are left as they were."""
+    threads = torch.get_num_threads()
+    with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
+        try:
+            _device, problem = _setup(cfg, device=device)
+            warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))
+            model = problem.build_model()
+            update = build_update(problem, model, cfg.optimizer)
+            estimate = check_memory(cfg, problem, model, update)
+        except ConfigError:  # too large for this device's memory
+            return math.inf
+        if cfg.get("threads") == "auto" and estimate is not None:
+            torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
+        generator = torch.Generator().manual_seed(int(cfg.seed))
+        batches = problem.epoch(int(cfg.batch_size), generator)
+        seconds = []
+        for _ in range(1 + placement.TIMED_UPDATES):
+            batch = next(batches, None) or next(problem.epoch(int(cfg.batch_size), generator))
+            t0 = time.perf_counter()
+            update(batch)  # synchronizes a GPU before returning
+            seconds.append(time.perf_counter() - t0)
+    torch.set_num_threads(threads)
+    return min(seconds[1:])
+
+
+def choose_placement(cfg: DictConfig, state: dict | None) -> placement.Placement | None:
+    """``device=auto``: the measured choice (a resumed run keeps its device); else None."""
+    if cfg.device != "auto":
+        return None
+    if state is not None:
+        return placement.resumed(state)
+    return placement.place(lambda device: _update_cost(cfg, device))
+
+
+def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, update, cfg: DictConfig, run_path: Path) -> None:
+    """A resumed run's checkpoint against the network and optimizer its stored config builds
+    (``checkpoint.check_fits``); ConfigError on ``resume`` when any part of it does not fit."""
+    train_set = getattr(problem, "train", None)
+    per_epoch = len(train_set) // int(cfg.batch_size) if train_set is not None else None
+    checkpoint.check_fits(state, model, update.optimizer, per_epoch, str(run_path), checkpoint.checkpoint_path(run_path))
+
+
+def preflight(cfg: DictConfig, resume_from: Path | None = None) -> None:
     """Build the problem and network once and run the checks that need them (no file written).
 
     Raises ConfigError for an ``init_from`` run whose weights do not fit this network and
@@ -236,6 +286,8 @@ def preflight(cfg: DictConfig) -> None:
         raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
     if cfg.get("init_from"):
         check_init_from(model, cfg.init_from, cfg.problem.name)
+    if resume_from is not None:  # read once per process: train() gets the same state back
+        check_checkpoint(checkpoint.load(resume_from), problem, model, update, cfg, Path(resume_from))
     if cfg.get("tensorboard"):
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
@@ -281,7 +333,11 @@ def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
         return []
     from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
 
-    return [TensorBoardSink(run_path.parent / "tensorboard")]
+    try:
+        return [TensorBoardSink(run_path.parent)]
+    except OSError as exc:  # its directory became a file or a link after the checks: a view, not the run
+        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
+        return []
 
 
 class TrainingRun:
@@ -291,6 +347,7 @@ class TrainingRun:
         self.cfg, self.run_path, self.problem, self.model, self.update = cfg, run_path, problem, model, update
         self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
         self.test = problem.test_set()
+        self.val = problem.val_set()  # its loss is the curve val_loss (what tuning reads)
         self.memory = MemoryMonitor(device)
         self.cpu = CpuUse(torch.get_num_threads())
         self.shuffle = torch.Generator().manual_seed(cfg.seed)
@@ -339,6 +396,8 @@ class TrainingRun:
         self.last_eval_step = self.step
         self.model.eval()
         metrics = evaluate(self.problem, self.model, self.test)
+        if self.val is not None:
+            metrics["val_loss"] = evaluate(self.problem, self.model, self.val)["test_loss"]
         self.model.train()
         train_loss = float(np.mean(self.batch_losses)) if self.batch_losses else math.nan
         self.batch_losses.clear()
@@ -410,6 +469,7 @@ class TrainingRun:
         self.batch_losses.append(result.loss)
         t = result.timings
         row = {"step": self.step, "wall_time": self.clock(), "loss": result.loss, "update_s": sum(t.values()), **t}
+        row.update(result.metrics)  # an optimizer's own values (SIP: proxy_loss)
         if self.records_spectrum:
             row.update(spectrum_columns(result.spectrum))
         self.sinks.on_update(row)
@@ -494,7 +554,8 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
     run.file.close_failed(exc, run.step, write_pending)
     for sink in run.sinks.sinks:
         if sink is not run.file:
-            sink.close("failed", str(exc), run.step)
+            with contextlib.suppress(Exception):  # a side sink's failure must not hide the run's
+                sink.close("failed", str(exc), run.step)
     signals.restore()
 
 
@@ -508,20 +569,24 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
     state = checkpoint.load(run_path) if resume else None
     if state is not None:
         checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
-    device, problem = _setup(cfg)
+    placed = choose_placement(cfg, state)
+    device, problem = _setup(cfg, device=placed.device if placed else None)
     warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     model = problem.build_model()
     if cfg.get("init_from") and not resume:
         load_initial_weights(model, cfg.init_from, cfg.problem.name)
     update = build_update(problem, model, cfg.optimizer)
+    if state is not None:  # all of it fits this network and optimizer, before the run file is touched
+        check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
 
     clock.pause()  # creating/reopening the file is not training
     extra = _extra_sinks(cfg, run_path)
-    file = RunFileSink(_open_run_file(cfg, run_path, state, {**environment(device), "warmup_s": warmup_s}, overrides))
+    env = {**environment(device), "warmup_s": warmup_s, **(placed.record() if placed else {})}
+    file = RunFileSink(_open_run_file(cfg, run_path, state, env, overrides))
     step = state["step"] if state else 0
     name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     progress = Progress(

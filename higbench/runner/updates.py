@@ -35,6 +35,7 @@ class UpdateResult:
     finite: bool = True
     reason: str = ""
     spectrum: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)  # an optimizer's own per-update values (SIP: proxy_loss)
 
 
 def synchronize(device: torch.device) -> None:
@@ -72,6 +73,7 @@ class Update:
             reduction=problem.cfg.get("loss_reduction", "mean"),  # poisson: sum, as the reference
             guard=True,
             outputs_fn=None if self.composed else (lambda: problem.outputs(model, batch)),
+            inverse=(lambda y, u0: problem.inverse_simulator(batch.inputs, y, u0)) if problem.has_inverse_simulator() else None,
         )
 
     def __call__(self, batch: Batch) -> UpdateResult:
@@ -94,6 +96,7 @@ class Update:
             getattr(opt, "last_finite", True),
             getattr(opt, "last_reason", ""),
             getattr(opt, "last_spectrum", {}),
+            dict(getattr(opt, "last_metrics", {})),
         )
 
 

@@ -14,6 +14,8 @@ starts jobs in list order, so a list sorted longest first keeps the workers busy
 # dataclass with string annotations cannot be built.
 
 import json
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,10 +38,25 @@ ConfigStore.instance().store(group="hydra/sweeper", name="joblist", node=JobList
 
 def read_jobs(path: str | Path) -> list[list[str]]:
     """The job list of a jobs file, checked to be a list of lists of ``key=value`` strings."""
-    jobs = json.loads(Path(path).read_text())
+    jobs = json.loads(_read_regular(Path(path)))
     if not isinstance(jobs, list) or not all(isinstance(j, list) and all(isinstance(o, str) for o in j) for j in jobs):
         raise ValueError(f"hydra.sweeper.jobs_file={path}: must hold a JSON list of lists of override strings")
     return jobs
+
+
+MAX_JOBS_FILE_BYTES = 64 << 20
+
+
+def _read_regular(path: Path) -> str:
+    """The text of ``path`` if it is a regular file (a FIFO would block the sweep forever)."""
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ValueError(f"hydra.sweeper.jobs_file={path}: not a regular file")
+        if st.st_size > MAX_JOBS_FILE_BYTES:
+            raise ValueError(f"hydra.sweeper.jobs_file={path}: {st.st_size:,} bytes (at most {MAX_JOBS_FILE_BYTES:,})")
+        return f.read(MAX_JOBS_FILE_BYTES + 1).decode()
 
 
 def merge(common: list[str], job: list[str]) -> list[str]:

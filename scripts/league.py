@@ -1,0 +1,237 @@
+"""The league: tune every optimizer the same way, confirm on fresh seeds and held-out variants, score.
+
+    python scripts/league.py --problems toy,oscillator --seconds 5 --trials 4      # a small league
+    python scripts/league.py --report-only --out docs/results/league               # re-read, train nothing
+
+Per problem (its config owns the budget ``problem.league_seconds``, the targets
+``problem.targets`` and the held-out variants ``problem.held_out``; ``--seconds`` replaces the
+budget for a short league):
+
+1. tuning: ``--trials`` scrambled Sobol points of each optimizer's search space
+   (conf/search/<optimizer>.yaml) on the tuning seed; the best by *validation* loss at the budget
+   is the optimizer's setting (``choose``);
+2. confirmation: that setting on ``--seeds`` fresh seeds, on the problem and on each held-out
+   variant (never tuned on); the ``--paper`` optimizers also at their shipped settings
+   (conf/problem_optimizer/: the paper's), as separate rows;
+3. scores: ``higbench-results ROOT --league`` (test loss, read once here), written to
+   ``--out`` with the manifest: every run's identity and role, the chosen settings, the
+   hardware calibration and the machine's load.
+
+Every run is an ordinary higbench run launched through ``higbench.jobs.launch`` into ``--root``;
+a run already there (same identity) is reused, so a killed league resumes and a new optimizer adds
+only its own runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from higbench.jobs import Job, launch, resolve, run_index  # noqa: E402
+from higbench.results import league  # noqa: E402
+
+EVALUATIONS = 25  # per run: the time-to-target resolution is budget / 25
+DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig")
+
+
+def problem_config(problem: str) -> dict:
+    """The composed problem node (targets, budget, variants) of ``problem``."""
+    from higbench.jobs import compose, hydra_conf
+
+    with hydra_conf():
+        return compose((f"problem={problem}",))["problem"]
+
+
+def base_overrides(problem: str, optimizer: str, seed: int, seconds: float) -> dict:
+    return {"problem": problem, "optimizer": optimizer, "seed": seed, "budget.seconds": seconds,
+            "eval_every": float(f"{seconds / EVALUATIONS:.3g}")}  # fmt: skip
+
+
+def variant_overrides(variant: str) -> dict:
+    return dict(item.split("=", 1) for item in variant.split())
+
+
+def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float) -> list[Job]:
+    space = league.load_space(optimizer)
+    jobs = []
+    for i, trial in enumerate(league.sobol_trials(space, trials, seed=0)):
+        for seed in league.TUNING_SEEDS:
+            job = Job(
+                "league", f"tune/{problem}/{optimizer}/{i}", {**base_overrides(problem, optimizer, seed, seconds), **trial}, seed
+            )
+            jobs.append(job)
+    return jobs
+
+
+def choose(jobs: list[Job]) -> dict | None:
+    """The tuned setting: the overrides of the trial with the lowest validation loss (median over
+    tuning seeds), read from its run files; None when no trial completed."""
+    from higbench.results.index import load_runs
+
+    done = [j for j in jobs if j.path is not None]
+    if not done:
+        return None
+    runs = load_runs([j.path for j in done])
+    by_path = {str(Path(j.path)): j for j in done}
+    runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
+    best = league.best_trial(runs)
+    if best is None:
+        return None
+    job = by_path[str(Path(best["path"]))]
+    space = league.load_space(str(job.overrides["optimizer"]))
+    return {k: v for k, v in job.overrides.items() if k in space}
+
+
+def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants) -> list[Job]:
+    """The setting (tuned, or the shipped one for ``setting=None``) on fresh seeds, on the problem
+    and each held-out variant."""
+    role = "paper" if setting is None else "confirm"
+    jobs = []
+    for variant in ["", *variants]:
+        for seed in seeds:
+            overrides = {**base_overrides(problem, optimizer, seed, seconds), **variant_overrides(variant), **(setting or {})}
+            jobs.append(Job("league", f"{role}/{problem}/{variant or 'base'}/{optimizer}", overrides, seed))
+    return jobs
+
+
+def run_jobs(jobs: list[Job], root: Path, n_jobs: int) -> None:
+    """Launch the jobs not done under ``root`` (reusing every done one), then resolve them again."""
+    resolve(jobs, run_index(root))
+    todo = [j for j in jobs if not j.done]
+    print(f"[league] {len(jobs) - len(todo)} of {len(jobs)} run(s) already done under {root}", file=sys.stderr)
+    if todo:
+        launch(todo, root, n_jobs=n_jobs, launcher="basic" if n_jobs == 1 else "joblib")
+        resolve(jobs, run_index(root))
+
+
+def calibration() -> dict:
+    """One fixed benchmark, so that tables from different machines can be read side by side:
+    the best of 5 timings of 50 float32 256x256 matrix products and one float64 256x256 SVD,
+    on one thread; with the load average at the time."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    gen = torch.Generator().manual_seed(0)
+    a = torch.randn(256, 256, generator=gen)
+    m = torch.randn(256, 256, generator=gen, dtype=torch.float64)
+    matmul, svd = [], []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(50):
+            a @ a
+        matmul.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        torch.linalg.svd(m)
+        svd.append(time.perf_counter() - t0)
+    torch.set_num_threads(threads)
+    return {"when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "matmul_50x256_s": min(matmul), "svd_256_f64_s": min(svd),
+            "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
+
+
+def report(root: Path, out: Path, manifest: dict) -> str:
+    from higbench.results.__main__ import main as results_main
+    from higbench.results.index import load_runs
+
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        results_main([str(root), "--league"])
+    text = buffer.getvalue()
+    out.mkdir(parents=True, exist_ok=True)
+    runs, curves = load_runs(root, curves=True, figure_runs=True)
+    scored, reached, _ = league.league_frames(runs, curves, league.all_spaces())
+    if len(scored):
+        league.plot_league(reached, league.interval_table(scored, reached), out)
+        identities = scored[["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps",
+                             "train_time_s", "config_id", "path"]].copy()  # fmt: skip
+        identities["path"] = identities["path"].map(lambda p: str(Path(p).resolve().relative_to(root.resolve())))
+        identities.sort_values(["task", "league_setting", "seed"]).to_csv(out / "runs.csv", index=False)
+    (out / "league.txt").write_text(text)
+    (out / "league.json").write_text(json.dumps(manifest, indent=1, default=str) + "\n")
+    return text
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--problems", default="toy,oscillator", help="comma-separated (default: toy,oscillator)")
+    p.add_argument(
+        "--optimizers", default=",".join(DEFAULT_OPTIMIZERS), help="comma-separated; each needs conf/search/<name>.yaml"
+    )
+    p.add_argument("--paper", default="hig,gn,adam", help="optimizers also run at their shipped (paper) settings")
+    p.add_argument("--trials", type=int, default=6, help="Sobol trials per (problem, optimizer), the same for every optimizer")
+    p.add_argument("--seeds", type=int, default=3, help="confirmation seeds 0..N-1 (never a tuning seed)")
+    p.add_argument("--seconds", type=float, help="training-clock budget per run (default: each problem's league_seconds)")
+    p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
+    p.add_argument("--root", type=Path, default=ROOT / "outputs" / "league", help="where the runs go (and are reused from)")
+    p.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "league", help="league.txt and league.json")
+    p.add_argument("--jobs", type=int, default=1, help="runs at once (1: the budgets are not shared)")
+    p.add_argument("--report-only", action="store_true", help="train nothing; score the runs under --root")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    problems = [p for p in args.problems.split(",") if p]
+    optimizers = [o for o in args.optimizers.split(",") if o]
+    paper = [o for o in args.paper.split(",") if o in optimizers]
+    seeds = list(range(args.seeds))
+    if set(seeds) & set(league.TUNING_SEEDS):
+        raise SystemExit(f"league: error: --seeds {args.seeds}: overlaps the tuning seeds {league.TUNING_SEEDS}")
+    for o in optimizers:
+        league.load_space(o)  # a missing or bad search space stops the league before any run
+    args.root.mkdir(parents=True, exist_ok=True)
+    manifest: dict = {"command": " ".join(["python scripts/league.py", *(argv if argv is not None else sys.argv[1:])]),
+                      "trials": args.trials, "tuning_seeds": list(league.TUNING_SEEDS), "confirmation_seeds": seeds,
+                      "problems": {}, "calibration": [calibration()]}  # fmt: skip
+    all_jobs: list[tuple[str, Job]] = []
+    for problem in problems:
+        node = problem_config(problem)
+        seconds = args.seconds or node.get("league_seconds")
+        if not seconds:
+            raise SystemExit(f"league: error: problem={problem}: no problem.league_seconds; give --seconds")
+        variants = list(node.get("held_out") or [])[: args.variants]
+        tune = {o: tuning_jobs(problem, o, args.trials, seconds) for o in optimizers}
+        if not args.report_only:
+            run_jobs([j for jobs in tune.values() for j in jobs], args.root, args.jobs)
+        else:
+            resolve([j for jobs in tune.values() for j in jobs], run_index(args.root))
+        chosen = {o: choose(jobs) for o, jobs in tune.items()}
+        confirm = [
+            j
+            for o in optimizers
+            if chosen[o] is not None
+            for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)
+        ]
+        confirm += [j for o in paper for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+        if not args.report_only:
+            run_jobs(confirm, args.root, args.jobs)
+        else:
+            resolve(confirm, run_index(args.root))
+        manifest["problems"][problem] = {"seconds": seconds, "targets": node.get("targets"), "held_out": variants,
+                                         "chosen": chosen}  # fmt: skip
+        all_jobs += [("tune", j) for jobs in tune.values() for j in jobs] + [(j.sweep.split("/")[0], j) for j in confirm]
+    manifest["calibration"].append(calibration())
+    manifest["runs"] = [{"role": role, "job": j.sweep, "seed": j.seed, "identity": j.identity, "status": j.status,
+                         "path": str(Path(j.path).relative_to(args.root.resolve())) if j.path else None}
+                        for role, j in all_jobs]  # fmt: skip
+    print(report(args.root, args.out, manifest))
+    missing = [j for _, j in all_jobs if not j.done]
+    if missing:
+        print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    pd.set_option("display.width", 250)
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""The league's scores on hand-made frames with known answers, its search spaces and tuning
+rule, and ``higbench-results --league`` on synthetic run files."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from higbench.results import league
+from higbench.results.profile import performance_profile
+from higbench.runfile.writer import RunFileWriter
+
+# -- interval estimates ----------------------------------------------------------------------
+
+
+def test_iqm_is_the_mean_of_the_middle_half():
+    assert league.iqm([1, 2, 3, 4, 5, 6, 7, 8]) == pytest.approx(4.5)  # mean of 3, 4, 5, 6
+    assert league.iqm([100, 1, 2, 3]) == pytest.approx(2.5)  # an outlier is cut
+    assert league.iqm([1, 2, 3, math.inf]) == pytest.approx(2.5)  # inf (never reached) is cut too
+    assert league.iqm([1, math.inf, math.inf, math.inf]) == math.inf  # most never reached
+    assert math.isnan(league.iqm([]))
+
+
+def test_bootstrap_of_a_constant_has_a_point_interval():
+    assert league.bootstrap_ci([[2.0, 2.0, 2.0]], league.iqm, reps=200) == (2.0, 2.0, 2.0)
+
+
+def test_bootstrap_is_stratified():
+    # Two tasks of equal size, each constant: every stratified resample has the same pooled mean
+    # (an unstratified one would not: it could draw all 1s).
+    point, lo, hi = league.bootstrap_ci([[1.0] * 4, [3.0] * 4], np.mean, reps=500)
+    assert (point, lo, hi) == (2.0, 2.0, 2.0)
+
+
+def test_bootstrap_interval_covers_the_spread():
+    point, lo, hi = league.bootstrap_ci([[1.0, 2.0, 3.0, 4.0, 5.0]], np.mean, reps=2000, seed=1)
+    assert point == 3.0 and 1.0 <= lo < 3.0 < hi <= 5.0
+    assert league.bootstrap_ci([[1.0, 2.0, 3.0, 4.0, 5.0]], np.mean, reps=2000, seed=1) == (point, lo, hi)  # seeded
+
+
+def test_probability_of_improvement_counts_pairs_and_half_ties():
+    assert league.probability_of_improvement([1, 2], [3, 4]) == 1.0
+    assert league.probability_of_improvement([3, 4], [1, 2]) == 0.0
+    assert league.probability_of_improvement([1], [1]) == 0.5
+    assert league.probability_of_improvement([1, 3], [2]) == 0.5
+    assert league.probability_of_improvement([1, 2, 3], [2]) == pytest.approx((1 + 0.5 + 0) / 3)
+
+
+def test_probability_of_improvement_averages_over_tasks():
+    point, lo, hi = league.probability_of_improvement_ci([([1, 1], [2, 2]), ([5, 5], [2, 2])], reps=200)
+    assert (point, lo, hi) == (0.5, 0.5, 0.5)
+
+
+# -- the integrated score --------------------------------------------------------------------
+
+
+def test_integrated_score_known_answer_and_numeric_area():
+    ratios = [1.0, 2.0, math.inf]
+    assert league.integrated_score(ratios, 4.0) == pytest.approx((3 + 2 + 0) / 3 / 3)
+    assert league.integrated_score([1.0, 1.0], 4.0) == 1.0
+    assert league.integrated_score([5.0, math.nan], 4.0) == 0.0
+    # The same area from the profile on a fine grid of tau (the step function's Riemann sum).
+    times = pd.DataFrame({"problem": ["a", "b", "c"], "target": [1, 1, 1], "setting": ["s"] * 3, "ratio": ratios})
+    taus = np.linspace(1, 4, 30001)
+    rho = performance_profile(times, taus)["s"].to_numpy()
+    assert np.trapezoid(rho, taus) / 3 == pytest.approx(league.integrated_score(ratios, 4.0), abs=1e-3)
+
+
+# -- search spaces and the tuning rule -------------------------------------------------------
+
+
+def test_every_shipped_optimizer_has_a_search_space():
+    from higbench.config import config_dir
+
+    optimizers = {p.stem for p in (Path(config_dir()) / "optimizer").glob("*.yaml")}
+    assert optimizers <= set(league.all_spaces()), "conf/search/ lacks a space for some optimizer"
+
+
+def test_sobol_trials_fill_the_log_range():
+    space = {"optimizer.lr": {"low": 1e-4, "high": 1e-1, "log": True, "integer": False},
+             "batch_size": {"low": 32, "high": 512, "log": True, "integer": True}}  # fmt: skip
+    trials = league.sobol_trials(space, 8, seed=3)
+    assert len(trials) == 8 and trials == league.sobol_trials(space, 8, seed=3)
+    lrs = [t["optimizer.lr"] for t in trials]
+    assert all(1e-4 <= lr <= 1e-1 for lr in lrs)
+    assert min(lrs) < 1e-3 and max(lrs) > 1e-2  # log-uniform: both ends of the decades are visited
+    assert {t["batch_size"] for t in trials} <= {32, 64, 128, 256, 512}
+
+
+def test_a_bad_search_space_names_the_key(tmp_path):
+    (tmp_path / "x.yaml").write_text(yaml.safe_dump({"space": {"optimizer.lr": {"low": 0, "high": 1}}}))
+    with pytest.raises(ValueError, match=r"space.optimizer.lr: low=0"):
+        league.load_space("x", tmp_path)
+    with pytest.raises(ValueError, match="optimizer=nope: no search space"):
+        league.load_space("nope", tmp_path)
+
+
+def test_tuning_never_reads_the_test_loss():
+    trials = pd.DataFrame(
+        {"trial": [0, 1, 2], "status": ["completed", "completed", "diverged"], "final_val_loss": [0.3, 0.1, 0.01]}
+    )
+    # No test-loss column at all: the choice is made without it (the lowest validation loss;
+    # the diverged trial does not count).
+    assert league.best_trial(trials)["trial"] == 1
+    with pytest.raises(ValueError, match="validation loss only"):
+        league.best_trial(trials.assign(final_test_loss=[0.0, 1.0, 1.0]), metric="final_test_loss")
+
+
+def test_the_league_script_tunes_on_the_validation_loss():
+    source = (Path(__file__).resolve().parents[2] / "scripts" / "league.py").read_text()
+    assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
+
+
+# -- --league on synthetic run files ---------------------------------------------------------
+
+
+def write_league_run(root: Path, name: str, optimizer: str, seed: int, losses, *, overrides=(), updates_per_eval=10):
+    """A completed run of the toy problem whose test and validation curves are ``losses``."""
+    config = {"problem": {"name": "toy", "targets": [1e-1, 1e-2]}, "optimizer": {"name": optimizer}, "seed": seed,
+              "budget": {"seconds": 5.0, "max_updates": None}}  # fmt: skip
+    w = RunFileWriter(
+        root / name / "run.h5", yaml.safe_dump(config), ["problem=toy", f"optimizer={optimizer}", f"seed={seed}", *overrides],
+        env={"hostname": "test"}, meta={"problem": "toy", "optimizer": optimizer},
+    )  # fmt: skip
+    for i, loss in enumerate(losses):
+        w.append_row("curves", {"step": i * updates_per_eval, "epoch": 0, "wall_time": float(i), "train_loss": loss,
+                                "test_loss": loss, "val_loss": loss * 1.1, "rss_mb": 1.0})  # fmt: skip
+    w.flush()
+    w.f.attrs["steps"] = (len(losses) - 1) * updates_per_eval
+    w.f.attrs["wall_time"] = float(len(losses) - 1)
+    w.close("completed", "", (len(losses) - 1) * updates_per_eval)
+
+
+def test_results_league_prints_scores_and_leaves_tuning_runs_out(tmp_path, capsys):
+    from higbench.results.__main__ import main
+
+    for seed in (0, 1, 2):  # hig reaches 1e-2 at 1 s in 1 update, adam at 3 s in 30 updates
+        write_league_run(tmp_path, f"h{seed}", "hig", seed, [1.0, 0.005, 0.001], overrides=["optimizer.lr=0.5"],
+                         updates_per_eval=1)  # fmt: skip
+        write_league_run(tmp_path, f"a{seed}", "adam", seed, [1.0, 0.5, 0.05, 0.009], overrides=["optimizer.lr=0.01"])
+    write_league_run(tmp_path, "tune", "adam", 1000, [1.0, 1e-6], overrides=["optimizer.lr=0.1"])  # a tuning seed
+    assert main([str(tmp_path), "--league"]) == 0
+    out = capsys.readouterr().out
+    assert "6 scored runs" in out and "1 tuning run(s) left out" in out
+    seconds = out.split("equal wall clock")[1].split("equal updates")[0]
+    hig_row = next(line for line in seconds.splitlines() if line.startswith("hig"))
+    adam_row = next(line for line in seconds.splitlines() if line.startswith("adam"))
+    # hig: fastest on both targets (score 1); adam: 1e-1 at 2 s (2x), 1e-2 at 3 s (3x): (2 + 1) / 2 / 3
+    assert hig_row.split()[-1] == "1.000" and adam_row.split()[-1] == f"{(2 + 1) / 2 / 3:.3f}"
+    assert "P(hig ends below X)" in out and "adam" in out.split("P(hig ends below X)")[1]
+    assert "0.00123 [0.00123, 0.00123]" not in out  # the test loss, not the val loss (1.1x), is the table's
+    assert "0.001 [0.001, 0.001]" in out
+
+
+def test_the_bootstraps_row_wise_iqm_matches_iqm():
+    rng = np.random.default_rng(0)
+    matrix = rng.lognormal(size=(50, 7))
+    matrix[3, 2] = math.inf  # one cut, and a row where inf stays
+    matrix[4, :5] = math.inf
+    np.testing.assert_allclose(league._iqm_rows(matrix), [league.iqm(row) for row in matrix], rtol=1e-12)
+
+
+def test_profile_targets_come_from_the_problem_configs():
+    from higbench.results.profile import configured_targets
+
+    runs = pd.DataFrame(
+        {"problem.name": ["toy", "toy", "poisson"], "problem.targets": [(1e-2, 1e-3), None, None],
+         "started": ["2026-01-01T00:00:00+0000"] * 3}
+    )  # fmt: skip
+    assert configured_targets(runs) == {"toy": [1e-2, 1e-3]}  # poisson's runs predate the key: absent
