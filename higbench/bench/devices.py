@@ -25,6 +25,7 @@ import sys
 from pathlib import Path
 
 from higbench.results.index import DEFAULT_THRESHOLDS, read_run_summary, threshold_column
+from higbench.runfile.reader import RUN_FILE
 
 # Every decade a problem's test loss passes through (Poisson's starts near 1e3, the oscillator's ends near 1e-7).
 THRESHOLDS = tuple(sorted({1e3, 1e2, 1e1, 1e0, *DEFAULT_THRESHOLDS, 1e-7}, reverse=True))
@@ -60,7 +61,7 @@ def run_side_by_side(problem: str, optimizer: str, seconds: float, out: Path, th
         output, _ = proc.communicate()
         if proc.returncode != 0:
             print(f"{problem} {optimizer} device={d} exited {proc.returncode}:\n{output[-2000:]}", file=sys.stderr)
-    return {d: dirs[d] / "run.h5" for d in DEVICES}
+    return {d: dirs[d] / RUN_FILE for d in DEVICES}
 
 
 def summary(problem: str, optimizer: str, device: str, path: Path) -> dict:

@@ -123,9 +123,13 @@ def main(argv=None) -> None:
     parser.add_argument("--no-exact", action="store_true", help="skip the exact route (K too large)")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="extra Hydra overrides")
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    parser.add_argument("--threads", default="auto", help="torch threads: N or auto (as bench.step)")
     args = parser.parse_args(argv)
     if any(m < 1 for m in args.steps):
         parser.error(f"--steps {args.steps}: every step count must be >= 1")
+    from higbench.runner.threads import resolve_threads
+
+    torch.set_num_threads(resolve_threads(args.threads if args.threads == "auto" else int(args.threads)))
     device = torch.device(args.device)
     for b in args.batch_size or [default_batch(args.problem, args.optimizer)]:
         rows = probe(

@@ -57,9 +57,10 @@ class SplitOptimizer(torch.optim.Optimizer):
     """One ``torch.optim`` optimizer per part of the parameters; ``parts``: rule -> {_target_, arguments}."""
 
     def __init__(self, params, parts: dict):
-        params = [p for p in params if p.requires_grad] if not isinstance(params, torch.Tensor) else [params]
+        params = [params] if isinstance(params, torch.Tensor) else list(params)
         if any(isinstance(p, dict) for p in params):
             raise ValueError("parameter groups are not supported: the parts' rules make the groups")
+        params = [p for p in params if p.requires_grad]
         if not isinstance(parts, dict) or not parts:
             raise ValueError(f"parts={parts!r}: must map rules ({', '.join(RULES)}) to optimizers")
         unknown = [k for k in parts if k not in RULES]

@@ -1,6 +1,7 @@
 """The Krylov route (optimizer.solver=krylov): Lanczos on products with K = J J^T, checked
 against the exact routes (SVD of J, eigen-decomposition of K)."""
 
+import json
 import math
 
 import numpy as np
@@ -217,3 +218,18 @@ def test_run_file_records_the_step_error_per_update(tmp_path):
     assert len(updates) == 3 and (updates["step_error"] > 0).all() and (updates["sv_max"] > 0).all()
     exact = load_updates(short_run(tmp_path / "exact", "hig", "optimizer.solver=gram", updates=2))
     assert np.isnan(exact["step_error"]).all()
+
+
+def test_probe_prints_cosine_and_estimate_per_step_count(capsys):
+    from higbench.bench import krylov as bench_krylov
+
+    threads = torch.get_num_threads()
+    try:
+        bench_krylov.main(["--problem", "poisson", "--batch-size", "1", "--steps", "8", "64", "--repeats", "1", "--threads", "1"])
+    finally:
+        torch.set_num_threads(threads)
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert [r["steps"] for r in rows] == [8, 64] and all(r["rows"] == 64 for r in rows)
+    few, full = rows
+    assert full["cosine"] == pytest.approx(1.0, abs=1e-9) and full["step_error"] == 0.0
+    assert few["cosine"] < full["cosine"] and few["step_error"] > 0 and few["krylov_s"] > 0 and few["exact_s"] > 0
