@@ -13,8 +13,9 @@ then runs on fresh confirmation seeds and on the problem's held-out variants
 (``problem.held_out``), and only those runs are scored, on the *test* loss. The scores follow
 rliable (Agarwal et al. 2021: interquartile mean, stratified bootstrap, probability of
 improvement) and AlgoPerf (Dahl et al. 2023: the integrated performance profile). rliable
-itself pins an old ``arch`` that does not install on current Pythons, so the few functions are
-here, each tested on hand-made frames with known answers (tests/test_league.py).
+itself is not a dependency: its release pins an old ``arch`` (and seaborn) for a few functions,
+which are written here instead, each tested on hand-made frames with known answers
+(tests/results/test_league.py).
 """
 
 from __future__ import annotations
