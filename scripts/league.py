@@ -140,6 +140,23 @@ def calibration() -> dict:
             "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
 
 
+def machine(runs: pd.DataFrame) -> dict:
+    """What the runs had of the machine: their CPU share (CPU seconds over wall seconds per
+    thread; 1 = a core of their own), the load average at their end, threads and revisions."""
+    share = pd.to_numeric(runs.get("env.cpu_share"), errors="coerce").dropna()
+    load = runs.get("env.load_at_finish", pd.Series(dtype=object)).dropna().map(lambda v: float(v[0]))
+    return {
+        "runs": len(runs),
+        "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
+        "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
+        "load_1min_median": round(float(load.median()), 2) if len(load) else None,
+        "cpu_count": int(pd.to_numeric(runs.get("env.cpu_count"), errors="coerce").max()) if len(runs) else None,
+        "threads_per_run": sorted(set(pd.to_numeric(runs.get("env.torch_threads"), errors="coerce").dropna().astype(int))),
+        "revisions": sorted(set(runs.get("env.git_revision", pd.Series(dtype=str)).dropna().astype(str).str[:12])),
+        "trained": [str(runs["started"].min()), str(runs["finished"].max())] if "started" in runs else None,
+    }
+
+
 def report(root: Path, out: Path, manifest: dict) -> str:
     from higbench.results.__main__ import main as results_main
     from higbench.results.index import load_runs
@@ -151,13 +168,15 @@ def report(root: Path, out: Path, manifest: dict) -> str:
     out.mkdir(parents=True, exist_ok=True)
     runs, curves = load_runs(root, curves=True, figure_runs=True)
     scored, reached, _ = league.league_frames(runs, curves, league.all_spaces())
+    manifest["machine"] = machine(runs)
+    text = "machine: " + ", ".join(f"{k} {v}" for k, v in manifest["machine"].items()) + "\n" + text
     if len(scored):
         league.plot_league(reached, league.interval_table(scored, reached), out)
         identities = scored[["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps",
                              "train_time_s", "config_id", "path"]].copy()  # fmt: skip
         identities["path"] = identities["path"].map(lambda p: str(Path(p).resolve().relative_to(root.resolve())))
         identities.sort_values(["task", "league_setting", "seed"]).to_csv(out / "runs.csv", index=False)
-    (out / "league.txt").write_text(text)
+    (out / "league.txt").write_text(text)  # after the machine line
     (out / "league.json").write_text(json.dumps(manifest, indent=1, default=str) + "\n")
     return text
 

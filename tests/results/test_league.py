@@ -173,3 +173,9 @@ def test_profile_targets_come_from_the_problem_configs():
          "started": ["2026-01-01T00:00:00+0000"] * 3}
     )  # fmt: skip
     assert configured_targets(runs) == {"toy": [1e-2, 1e-3]}  # poisson's runs predate the key: absent
+
+
+def test_more_trials_keep_the_first_ones():
+    # A league run again with more trials reuses its earlier runs: the first points stay the same.
+    space = league.load_space("hig")
+    assert league.sobol_trials(space, 8)[:4] == league.sobol_trials(space, 4)
