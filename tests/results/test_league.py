@@ -116,6 +116,17 @@ def test_the_league_script_tunes_on_the_validation_loss():
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
+def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.refusal("oscillator", "sip") == "optimizer=sip: problem oscillator has no inverse simulator"
+    assert script.refusal("toy", "sip") is None and script.refusal("oscillator", "hig") is None
+
+
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
