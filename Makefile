@@ -2,6 +2,9 @@
 PYTHON ?= python3
 VENV ?= .venv
 TORCH_VERSION ?= 2.13.0
+# Where torch comes from: empty = pip's default index, which on Linux gives the CUDA build (what
+# a GPU needs, several GB); TORCH_INDEX=https://download.pytorch.org/whl/cpu gives the CPU-only one.
+TORCH_INDEX ?=
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 PRESET ?= quick
@@ -11,12 +14,12 @@ PYTEST_ARGS ?=
 
 .PHONY: install install-dev install-optuna run test test-slow test-all test-optuna lint bench bench-time-to-loss figures authors-env probe-authors-oscillator clean
 
-# A virtual environment with torch pinned first (CPU build), then higbench (editable) with
+# A virtual environment with torch pinned first (TORCH_INDEX above), then higbench (editable) with
 # only what `make run` needs. Re-runs when pyproject.toml changes.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip "setuptools>=77" wheel
-	$(BIN)/python -m pip install --quiet "torch==$(TORCH_VERSION)"
+	$(BIN)/python -m pip install --quiet "torch==$(TORCH_VERSION)" $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
 	$(BIN)/python -m pip install -qq -e .
 	rm -f $(DEV_STAMP) $(OPTUNA_STAMP)
 	touch $(STAMP)

@@ -15,6 +15,9 @@ and the network (per-layer factors) apart and never forms J. Run it:
 
     python scripts/example_custom_physics.py            # HIG for ~10 s
     python scripts/example_custom_physics.py --adam     # and Adam for the same time, to compare
+
+Another example, in a notebook with its plot (a ball through air drag):
+examples/hig_in_your_code.ipynb.
 """
 
 from __future__ import annotations

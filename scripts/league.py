@@ -42,7 +42,8 @@ from higbench.jobs import Job, launch, resolve, run_index  # noqa: E402
 from higbench.results import league  # noqa: E402
 
 EVALUATIONS = 25  # per run: the time-to-target resolution is budget / 25
-DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig")
+DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig",
+                      "adamw", "muon", "soap", "shampoo", "sip")  # fmt: skip
 
 
 def problem_config(problem: str) -> dict:
@@ -56,6 +57,22 @@ def problem_config(problem: str) -> dict:
 def base_overrides(problem: str, optimizer: str, seed: int, seconds: float) -> dict:
     return {"problem": problem, "optimizer": optimizer, "seed": seed, "budget.seconds": seconds,
             "eval_every": float(f"{seconds / EVALUATIONS:.3g}")}  # fmt: skip
+
+
+def refusal(problem: str, optimizer: str) -> str | None:
+    """Why ``optimizer`` cannot run on ``problem`` (the CLI's one line: SIP without an inverse
+    simulator, a package's missing extra), or None."""
+    from higbench.config import validate
+    from higbench.errors import ConfigError
+    from higbench.jobs import compose, hydra_conf
+
+    with hydra_conf():
+        cfg = compose((f"problem={problem}", f"optimizer={optimizer}"))
+    try:
+        validate(cfg)
+    except ConfigError as exc:
+        return str(exc)
+    return None
 
 
 def variant_overrides(variant: str) -> dict:
@@ -140,6 +157,23 @@ def calibration() -> dict:
             "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
 
 
+def machine(runs: pd.DataFrame) -> dict:
+    """What the runs had of the machine: their CPU share (CPU seconds over wall seconds per
+    thread; 1 = a core of their own), the load average at their end, threads and revisions."""
+    share = pd.to_numeric(runs.get("env.cpu_share"), errors="coerce").dropna()
+    load = runs.get("env.load_at_finish", pd.Series(dtype=object)).dropna().map(lambda v: float(v[0]))
+    return {
+        "runs": len(runs),
+        "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
+        "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
+        "load_1min_median": round(float(load.median()), 2) if len(load) else None,
+        "cpu_count": int(pd.to_numeric(runs.get("env.cpu_count"), errors="coerce").max()) if len(runs) else None,
+        "threads_per_run": sorted(set(pd.to_numeric(runs.get("env.torch_threads"), errors="coerce").dropna().astype(int))),
+        "revisions": sorted(set(runs.get("env.git_revision", pd.Series(dtype=str)).dropna().astype(str).str[:12])),
+        "trained": [str(runs["started"].min()), str(runs["finished"].max())] if "started" in runs else None,
+    }
+
+
 def report(root: Path, out: Path, manifest: dict) -> str:
     from higbench.results.__main__ import main as results_main
     from higbench.results.index import load_runs
@@ -151,13 +185,15 @@ def report(root: Path, out: Path, manifest: dict) -> str:
     out.mkdir(parents=True, exist_ok=True)
     runs, curves = load_runs(root, curves=True, figure_runs=True)
     scored, reached, _ = league.league_frames(runs, curves, league.all_spaces())
+    manifest["machine"] = machine(runs)
+    text = "machine: " + ", ".join(f"{k} {v}" for k, v in manifest["machine"].items()) + "\n" + text
     if len(scored):
         league.plot_league(reached, league.interval_table(scored, reached), out)
         identities = scored[["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps",
                              "train_time_s", "config_id", "path"]].copy()  # fmt: skip
         identities["path"] = identities["path"].map(lambda p: str(Path(p).resolve().relative_to(root.resolve())))
         identities.sort_values(["task", "league_setting", "seed"]).to_csv(out / "runs.csv", index=False)
-    (out / "league.txt").write_text(text)
+    (out / "league.txt").write_text(text)  # after the machine line
     (out / "league.json").write_text(json.dumps(manifest, indent=1, default=str) + "\n")
     return text
 
@@ -201,25 +237,26 @@ def main(argv=None) -> int:
         if not seconds:
             raise SystemExit(f"league: error: problem={problem}: no problem.league_seconds; give --seconds")
         variants = list(node.get("held_out") or [])[: args.variants]
-        tune = {o: tuning_jobs(problem, o, args.trials, seconds) for o in optimizers}
+        refused = {o: why for o in optimizers if (why := refusal(problem, o))}
+        for o, why in refused.items():
+            print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
+        usable = [o for o in optimizers if o not in refused]
+        tune = {o: tuning_jobs(problem, o, args.trials, seconds) for o in usable}
         if not args.report_only:
             run_jobs([j for jobs in tune.values() for j in jobs], args.root, args.jobs)
         else:
             resolve([j for jobs in tune.values() for j in jobs], run_index(args.root))
         chosen = {o: choose(jobs) for o, jobs in tune.items()}
         confirm = [
-            j
-            for o in optimizers
-            if chosen[o] is not None
-            for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)
+            j for o in usable if chosen[o] is not None for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)
         ]
-        confirm += [j for o in paper for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+        confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
         if not args.report_only:
             run_jobs(confirm, args.root, args.jobs)
         else:
             resolve(confirm, run_index(args.root))
         manifest["problems"][problem] = {"seconds": seconds, "targets": node.get("targets"), "held_out": variants,
-                                         "chosen": chosen}  # fmt: skip
+                                         "chosen": chosen, "left_out": refused}  # fmt: skip
         all_jobs += [("tune", j) for jobs in tune.values() for j in jobs] + [(j.sweep.split("/")[0], j) for j in confirm]
     manifest["calibration"].append(calibration())
     manifest["runs"] = [{"role": role, "job": j.sweep, "seed": j.seed, "identity": j.identity, "status": j.status,

@@ -1,16 +1,18 @@
 """Measure again, from the committed results, the claims whose measurement this revision changed.
 
-    python scripts/probe_remeasure.py                 # docs/results: rewrite those rows, then REPORT.md
+    python scripts/probe_remeasure.py                 # docs/results: rewrite those rows, redraw, then REPORT.md
     python scripts/probe_remeasure.py --dry-run       # print the new rows only
+    python scripts/probe_remeasure.py --no-redraw     # the rows and REPORT.md, not the pictures
 
 The run files behind docs/results are not committed; their plotted data are (<id>.csv: every
-evaluation of a run up to 1,000 of them). ``higbench.claims.committed`` rebuilds the runs from
+evaluation of a run up to 1,000 of them). ``higbench.figures.committed`` rebuilds the runs from
 those files and the claim's own measurement code runs on them, as a fresh build would on the run
 files. Where the plotted data count time only (oscillator runs evaluate by time), the update
 counts come from the row that was measured on the run files (stated in the row). A claim whose
 measurement needs more than the plotted data hold gets only the values that can be measured
-added to its stored row (``EXTEND``). A fresh `python -m higbench.figures` build measures every
-claim from its run files and replaces all of this.
+added to its stored row (``EXTEND``). The figures drawn from curves alone are drawn again by this
+revision's plotting code (``committed.REDRAWABLE``; their plotted data come out the same). A fresh
+`python -m higbench.figures` build measures every claim from its run files and replaces all of this.
 """
 
 from __future__ import annotations
@@ -19,10 +21,10 @@ import argparse
 import json
 from pathlib import Path
 
-from higbench.claims.committed import extend, remeasure, store
 from higbench.claims.paper import gn_small_tau_by_time
 from higbench.claims.report import write_report
 from higbench.figures import registry
+from higbench.figures.committed import REDRAWABLE, extend, redraw, remeasure, store
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 # Claims whose measurement changed and which the plotted data hold entirely.
@@ -60,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, default=RESULTS, help="a results directory (default: docs/results)")
     p.add_argument("--dry-run", action="store_true", help="print the rows, write nothing")
+    p.add_argument("--no-redraw", action="store_true", help="leave the pictures as they are")
     args = p.parse_args(argv)
     claims = registry.claims()
     rows = [remeasure(args.out, claims[cid]) for cid in REMEASURE + ADDED]
@@ -69,6 +72,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{row['id']}: {row['verdict']} ({row['rule_verdict']} by the rule): {row['measured']}")
         if not args.dry_run:
             store(args.out, row)
+    if not args.dry_run and not args.no_redraw:
+        for fid in REDRAWABLE:
+            print(redraw(args.out, fid))
     if not args.dry_run:
         print(write_report(args.out, list(registry.figures())))
     return 0

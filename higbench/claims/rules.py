@@ -30,6 +30,13 @@ OPTIMIZER_NAMES = {
     "rmsprop": "RMSprop",
     "gn": "GN",
     "hig": "HIG",
+    "lbfgs": "L-BFGS",
+    "lm": "Levenberg-Marquardt",
+    "adamw": "AdamW",
+    "muon": "Muon",
+    "soap": "SOAP",
+    "shampoo": "Shampoo",
+    "sip": "SIP",
 }
 REPRODUCED, PARTLY, NOT, NA = "reproduced", "partly", "not", "n/a"
 CAUSES = {

@@ -21,9 +21,13 @@ def sweep(name: str, opt: str, key: str, values: PerPreset, budget: Budget = BUD
     return Sweep(name, {"problem": "oscillator", "optimizer": opt}, budget, grid={key: values}, **kw)
 
 
+# Categorical colours (the values are settings, not a scale); κ's name the optimizer each value stands for.
+CATEGORIES = ("tab:gray", "tab:orange", "tab:purple", "tab:green", "tab:red")  # κ=1 (GD) ... -1/2 (HIG), -1 (GN)
+
+
 def lines(title: str, sweep: str, key: str, panel: str) -> Curves:
-    """One line per value of ``key``, viridis colours (up to 0.85: its yellow end is nearly invisible on white)."""
-    return Curves(title, [Series(sweep, key, label="{kv}", color="viridis", reverse=True, lw=1.8)], panel)
+    """One line per value of ``key``, in categorical colours, largest value first."""
+    return Curves(title, [Series(sweep, key, label="{kv}", color=list(CATEGORIES), reverse=True, lw=1.8)], panel)
 
 
 FIGURES = [

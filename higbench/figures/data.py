@@ -33,6 +33,13 @@ COLORS = {
     "adagrad": "tab:purple",
     "adadelta": "tab:brown",
     "rmsprop": "tab:orange",
+    "lbfgs": "tab:pink",
+    "lm": "tab:olive",
+    "adamw": "tab:cyan",
+    "muon": "navy",
+    "soap": "darkgoldenrod",
+    "shampoo": "teal",
+    "sip": "crimson",
 }
 COLUMNS = ("panel", "series", "seed", "run", "x_name", "x", "y_name", "y")  # of a figure's data table
 SYMBOLS = {

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import HE, LE
-from higbench.claims.rules import OPTIMIZER_NAMES, float32_loss
+from higbench.claims.rules import OPTIMIZER_NAMES, PAPER, float32_loss
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid
@@ -105,6 +105,17 @@ FIG4C = [
         seeds=PerPreset([0, 1, 2], smoke=[0]),
     ),
 ]
+
+
+def float32_floor(d: FigureData, ax) -> None:
+    """The float32 evaluation floor drawn as such: below it a dipole loss is rounding, not a value (a curve that
+    plunges there runs into the shaded band, clipped at a decade and a half below it)."""
+    floor = PAPER["float32_floor"]
+    ax.axhspan(floor / 30, floor, color="0.85", zorder=0, label="below the float32 evaluation floor: rounding")
+    ax.axhline(floor, color="0.4", ls=":", lw=1)
+    ax.set_ylim(bottom=floor / 30)
+
+
 ENERGIES = [
     Series(o, label=f"{tag} {{label}}", y=y, ls=ls) for o in ("adam", "hig") for y, ls, tag in ((LE, "-", "LE"), (HE, "--", "HE"))
 ]
@@ -130,6 +141,7 @@ FIGURES = [
                     Series("adam", "optimizer.lr", color=("#08306b", "#4292c6", "#9ecae1")),
                     Series("hig", "optimizer.lr", color=("#a1d99b", "#41ab5d", "#00441b")),
                 ],
+                extra=float32_floor,
             )
         ],
         size=(1, 6.2, 4.0),
@@ -145,6 +157,7 @@ FIGURES = [
                 ENERGIES,
                 "energy losses",
                 ylabel="low-energy (LE) / high-energy (HE) loss",
+                extra=float32_floor,
             )
         ],
     ),

@@ -102,6 +102,14 @@ def _ref_panel() -> Curves:
     return Curves(title, [Series(o, label="higbench {label}") for o in OSCILLATOR_CURVES], extra=reference)
 
 
+# fig. 2c: each optimizer's batch sizes in shades of its colour (light: the smallest b), and by line style.
+SHADES = {
+    "adam": ("#9ecae1", "#4292c6", "#08306b"),
+    "gn": ("#fc9272", "#ef3b2c", "#99000d"),
+    "hig": ("#a1d99b", "#41ab5d", "#00441b"),
+}
+
+
 FIGURES = [
     Figure(
         "fig2a",
@@ -123,7 +131,7 @@ FIGURES = [
         panels=[
             Curves(
                 "c) oscillators: Adam, GN, HIG for several batch sizes b",
-                [Series(o, "batch_size", ls=["-", "--", ":"]) for o in FIG2C_BATCHES],
+                [Series(o, "batch_size", color=list(SHADES[o]), ls=["-", "--", ":"]) for o in FIG2C_BATCHES],
                 ncol=3,
             )
         ],

@@ -87,14 +87,22 @@ def new_figure(ncols: int = 1, nrows: int = 1, width: float = 4.2, height: float
     return plt.subplots(nrows, ncols, figsize=(width * ncols, height * nrows + 0.3), squeeze=False, **kw)
 
 
-def legend(ax, **kw) -> None:
+OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0}  # beside the axes, off the data
+LEGEND_WIDTH = 2.6  # inches a panel gains for its legend beside it
+
+
+def legend(ax, shown: bool = True, **kw) -> None:
+    """The axes' legend beside it, right of the data (``kw``: another placement; ``shown``: False where the figure
+    has one legend for all its axes)."""
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7, **kw)
+        if shown:
+            ax.legend(fontsize=7, **(kw if "loc" in kw else {**OUTSIDE, **kw}))
     else:
         ax.text(0.5, 0.5, "no runs", transform=ax.transAxes, ha="center", va="center", color="0.5")
 
 
 def style(ax, title: str, xlabel: str = TIME, ylabel: str = "test loss", xscale: str = "linear", fontsize=9, **legend_kw):
+    legend_kw.pop("ncol", None)  # beside the axes one column reads best
     ax.set_yscale("log")
     ax.set_xscale(xscale)
     ax.set_xlabel(xlabel)
@@ -168,10 +176,11 @@ def curve(d: FigureData, ax, runs, label, *, panel, x="wall_time", y="test_loss"
     c = line.get_color()
     for dx, dy, _ in diverged:  # where a diverged run's last finite evaluation was, named in the plot
         ax.plot([dx], [dy], marker="X", ms=10, mew=1, mec="black", color=c, ls="none", zorder=5)
+        earlier = sum(t.get_text() == "diverged" for t in ax.texts)  # stacked: one run's label never hides another's
         ax.annotate(
             "diverged",
             (dx, dy),
-            xytext=(10, -14),  # below right: inside the axes, clear of the title (markers sit near loss 1)
+            xytext=(10, -14 - 12 * earlier),  # below right: inside the axes, clear of the title (markers sit near loss 1)
             textcoords="offset points",
             ha="left",
             va="top",
@@ -245,7 +254,7 @@ def draw_facets(d: FigureData, f: Facets) -> None:
                     curve(d, ax, runs, kv(f.lines, lv), panel=panel, color=PALETTE[i % len(PALETTE)])
             title = f"{f.prefix} {OPTIMIZER_NAMES.get(sweep, sweep) if f.rows == 'sweep' else head} {kv(f.cols, cv)}"
             xlabel, ylabel = FACET_TIME if r == len(rows) - 1 else "", "test loss" if c == 0 else ""
-            style(ax, " ".join(title.split()), xlabel, ylabel, fontsize=8)
+            style(ax, " ".join(title.split()), xlabel, ylabel, fontsize=8, shown=False)
         for c in range(len(cols), ncols):
             axes[r, c].axis("off")
     # One time axis for all panels: a panel whose runs all diverged at once would otherwise
@@ -253,8 +262,20 @@ def draw_facets(d: FigureData, f: Facets) -> None:
     if ends := [ax.get_xlim()[1] for ax in axes.ravel() if ax.lines]:  # none: no run done yet ("no runs")
         for ax in axes.ravel():
             ax.set_xlim(0, max(ends))
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    facet_legend(d, fig, f.lines, lines)
+    fig.tight_layout(rect=(0, 0.03, 1, 0.93))
     d.save(fig)
+
+
+def facet_legend(d: FigureData, fig, key: str, values: list) -> None:
+    """One legend above a grid for the lines every panel shares (a legend in each panel covers its data)."""
+    from matplotlib.lines import Line2D
+
+    seeds = " (median of the seeds, band: min-max)" if d.banded else ""
+    handles = [Line2D([], [], color=PALETTE[i % len(PALETTE)], label=kv(key, v) + seeds) for i, v in enumerate(values)]
+    if d.diverged_marked:
+        handles.append(Line2D([], [], marker="X", ms=8, mec="black", color="0.6", ls="none", label="diverged (last value)"))
+    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=8, frameon=False, bbox_to_anchor=(0.5, 1.0))
 
 
 def draw_one_panel(d: FigureData, f: Facets, row: tuple, lv: Any) -> None:
@@ -279,6 +300,7 @@ def draw(d: FigureData) -> None:
     declared = {s.name for s in f.runs(d.preset)}  # a preset may leave a setup out (fig3b: the authors')
     panels = [p for p in f.panels if not isinstance(p, Curves) or any(s.sweep in declared for s in p.series)]
     cols, width, height = f.size
+    width += LEGEND_WIDTH if any(isinstance(p, Curves) for p in panels) else 0.0  # the legends sit beside the axes
     fig, axes = new_figure(cols, -(-len(panels) // cols), width, height, sharey=f.sharey)
     for ax, p in zip(axes.ravel(), panels):
         draw_curves(d, ax, p) if isinstance(p, Curves) else p.draw(d, ax, **p.kw)

@@ -63,7 +63,9 @@ CHAIN = [
     Series("adam_cont", name="Adam, continued", color="#08306b"),
     Series("hig_cont", name="HIG pre-trained with Adam", color=COLORS["hig"]),
 ]
-TUNED = Series("adam_cont_tuned", "optimizer.lr", name="Adam, continued", color=BLUES[:2])  # poi-2's re-tuned baseline
+# Adam continued: one colour per η in every panel (η=1e-4 darkest, 3e-4, 1e-3 lighter), ours and the authors' setup.
+CONT_BLUE = {1e-4: "#08306b", 3e-4: "#4292c6", 1e-3: "#9ecae1"}
+TUNED = Series("adam_cont_tuned", "optimizer.lr", name="Adam, continued", color=[CONT_BLUE[3e-4], CONT_BLUE[1e-3]])
 
 # The authors' script's setup (experiment poisson_authors): PhiFlow Noise potentials, network
 # [64, 128, 64]; Adam eta 1e-4 (fig. 3c) and 3e-4 (the script's), HIG 0.02 (fig. 3c) and 0.01 (the
@@ -81,7 +83,7 @@ FIG3C_AUTHORS = [
 FIG7_AUTHORS = poi("adam_after_hig_authors", "adam", "hig_cont_authors", **AUTHORS, **{"optimizer.lr": ADAM_LR})
 CHAIN_AUTHORS = [
     Series("adam_pre_authors", name="Adam", color=PRE_TRAINING),
-    Series("adam_cont_authors", "optimizer.lr", name="Adam, continued", color=BLUES[1:]),
+    Series("adam_cont_authors", "optimizer.lr", name="Adam, continued", color=[CONT_BLUE[1e-4], CONT_BLUE[3e-4]]),
     Series("hig_cont_authors", "optimizer.lr", name="HIG pre-trained with Adam", color=GREENS[1:]),
 ]
 
@@ -142,7 +144,7 @@ FIGURES = [
         beside_authors(FIG3B, FIG3B_AUTHORS),
         size=(2, 4.6, 3.6),
         panels=[
-            Curves(f"b) Poisson, {who}:\nAdam and HIG ({x} time)", series, f"{tag}loss ({x} time)", xscale=x)
+            Curves(f"Poisson, {who}, {x} time axis:\nAdam and HIG for several η", series, f"{tag}loss ({x} time)", xscale=x)
             for who, series, tag in ((OURS, BY_LR, ""), (THEIRS, BY_LR_AUTHORS, "authors: "))
             for x in ("linear", "log")
         ],

@@ -2,7 +2,7 @@
 
 higbench-results outputs                          # every run, one line each
 higbench-results outputs/sweeps --problem oscillator --status completed
-higbench-results outputs --best                   # best run per optimizer (table 2)
+higbench-results outputs --best                   # best run per setup, lr and batch size selected (table 2)
 higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
@@ -86,7 +86,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--problem", action="append", help="keep these problems (comma-separated or repeated)")
     p.add_argument("--optimizer", action="append", help="keep these optimizers (comma-separated or repeated)")
     p.add_argument("--status", action="append", help="keep these statuses: completed, diverged, running, corrupt, ...")
-    p.add_argument("--best", action="store_true", help="only the best completed run per (problem, optimizer) by --metric")
+    p.add_argument(
+        "--best", action="store_true", help="only the best completed run per (problem, setup, budget) by --metric (see --by)"
+    )
     p.add_argument("--metric", default="final_test_loss", help="what --best and the sort minimise (default: final_test_loss)")
     p.add_argument(
         "--by",
@@ -124,8 +126,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument(
         "--setting",
-        help="config columns that make an optimizer setting, comma-separated (default: the overrides without seed,"
-        " problem and budget)",
+        help="config columns that make an optimizer setting, comma-separated (default: every key that changes a"
+        " result; not the seed, budget, evaluation schedule, threads, progress, tensorboard, ...)",
     )
     return p.parse_args(argv)
 
@@ -261,10 +263,10 @@ def _comparable(runs: pd.DataFrame, targets: dict[str, list[float]], args: argpa
             f"{len(done) - len(unique)} duplicate run(s) left out: same configuration and seed as another run"
             " (the newest counts once; a sweep directory inside another?)"
         )
-    if args.targets:
-        for problem, n in unique["problem.name"].value_counts().sort_index().items():
-            if problem not in targets:
-                notes.append(f"{problem}: {n} run(s) in the plot but not in the table: no --targets {problem}=...")
+    why = "no --targets {}=..." if args.targets else "no finite test loss to choose targets from (give --targets {}=...)"
+    for problem, n in unique["problem.name"].value_counts().sort_index().items():
+        if problem not in targets:
+            notes.append(f"{problem}: {n} run(s) in the plot but not in the table: {why.format(problem)}")
     for line in notes:
         print(f"note: {line}", file=sys.stderr)
     return unique

@@ -70,7 +70,8 @@ _OWN_COLUMNS = {
 # Config keys that never make a different optimizer setting: the seed is what a comparison's
 # median runs over, the budget and the evaluation schedule are what settings are compared
 # within, and the schema's cosmetic keys (threads, progress, tensorboard, checkpoints, ...:
-# identity=False) change no result. Everything else does (problem.gamma, dtype, amsgrad, ...).
+# identity=False, and the problem's: PROBLEM_COSMETIC_KEYS) change no result. Everything else
+# does (problem.gamma, dtype, amsgrad, ...).
 NOT_SETTING_KEYS = ("seed", "budget", "eval_every", "eval_unit", *COSMETIC_KEYS)
 
 
@@ -97,6 +98,8 @@ def setting_config(config: dict, device: str | None = None) -> str:
     Runs with equal strings are seeds of one setting (``profile.setting_labels``).
     """
     kept = {k: v for k, v in config.items() if k not in NOT_SETTING_KEYS}
+    if isinstance(kept.get("problem"), dict):  # the problem's own such keys (targets, validation size, ...)
+        kept["problem"] = {k: v for k, v in kept["problem"].items() if k not in PROBLEM_COSMETIC_KEYS}
     if device:
         kept["device"] = device.split(":")[0]
     return json.dumps(_flatten(kept), sort_keys=True, default=str)

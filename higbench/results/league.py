@@ -13,8 +13,9 @@ then runs on fresh confirmation seeds and on the problem's held-out variants
 (``problem.held_out``), and only those runs are scored, on the *test* loss. The scores follow
 rliable (Agarwal et al. 2021: interquartile mean, stratified bootstrap, probability of
 improvement) and AlgoPerf (Dahl et al. 2023: the integrated performance profile). rliable
-itself pins an old ``arch`` that does not install on current Pythons, so the few functions are
-here, each tested on hand-made frames with known answers (tests/test_league.py).
+itself is not a dependency: its release pins an old ``arch`` (and seaborn) for a few functions,
+which are written here instead, each tested on hand-made frames with known answers
+(tests/results/test_league.py).
 """
 
 from __future__ import annotations
@@ -358,12 +359,12 @@ def improvement_table(runs: pd.DataFrame, reference: str = HIG, metric: str = TE
     return pd.DataFrame(rows)
 
 
-def _ci(cell) -> str:
+def _ci(cell, inf: str = "not reached") -> str:
     if not isinstance(cell, tuple):
         return "" if cell is None or (isinstance(cell, float) and math.isnan(cell)) else str(cell)
     point, lo, hi = cell
     if not math.isfinite(point):
-        return "not reached" if point == math.inf else "-"
+        return inf if point == math.inf else "-"
     return f"{point:.3g} [{lo:.3g}, {hi:.3g}]"
 
 
@@ -372,6 +373,20 @@ def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str,
     scored = league_runs(runs, spaces, tuning_seeds)
     targets = task_targets(scored) if len(scored) else {}
     return scored, reach_table(scored, curves, targets), targets
+
+
+def _task_table(group: pd.DataFrame) -> pd.DataFrame:
+    """One task's rows as text cells: the final losses, then seconds and updates to each target
+    that some setting reached (highest target first)."""
+    reached = [c for c in group.columns if "_to_" in c and any(isinstance(v, tuple) and math.isfinite(v[0]) for v in group[c])]
+    reached.sort(key=lambda c: (-float(c.split("_to_")[1]), c))
+    cols = ["seeds", TEST_METRIC, VALIDATION_METRIC, *reached]
+    shown = group.set_index("setting")[cols].copy()
+    for c in cols[1:]:
+        shown[c] = shown[c].map(
+            lambda v, c=c: _ci(v, "inf (seeds diverged)" if c in (TEST_METRIC, VALIDATION_METRIC) else "not reached")
+        )
+    return shown.rename(columns=lambda c: c.replace("seconds_to_", "s to ").replace("updates_to_", "updates to "))
 
 
 def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=TUNING_SEEDS) -> str:
@@ -391,18 +406,14 @@ def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str,
             out += ["", f"performance profile, {view} ({unit} to target; integrated score: area under rho up to tau={TAU_MAX:g})"]
             out.append(scores(profile_times(reached, unit)).to_string())
         table = interval_table(scored, reached)
-        out += ["", "per task: IQM over seeds [95% stratified-bootstrap interval]"]
+        out += ["", "per task: IQM over seeds [95% stratified-bootstrap interval]; targets no setting reached are left out"]
         for task, group in table.groupby("task"):
-            cols = [c for c in group.columns if c not in ("task",)]
-            shown = group[cols].copy()
-            for c in cols:
-                if c not in ("setting", "seeds"):
-                    shown[c] = shown[c].map(_ci)
-            out += [f"-- {task}", shown.set_index("setting").to_string()]
-        if HIG in set(scored["league_setting"]):
-            improve = improvement_table(scored)
-            out += ["", f"P({HIG} ends below X) on the final test loss, mean over tasks [95% interval]; per task after"]
-            improve[["P", "low", "high"]] = improve[["P", "low", "high"]].round(2)
+            out += [f"-- {task}", _task_table(group).to_string()]
+        for reference in (HIG, f"{HIG} (paper)"):  # HIG tuned as every optimizer, and at the paper's settings
+            if reference not in set(scored["league_setting"]):
+                continue
+            improve = improvement_table(scored, reference)
+            out += ["", f"P({reference} ends below X) on the final test loss, mean over tasks [95% interval]; per task after"]
             out.append(improve.to_string(index=False, float_format="{:.2f}".format))
     return "\n".join(out)
 
@@ -465,33 +476,38 @@ def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: 
     plt.close(fig)
 
     tasks = sorted(table["task"].unique())
-    fig, axes = plt.subplots(1, len(tasks), figsize=(3.6 * len(tasks), 4), squeeze=False)
+    settings = sorted(table["setting"].unique())
+    colour = {name: plt.get_cmap("tab20")(i % 20) for i, name in enumerate(settings)}  # one colour per setting
+    fig, axes = plt.subplots(1, len(tasks), figsize=(3.6 * len(tasks), 4.4), squeeze=False)
     for ax, task in zip(axes[0], tasks):
         rows = table[table["task"] == task]
-        cols = sorted((c for c in rows.columns if c.startswith("seconds_to_")), key=lambda c: -float(c.split("_to_")[1]))
-        for k, (_, row) in enumerate(rows.iterrows()):
+        cols = [c for c in rows.columns if c.startswith("seconds_to_") and rows[c].map(lambda v: isinstance(v, tuple)).any()]
+        cols.sort(key=lambda c: -float(c.split("_to_")[1]))  # this task's targets, highest first
+        for _, row in rows.iterrows():
+            k = settings.index(row["setting"])
             xs, ys, los, his = [], [], [], []
             for j, c in enumerate(cols):
                 cell = row[c]
                 if isinstance(cell, tuple) and math.isfinite(cell[0]):
-                    xs.append(j + 0.08 * (k - len(rows) / 2))
+                    xs.append(j + 0.6 * (k / max(len(settings) - 1, 1) - 0.5))
                     ys.append(cell[0])
                     los.append(cell[0] - cell[1])
                     his.append((cell[2] if math.isfinite(cell[2]) else cell[0]) - cell[0])
             if xs:
-                ax.errorbar(xs, ys, yerr=[los, his], fmt="o", ms=4, capsize=2, label=row["setting"])
-        ax.set_xticks(range(len(cols)), [c.split("_to_")[1] for c in cols])
+                ax.errorbar(xs, ys, yerr=[los, his], fmt="o", ms=4, capsize=2, color=colour[row["setting"]])
+        ax.set_xticks(range(len(cols)), [f"{float(c.split('_to_')[1]):g}" for c in cols])
+        ax.set_xlim(-0.5, len(cols) - 0.5)
         if ax.has_data():
             ax.set_yscale("log")
         else:
             ax.text(0.5, 0.5, "no setting reached a target", ha="center", transform=ax.transAxes, fontsize=8)
         ax.set_title(task, fontsize=9)
-        ax.set_xlabel("test-loss target")
+        ax.set_xlabel("test-loss target (not reached: no point)")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("seconds to target (IQM, 95% interval)")
-    if axes[0][-1].has_data():
-        axes[0][-1].legend(fontsize=6)
-    fig.tight_layout()
+    axes[0][0].set_ylabel("seconds to target (IQM over seeds, 95% interval)")
+    handles = [plt.Line2D([], [], marker="o", ls="", color=colour[n], label=n) for n in settings]
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(settings), 6), fontsize=7)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     paths.append(out / "time_to_target.png")
     fig.savefig(paths[1], dpi=120)
     plt.close(fig)

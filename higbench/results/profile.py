@@ -57,9 +57,11 @@ def setting_labels(runs: pd.DataFrame, keys: Sequence[str] | None = None, leave_
         return pd.Series([], dtype=object)
     if keys:
         return runs[list(keys)].astype(str).agg(" ".join, axis=1)
-    if "setting_config" in runs and runs["setting_config"].notna().all():
-        return _labels_from_config(runs, leave_out)
-    return runs.apply(lambda row: _label_from_overrides(row, leave_out), axis=1)
+    labels = runs.apply(lambda row: _label_from_overrides(row, leave_out), axis=1).astype(object)
+    has = runs["setting_config"].notna() if "setting_config" in runs else pd.Series(False, index=runs.index)
+    if has.any():  # rows without one: unreadable files, hand-made tables
+        labels[has] = _labels_from_config(runs[has], leave_out)
+    return labels
 
 
 def _label_from_overrides(row: pd.Series, leave_out: Sequence[str] = ()) -> str:

@@ -116,6 +116,17 @@ def test_the_league_script_tunes_on_the_validation_loss():
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
+def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.refusal("oscillator", "sip") == "optimizer=sip: problem oscillator has no inverse simulator"
+    assert script.refusal("toy", "sip") is None and script.refusal("oscillator", "hig") is None
+
+
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
@@ -173,3 +184,9 @@ def test_profile_targets_come_from_the_problem_configs():
          "started": ["2026-01-01T00:00:00+0000"] * 3}
     )  # fmt: skip
     assert configured_targets(runs) == {"toy": [1e-2, 1e-3]}  # poisson's runs predate the key: absent
+
+
+def test_more_trials_keep_the_first_ones():
+    # A league run again with more trials reuses its earlier runs: the first points stay the same.
+    space = league.load_space("hig")
+    assert league.sobol_trials(space, 8)[:4] == league.sobol_trials(space, 4)

@@ -165,6 +165,7 @@ def test_bookkeeping_keys_do_not_split_a_setting(tmp_path):
         {**base, "device": "auto", "budget": {"seconds": 9}, "eval_every": 0.1},
     ]
     assert {setting_config(c, "cpu") for c in same} == {setting_config(base, "cpu")}
+    assert setting_config({**base, "problem": {"name": "toy", "targets": [1e-3]}}, "cpu") == setting_config(base, "cpu")
     assert setting_config({**base, "problem": {"name": "toy", "gamma": 0.01}}, "cpu") != setting_config(base, "cpu")
     by_overrides = pd.DataFrame({"overrides": ["tensorboard=true seed=1", "device=cpu", ""], "optimizer.name": ["hig"] * 3})
     assert setting_labels(by_overrides).tolist() == ["hig", "hig device=cpu", "hig"]

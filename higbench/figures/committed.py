@@ -26,6 +26,7 @@ import pandas as pd
 import yaml
 
 from higbench.claims.rules import OPTIMIZER_NAMES, budget_of, finish, judge, num, rule_why
+from higbench.errors import dotted_get
 
 GROUPS = {"optimizer": "optimizer.name", "problem": "problem.name"}  # a config group's choice, as the config names it
 SYMBOL_KEYS = ("optimizer.lr", "optimizer.tau", "batch_size")
@@ -59,22 +60,29 @@ class CommittedRun:
     figure: str
     points: pd.DataFrame  # its rows of <id>.csv
     updates: int | None = None  # the updates it made, where a row measured from its run file stored them
+    resolved: dict = field(default_factory=dict)  # its config as the CLI composes its overrides (``resolve``)
+    parent_end: float | None = None  # where its parent's plotted curve ends (the continued run is drawn after it)
     config: dict = field(init=False)
 
     def __post_init__(self):
         self.config = parse_overrides(self.entry["overrides"])
         searched = self.entry["sweep"].endswith("/search")
         self.job = SimpleNamespace(
-            figure=self.figure, sweep=self.entry["sweep"], seed=self.entry["seed"], search=[] if searched else None
+            figure=self.figure, sweep=self.entry["sweep"], seed=self.entry["seed"], search=[] if searched else None, parent=None
         )
         self.job.overrides = {k: v for k, v in self.config.items() if k != "init_from"}
 
+    meta: dict = field(init=False, default_factory=dict)  # the run file's metadata: not committed
     path = property(lambda self: self.entry["path"])
     seed = property(lambda self: self.entry["seed"])
     status = property(lambda self: self.entry["status"])
+    ok = property(lambda self: self.entry["status"] in ("completed", "diverged"))
 
     def cfg(self, key: str, default: Any = None) -> Any:
-        return self.config.get(key, default)
+        """An override's value, else the composed config's (the default the run had)."""
+        if key in self.config:
+            return self.config[key]
+        return dotted_get(self.resolved, key, default)
 
     @property
     def curves(self) -> pd.DataFrame:
@@ -83,13 +91,14 @@ class CommittedRun:
         rows = self.points[~self.points["panel"].str.startswith(TRAJECTORY)]
         frames = []
         for x_name, g in rows.groupby("x_name", sort=False):
-            wide = g.pivot_table(index="x", columns="y_name", values="y", aggfunc="first").sort_index()
+            # pivot, not pivot_table: a diverged run's NaN evaluation stays (its final loss is then inf, as in a build)
+            wide = g.drop_duplicates(["x", "y_name"]).pivot(index="x", columns="y_name", values="y").sort_index()
             frames.append(wide.rename_axis(None, axis=1).reset_index().rename(columns={"x": x_name}))
         if not frames:
             return pd.DataFrame({"wall_time": [], "step": [], "test_loss": []})
         c = max(frames, key=len)
-        if "wall_time" in c and "init_from" in self.config:
-            c["wall_time"] -= c["wall_time"].iloc[0]  # a continued run is drawn after its parent
+        if "wall_time" in c and self.config.get("init_from"):  # a continued run is drawn after its parent
+            c["wall_time"] -= self.parent_end if self.parent_end is not None else c["wall_time"].iloc[0]
         if "step" not in c and self.config.get("eval_unit") == "updates" and len(c) < 1000:
             c["step"] = np.arange(len(c)) * int(self.config.get("eval_every", 1))  # every evaluation plotted
         elif "step" not in c and self.updates and "wall_time" in c and len(c):
@@ -121,6 +130,21 @@ class CommittedRun:
             if (v := self.cfg(key)) is not None:
                 parts.append(f"{symbols.get(key, key)}={num(v)}")
         return " ".join(parts)
+
+
+def resolve_configs(entries: list[dict]) -> list[dict]:
+    """Each run's config as the CLI composes its overrides (Hydra, ``higbench.jobs.compose``); {} for
+    a run whose overrides no longer compose (a key since removed): its overrides alone then."""
+    from higbench.jobs import compose, hydra_conf
+
+    out = []
+    with hydra_conf():
+        for e in entries:
+            try:
+                out.append(compose(tuple(o for o in e["overrides"] if not o.startswith("init_from="))))
+            except Exception:  # noqa: BLE001 - an old override: fall back to the overrides
+                out.append({})
+    return out
 
 
 def _match(value: Any, want: Any) -> bool:
@@ -164,13 +188,22 @@ class CommittedFigure:
         if "_cache" not in self.__dict__:
             by_run = dict(tuple(self.table.groupby("run"))) if "run" in self.table else {}
             empty = self.table.iloc[:0]
+            entries = self.info.get("runs", [])
+            resolved = resolve_configs(entries)
             runs = [
-                CommittedRun(e, self.info["id"], by_run.get(e["path"], empty), self.updates.get(e["path"]))
-                for e in self.info.get("runs", [])
+                CommittedRun(e, self.info["id"], by_run.get(e["path"], empty), self.updates.get(e["path"]), cfg)
+                for e, cfg in zip(entries, resolved)
             ]
             for r in runs:  # init_from names the parent's run file where it was run: the parent as listed here
                 parent = str(r.config.get("init_from") or "")
-                r.config["init_from"] = next((p.path for p in runs if parent.endswith("/" + p.path)), parent or None)
+                found = next((p for p in runs if parent == p.path or parent.endswith("/" + p.path)), None)
+                r.config["init_from"] = found.path if found else (parent or None)
+                r.job.parent = found.job if found else None
+            for r in runs:
+                if r.job.parent is not None:
+                    parent = next(p for p in runs if p.job is r.job.parent)
+                    rows = parent.points[parent.points["x_name"] == "wall_time"]
+                    r.parent_end = float(rows["x"].max()) if len(rows) else None
             self.__dict__["_cache"] = runs
         return self.__dict__["_cache"]
 
@@ -226,5 +259,43 @@ def store(out_dir: Path, row: dict) -> Path:
     info["claims"] = [row if c["id"] == row["id"] else c for c in claims]
     if row["id"] not in {c["id"] for c in claims}:
         info["claims"].append(row)
+    path.write_text(json.dumps(info, indent=1, default=str) + "\n")
+    return path
+
+
+# Figures whose every panel is drawn from what the plotted data hold (curves; fig. 1's neurons, fig. 7's epoch axis,
+# the trajectories of 2a, 3a, 4a and the reference comparison need the run files).
+REDRAWABLE = ("fig2b", "fig2c", "fig3b", "fig3c", "fig4b", "fig4c", "fig5", "fig6", "fig8", "fig9", "fig10", "fig11")
+REDRAWABLE += ("fig12", "fig13")
+
+
+def redraw(out_dir: Path, fid: str) -> Path:
+    """Draw figure ``fid`` again from its committed data files, by this revision's plotting code: its
+    picture and its plotted data (<id>.png, .pdf, .csv); its data file keeps its runs and claims, and
+    records the drawing (revision, date, machine, load) beside when its runs were made."""
+    from higbench.figures import plot, registry
+    from higbench.figures.build import provenance
+    from higbench.figures.data import FigureData
+    from higbench.figures.spec import Preset
+
+    if fid not in REDRAWABLE:
+        raise ValueError(f"{fid}: drawn from what the run files hold, not the plotted data (redrawable: {REDRAWABLE})")
+    committed = CommittedFigure.load(out_dir, fid)
+
+    class Data(FigureData):
+        def runs(self, sweep=None, only_ok=True, **where):
+            return committed.runs(sweep, only_ok, **where)
+
+        def missing(self):
+            return []
+
+    figure = registry.figures()[fid]
+    data = Data(figure, Preset(committed.info["preset"]), Path(out_dir), committed.jobs, budgets=committed.budgets)
+    data.notes = list(committed.info.get("notes", []))
+    (figure.plot or plot.draw)(data)
+    data.write_data()
+    info = dict(committed.info)
+    info["made"] = {**info.get("made", {}), **provenance(), "redrawn": "from the committed plotted data"}
+    path = Path(out_dir) / f"{fid}.json"
     path.write_text(json.dumps(info, indent=1, default=str) + "\n")
     return path
