@@ -36,13 +36,15 @@ def test_concurrent_sweeps_get_their_own_directories(tmp_path):
 
 @pytest.mark.slow
 def test_forced_same_sweep_dir_never_overwrites(tmp_path):
-    """Even when both sweeps are told the same directory, a run file has one writer: the
-    writer opens with mode "w-" (exclusive create), the loser stops with an error."""
+    """Even when both sweeps are told the same directory, a run file has one writer: each job's
+    directory is claimed by one sweep, and the other sweep's copy of that job fails alone
+    (refused, nothing overwritten), so the jobs may split between the two sweeps and both
+    report the jobs they lost. Every job runs exactly once."""
     same = [*SWEEP, f"hydra.sweep.dir={tmp_path / 'same'}"]
     results = start_together(tmp_path, same, same)
-    codes = sorted(p.returncode for p, _, _ in results)
-    assert codes[0] == 0 and codes[1] != 0, [(p.returncode, err[-500:]) for p, _, err in results]
-    loser_err = next(err for p, _, err in results if p.returncode != 0)
-    assert "refusing to overwrite" in loser_err or "already holds a run file" in loser_err
+    losers = [err for p, _, err in results if p.returncode != 0]
+    assert losers, [(p.returncode, err[-500:]) for p, _, err in results]  # two jobs, four attempts: two refused
+    for err in losers:
+        assert "refusing to overwrite" in err or "already holds a run file" in err, err[-1000:]
     runs = load_runs(tmp_path / "same")
     assert len(runs) == 2 and set(runs["status"]) == {"completed"}
