@@ -25,11 +25,11 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from higbench.claims.rules import OPTIMIZER_NAMES, budget_of, finish, judge, num, rule_why
+from higbench.claims.rules import budget_of, finish, judge, rule_why
 from higbench.errors import dotted_get
+from higbench.figures.data import LabelledRun
 
 GROUPS = {"optimizer": "optimizer.name", "problem": "problem.name"}  # a config group's choice, as the config names it
-SYMBOL_KEYS = ("optimizer.lr", "optimizer.tau", "batch_size")
 TRAJECTORY = "trajectory"  # fig1's y-space panels: the run's logged probe_output
 
 
@@ -53,7 +53,7 @@ def parse_overrides(overrides: list[str]) -> dict[str, Any]:
 
 
 @dataclass
-class CommittedRun:
+class CommittedRun(LabelledRun):
     """One run of a figure, read back from its data files."""
 
     entry: dict
@@ -109,27 +109,6 @@ class CommittedRun:
     def logs(self) -> dict[str, np.ndarray]:
         t = self.points[self.points["panel"].str.startswith(TRAJECTORY)]
         return {"probe_output": t[["x", "y"]].to_numpy(dtype=float)} if len(t) else {}
-
-    @property
-    def final_loss(self) -> float:
-        c = self.curves
-        return float(c["test_loss"].iloc[-1]) if len(c) else math.nan
-
-    @property
-    def initial_loss(self) -> float:
-        c = self.curves
-        return float(c["test_loss"].iloc[0]) if len(c) else math.nan
-
-    def label(self, keys=SYMBOL_KEYS) -> str:
-        opt = self.cfg("optimizer.name", "?")
-        symbols = {"optimizer.lr": "η", "optimizer.tau": "τ", "batch_size": "b"}
-        parts = [OPTIMIZER_NAMES.get(opt, opt)]
-        for key in keys:
-            if (key == "optimizer.lr" and opt == "gn") or (key == "optimizer.tau" and opt not in ("gn", "hig")):
-                continue
-            if (v := self.cfg(key)) is not None:
-                parts.append(f"{symbols.get(key, key)}={num(v)}")
-        return " ".join(parts)
 
 
 def resolve_configs(entries: list[dict]) -> list[dict]:

@@ -53,13 +53,43 @@ SYMBOLS = {
 }
 
 
+LABEL_KEYS = ("optimizer.lr", "optimizer.tau", "batch_size")  # a run's legend label names these
+
+
 def kv(key: str, value: Any) -> str:
     """'optimizer.lr', 1e-4 -> 'η=1e-4'."""
     return f"{SYMBOLS.get(key, key)}={num(value)}"
 
 
+class LabelledRun:
+    """What a figure reads of a run besides its data: the test loss at both ends and a legend
+    label. For run records with ``cfg(key)`` and ``curves`` (``RunData``, and
+    ``figures.committed.CommittedRun`` rebuilt from committed data)."""
+
+    @property
+    def final_loss(self) -> float:
+        c = self.curves
+        return float(c["test_loss"].iloc[-1]) if len(c) else math.nan
+
+    @property
+    def initial_loss(self) -> float:
+        c = self.curves
+        return float(c["test_loss"].iloc[0]) if len(c) else math.nan
+
+    def label(self, keys: Iterable[str] = LABEL_KEYS) -> str:
+        """'HIG η=1 τ=1e-6 b=128': optimizer and the given hyper-parameters (GN has no η)."""
+        opt = self.cfg("optimizer.name", "?")
+        parts = [OPTIMIZER_NAMES.get(opt, opt)]
+        for key in keys:
+            if (key == "optimizer.lr" and opt == "gn") or (key == "optimizer.tau" and opt not in ("gn", "hig")):
+                continue
+            if (v := self.cfg(key)) is not None:
+                parts.append(kv(key, v))
+        return " ".join(parts)
+
+
 @dataclass
-class RunData:
+class RunData(LabelledRun):
     """One job of the figure and, if it ran, its run file (read lazily)."""
 
     job: Job
@@ -89,27 +119,6 @@ class RunData:
     @cached_property
     def weights(self) -> dict[str, np.ndarray]:
         return load_weights(self.path)
-
-    @property
-    def final_loss(self) -> float:
-        c = self.curves
-        return float(c["test_loss"].iloc[-1]) if len(c) else math.nan
-
-    @property
-    def initial_loss(self) -> float:
-        c = self.curves
-        return float(c["test_loss"].iloc[0]) if len(c) else math.nan
-
-    def label(self, keys: Iterable[str] = ("optimizer.lr", "optimizer.tau", "batch_size")) -> str:
-        """'HIG η=1 τ=1e-6 b=128': optimizer and the given hyper-parameters (GN has no η)."""
-        opt = self.cfg("optimizer.name", "?")
-        parts = [OPTIMIZER_NAMES.get(opt, opt)]
-        for key in keys:
-            if (key == "optimizer.lr" and opt == "gn") or (key == "optimizer.tau" and opt not in ("gn", "hig")):
-                continue
-            if (v := self.cfg(key)) is not None:
-                parts.append(kv(key, v))
-        return " ".join(parts)
 
     def build_model(self):
         """(problem, model) rebuilt from the run's config with its final weights loaded."""

@@ -34,18 +34,6 @@ def refused(argv: list[str], capsys) -> str:
     return err[0]
 
 
-@pytest.fixture
-def completed(tmp_path, monkeypatch):
-    """A function making a completed run in a new directory under tmp_path."""
-    monkeypatch.chdir(tmp_path)
-
-    def make(name: str) -> Path:
-        cli.main([*TINY, "problem=toy", "optimizer=adam", f"hydra.run.dir={tmp_path / name}"])
-        return tmp_path / name / "run.h5"
-
-    return make
-
-
 def test_a_stored_config_cannot_name_an_arbitrary_callable(tmp_path, monkeypatch, capsys):
     """A 7-byte run.h5 and a .hydra/config.yaml whose optimizer is ``torch.save``: resume
     would build it (and write the victim file) before checking anything."""

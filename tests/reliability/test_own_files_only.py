@@ -17,18 +17,6 @@ from test_front_door_security import TINY, listing, refused, sha
 from higbench import cli
 
 
-@pytest.fixture
-def completed(tmp_path, monkeypatch):
-    """A function making a completed toy run in a new directory under tmp_path."""
-    monkeypatch.chdir(tmp_path)
-
-    def make(name: str) -> Path:
-        cli.main([*TINY, "problem=toy", "optimizer=adam", f"hydra.run.dir={tmp_path / name}"])
-        return tmp_path / name / "run.h5"
-
-    return make
-
-
 class _Payload:
     """Unpickling this creates the marker file (as a crafted pickle would run a command)."""
 
