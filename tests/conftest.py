@@ -1,14 +1,31 @@
-"""Shared fixtures: the CLI in this process (``higbench``) or as a process (``cli``), tiny budgets, a tmp dir."""
+"""Shared fixtures: the CLI in this process (``higbench``) or as a process (``cli``), with the
+one tiny run (tests/cases.py ``TINY_RUN``). Configs composed with Hydra's compose API, ``train``
+in this process, a signal mid-run: tests/in_process.py.
+
+Most tests call the CLI in this process: ``higbench.cli.main(argv)``, as the console script
+does, with its exit code from ``SystemExit``. What one run leaves behind in the process is put
+back after each test (``in_process``). A test that starts a process of its own is marked
+``process`` (tests/process_starts.py counts them).
+"""
 
 from __future__ import annotations
 
 import importlib.util
+import logging
+import os
+import signal
+import sys
 from pathlib import Path
 
 import pytest
+from cases import TINY_RUN
 from cli_runner import run_cli
 
 ROOT = Path(__file__).resolve().parent.parent  # higbench is installed (editable): no sys.path entry needed
+
+pytest_plugins = ["process_starts"]  # counts the processes each test starts; see tests/process_starts.py
+
+TINY = list(TINY_RUN)  # the one tiny run, as a list for ``[*TINY, ...]``
 
 
 def pytest_collection_modifyitems(config, items):
@@ -24,20 +41,65 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-# A budget of a few updates, one evaluation per update, no progress bar.
-TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false"]
-
-
 @pytest.fixture
-def higbench(tmp_path, monkeypatch, capsys):
-    """higbench(*argv) in this process, from a fresh tmp dir -> (exit code, stdout, stderr).
+def in_process(tmp_path, monkeypatch):
+    """Run higbench in this process from a fresh tmp dir, and put back what a run changes in it.
 
-    The front door as a user meets it, without a new Python and torch per call; use ``cli``
-    (a subprocess) where the process itself is the point (signals, pipes, the entry point).
+    A run sets torch's thread count, installs SIGINT/SIGTERM handlers (a single run leaves
+    them ignored until exit), records HIGBENCH_PARALLEL_JOBS in the environment, rewrites
+    sys.argv and holds a lock on its directory until exit; Hydra adds logging handlers (to
+    this test's captured streams) and keeps its global state.
     """
+    import torch
+    from hydra.core.global_hydra import GlobalHydra
+
     from higbench import cli as entry
 
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", list(sys.argv))
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    environ = dict(os.environ)
+    threads = torch.get_num_threads()
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    loggers = {name: (lg.handlers[:], lg.level, lg.propagate, lg.disabled) for name, lg in _loggers()}
+    try:
+        yield tmp_path
+    finally:
+        GlobalHydra.instance().clear()
+        getattr(entry, "release_dirs", lambda: None)()  # as at the process's exit
+        torch.set_num_threads(threads)
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+        if dict(os.environ) != environ:
+            os.environ.clear()
+            os.environ.update(environ)
+        for name, lg in _loggers():
+            before, level, propagate, disabled = loggers.get(name, ([], logging.NOTSET, True, False))
+            for h in lg.handlers[:]:
+                if h not in before:
+                    lg.removeHandler(h)
+                    h.close()
+            lg.setLevel(level)
+            lg.propagate, lg.disabled = propagate, disabled
+
+
+def _loggers():
+    """The root logger and every named one."""
+    yield "", logging.getLogger()
+    for name, lg in list(logging.root.manager.loggerDict.items()):
+        if isinstance(lg, logging.Logger):
+            yield name, lg
+
+
+@pytest.fixture
+def higbench(in_process, capsys):
+    """higbench(*argv) in this process, from a fresh tmp dir -> (exit code, stdout, stderr).
+
+    The front door as a user meets it, without a new Python and torch per call; the tiny run
+    comes first unless ``tiny=False`` (later overrides win). Use ``cli`` (a process) only where
+    the process itself is the point (signals, pipes, the entry point).
+    """
+    from higbench import cli as entry
 
     def _run(*args: str, tiny: bool = True):
         try:

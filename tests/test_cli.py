@@ -1,9 +1,14 @@
-"""The console script end to end: run files, multirun, bad input, divergence."""
+"""The console script end to end: run files, multirun, bad input, divergence.
+
+In this process (``higbench.cli.main``, the ``higbench`` fixture) except where the process is
+the point (a closed pipe) or the launcher starts its own (joblib's workers).
+"""
 
 from pathlib import Path
 
 import h5py
 import pytest
+from cases import PROBLEM_CONFIGS, SMALL_RUN
 
 from higbench.results import load_run, load_updates, load_weights
 
@@ -12,11 +17,11 @@ def run_files(root: Path) -> list[Path]:
     return sorted(root.rglob("run.h5"))
 
 
-def test_single_run_writes_a_complete_run_file(cli, tmp_path):
-    proc = cli("problem=toy", "optimizer=hig", "problem.gamma=0.01")
-    assert proc.returncode == 0, proc.stderr
+def test_single_run_writes_a_complete_run_file(higbench, tmp_path):
+    code, out, err = higbench("problem=toy", "optimizer=hig", "problem.gamma=0.01")
+    assert code == 0, err
     files = run_files(tmp_path / "outputs")
-    assert len(files) == 1 and f"run file: {files[0]}" in proc.stdout
+    assert len(files) == 1 and f"run file: {files[0]}" in out
     meta, curves = load_run(files[0])
     assert meta["status"] == "completed"
     assert meta["config"]["problem"]["gamma"] == 0.01 and meta["config"]["optimizer"]["kappa"] == -0.5
@@ -35,9 +40,9 @@ def test_single_run_writes_a_complete_run_file(cli, tmp_path):
         assert f["logs/neuron_mean"].shape == (4, 7) and f["logs/probe_output"].shape == (4, 2)
 
 
-def test_multirun_writes_one_file_per_job(cli, tmp_path):
-    proc = cli("-m", "problem=toy", "optimizer=adam,hig")
-    assert proc.returncode == 0, proc.stderr
+def test_multirun_writes_one_file_per_job(higbench, tmp_path):
+    code, _, err = higbench("-m", "problem=toy", "optimizer=adam,hig")
+    assert code == 0, err
     files = run_files(tmp_path / "outputs" / "sweeps")
     assert len(files) == 2
     assert sorted(load_run(f)[0]["optimizer"] for f in files) == ["adam", "hig"]
@@ -103,31 +108,30 @@ def test_diverging_run_is_recorded_not_crashed(higbench, tmp_path):
     assert meta["status_step"] >= 1 and len(curves) >= 1  # the curve so far is kept
 
 
-@pytest.mark.parametrize("problem", ["oscillator", "poisson", "dipole", "dipole_cnn"])
-@pytest.mark.parametrize("optimizer", ["adam", "hig"])
+@pytest.mark.parametrize("problem", PROBLEM_CONFIGS)
+@pytest.mark.parametrize("optimizer", ["adam", "hig"])  # every optimizer on the toy: tests/optim/test_every_optimizer.py
 def test_every_problem_trains_a_few_updates(higbench, tmp_path, problem, optimizer):
-    small = ["batch_size=4", "problem.test_size=16"]
-    code, _, err = higbench(f"problem={problem}", f"optimizer={optimizer}", *small, "budget.max_updates=2")
+    code, _, err = higbench(f"problem={problem}", f"optimizer={optimizer}", *SMALL_RUN, "budget.max_updates=2")
     assert code == 0, err
     meta, curves = load_run(run_files(tmp_path / "outputs")[0])
     assert meta["status"] == "completed" and curves["test_loss"].notna().all()
 
 
-def test_help_lists_every_choice_and_the_outputs(cli, tmp_path):
-    proc = cli("--help", tiny=False)
-    assert proc.returncode == 0, proc.stderr
+def test_help_lists_every_choice_and_the_outputs(higbench, tmp_path):
+    code, out, err = higbench("--help", tiny=False)
+    assert code == 0, err
     conf = Path(__file__).resolve().parent.parent / "conf"
     for group in ("problem", "optimizer", "experiment"):
         for name in sorted(p.stem for p in (conf / group).glob("*.yaml")):
-            assert f" {name} " in proc.stdout.replace("\n", " \n"), f"--help does not list {group} {name}"
-    assert "problem_optimizer:" not in proc.stdout and "powered by Hydra" not in proc.stdout
-    assert "outputs/runs/" in proc.stdout and "budget.seconds" in proc.stdout
-    assert not (tmp_path / "outputs").exists()
+            assert f" {name} " in out.replace("\n", " \n"), f"--help does not list {group} {name}"
+    assert "problem_optimizer:" not in out and "powered by Hydra" not in out
+    assert "outputs/runs/" in out and "budget.seconds" in out
+    assert list(tmp_path.rglob("*")) == []
 
 
-def test_hydra_log_is_named_after_the_tool_and_not_empty(cli, tmp_path):
-    proc = cli("problem=toy", "optimizer=adam")
-    assert proc.returncode == 0, proc.stderr
+def test_hydra_log_is_named_after_the_tool_and_not_empty(higbench, tmp_path):
+    code, _, err = higbench("problem=toy", "optimizer=adam")
+    assert code == 0, err
     (run,) = run_files(tmp_path / "outputs")
     log = run.parent / "higbench.log"
     assert log.is_file() and not (run.parent / "cli.log").exists()
@@ -175,6 +179,7 @@ def test_multirun_cfg_job_prints_each_jobs_config(higbench, tmp_path):
     assert list(tmp_path.rglob("*")) == []
 
 
+@pytest.mark.process  # the pipe is the point
 def test_help_into_a_closed_pipe_is_quiet(tmp_path):
     import subprocess
     import sys
@@ -243,6 +248,7 @@ def fresh_joblib_workers():
     get_reusable_executor().shutdown(wait=True)
 
 
+@pytest.mark.process  # joblib's workers
 def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     from higbench.results import load_runs
 
@@ -254,6 +260,7 @@ def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_pat
     assert code == 0 and list(load_runs(tmp_path / "outputs")["parallel_jobs"]).count(1.0) == 1, err
 
 
+@pytest.mark.process  # joblib's workers
 def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     """The figures' launch: the joblist sweeper on joblib. Its jobs come from a file, not the
     command line: two of them on two workers ran together, and both run files say so."""
@@ -313,28 +320,20 @@ def test_the_optimizer_arguments_rule_is_one_definition():
     }
 
 
-def test_resume_announces_the_stored_run_not_the_config_defaults(tmp_path, monkeypatch, capsys):
+def test_resume_announces_the_stored_run_not_the_config_defaults(higbench, tmp_path):
     """``higbench resume=<an oscillator run>`` used to say ``toy/hig: resuming, batch size 256``."""
     import signal
-    import subprocess
-    import sys
-    import time
 
-    from higbench import cli as entry
+    from in_process import signal_when
 
     run = tmp_path / "osc"
     args = ["problem=oscillator", "optimizer=adam", "batch_size=8", "problem.test_size=16", "budget.seconds=60"]
     args += ["checkpoint_every=0.05", "eval_every=0.05", "progress=false", "threads=1", f"hydra.run.dir={run}"]
-    proc = subprocess.Popen([sys.executable, "-m", "higbench.cli", *args], cwd=tmp_path, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    while not (run / "run.h5.ckpt").exists() and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
-    assert proc.wait(timeout=60) == 128 + signal.SIGINT, proc.stderr.read()
-    monkeypatch.chdir(tmp_path)
-    entry.main([f"resume={run}", "budget.seconds=0.01", "progress=true"])
-    err = capsys.readouterr().err
-    assert "oscillator/adam: resuming, batch size 8" in err, err
+    with signal_when(run / "run.h5.ckpt", signal.SIGINT):  # Ctrl-C once it has a checkpoint
+        code, _, err = higbench(*args, tiny=False)
+    assert code == 128 + signal.SIGINT, err
+    code, _, err = higbench(f"resume={run}", "budget.seconds=0.01", "progress=true", tiny=False)
+    assert code == 0 and "oscillator/adam: resuming, batch size 8" in err, err
 
 
 @pytest.mark.parametrize("value", [None, True, 0.001, 3, "cuda:0", "a b", "it's", "x\\y", "a b\\", "", [1, "a,b"], {"k": 1.5}])

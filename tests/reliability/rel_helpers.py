@@ -10,6 +10,7 @@ from pathlib import Path
 import h5py
 import pytest
 from cli_runner import cli_env, run_cli, start_cli  # noqa: F401  (the one process runner, re-exported)
+from in_process import compose_here, train_here  # noqa: F401  (re-exported)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -45,29 +46,6 @@ def wait_for_rows(path: Path, n: int, proc: subprocess.Popen | None = None, time
 
 def files_under(root: Path) -> list[str]:
     return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
-
-
-def compose_here(overrides):
-    """The config ``higbench <overrides>`` would run, composed in-process (no Hydra run dir)."""
-    from hydra import compose, initialize_config_dir
-
-    from higbench import cli
-
-    with initialize_config_dir(config_dir=cli.config_dir(), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
-
-
-def train_here(cfg, path, **kwargs):
-    """``train`` in this process, restoring torch's thread count (a run sets its own)."""
-    import torch
-
-    from higbench.runner.train import train
-
-    threads = torch.get_num_threads()
-    try:
-        return train(cfg, path, **kwargs)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def sha256(path: Path) -> str:

@@ -1,0 +1,67 @@
+"""Helpers for running higbench in the test's own process: configs composed with Hydra's
+compose API, ``train`` called directly, a stop signal sent to this process mid-run.
+
+The CLI itself in this process is the ``higbench`` fixture (tests/conftest.py); a process of
+its own comes from tests/cli_runner.py, only where the process is the point.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+
+def compose_here(overrides=()):
+    """The config ``higbench <overrides>`` would run, composed in-process (no Hydra run dir)."""
+    from hydra import compose, initialize_config_dir
+
+    from higbench.config import config_dir
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        return compose("config", overrides=list(overrides))
+
+
+def train_here(cfg, path, **kwargs):
+    """``train`` in this process, restoring torch's thread count (a run sets its own)."""
+    import torch
+
+    from higbench.runner.train import train
+
+    threads = torch.get_num_threads()
+    try:
+        return train(cfg, path, **kwargs)
+    finally:
+        torch.set_num_threads(threads)
+
+
+@contextlib.contextmanager
+def signal_when(path: Path, signum: int = signal.SIGINT, timeout: float = 120):
+    """Send ``signum`` to this process once ``path`` exists (e.g. a run's first checkpoint),
+    as Ctrl-C or ``kill`` would, while the block runs a training in the main thread.
+
+    The run's own handler takes it (it is installed before the run writes anything); the
+    block must outlast the wait, e.g. a budget of a minute that the signal cuts short.
+    """
+    done = threading.Event()
+    sent = threading.Event()
+
+    def watch():
+        deadline = time.monotonic() + timeout
+        while not done.is_set() and time.monotonic() < deadline:
+            if Path(path).exists():
+                sent.set()
+                os.kill(os.getpid(), signum)
+                return
+            time.sleep(0.01)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        yield sent
+    finally:
+        done.set()
+        watcher.join()

@@ -1,0 +1,128 @@
+"""Which tests start processes: a pytest plugin (loaded by tests/conftest.py).
+
+A test that starts a Python (the CLI, a script, a launcher's workers) pays for a new
+interpreter and torch each time; most of the suite's time went there. This plugin wraps the
+three ways a process starts (``subprocess.Popen``, ``os.fork``, and the fork-exec that
+multiprocessing and joblib's workers use) for the whole session, counts the starts of each
+test (setup, call and teardown), and
+
+* fails a test that starts one unless it is marked ``process`` (the few tests where the
+  process is the point: signals, pipes, the installed wheel, parallel sweeps); everything
+  else calls ``higbench.cli.main`` in this process or composes configs with Hydra's compose
+  API;
+* prints, at the end, how many tests started processes and, with ``--process-starts``, which.
+
+``git`` is not counted: every run records the checkout's revision with it
+(higbench/runner/revision.py), in this process or not.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+NOT_COUNTED = {"git"}  # the run's revision lookup, not a process of the test's own
+BUDGET = 15  # tests of the default suite (not slow) that may start processes (issue 34)
+
+ENFORCE = False  # fail unmarked tests that start processes
+
+_current: Counter | None = None  # the running test's starts, by program
+_by_test: dict[str, tuple[Counter, bool]] = {}  # node id -> (starts by program, marked slow)
+
+
+def _record(program: str) -> None:
+    if _current is not None and program not in NOT_COUNTED:
+        _current[program] += 1
+
+
+def _program(args) -> str:
+    """The program's name: the first word of a shell command line, else the first argument."""
+    if isinstance(args, str | bytes | os.PathLike):
+        first = (os.fsdecode(args).split() or [""])[0]
+    else:
+        first = os.fsdecode(list(args)[0])
+    name = Path(first).name
+    return "python" if name.startswith("python") else name
+
+
+def _wrap_starts(monkeypatch: pytest.MonkeyPatch) -> None:
+    import _posixsubprocess
+
+    execute_child = subprocess.Popen._execute_child
+
+    def popen_child(self, args, *rest, **kw):
+        _record(_program(args))
+        return execute_child(self, args, *rest, **kw)
+
+    fork, fork_exec = os.fork, _posixsubprocess.fork_exec
+
+    def counted_fork():
+        _record("fork")
+        return fork()
+
+    def counted_fork_exec(*args, **kw):  # multiprocessing's and loky's spawn (subprocess keeps its own reference)
+        _record("python (worker)")
+        return fork_exec(*args, **kw)
+
+    monkeypatch.setattr(subprocess.Popen, "_execute_child", popen_child)
+    monkeypatch.setattr(os, "fork", counted_fork)
+    monkeypatch.setattr(_posixsubprocess, "fork_exec", counted_fork_exec)
+
+
+def pytest_addoption(parser):
+    parser.addoption("--process-starts", action="store_true", help="list the tests that started processes, and which")
+
+
+def pytest_configure(config):
+    config._process_patch = pytest.MonkeyPatch()
+    _wrap_starts(config._process_patch)
+
+
+def pytest_unconfigure(config):
+    patch = getattr(config, "_process_patch", None)
+    if patch is not None:
+        patch.undo()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    global _current
+    _current = Counter()
+    try:
+        yield
+    finally:
+        if _current:
+            _by_test[item.nodeid] = (_current, item.get_closest_marker("slow") is not None)
+        _current = None
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if ENFORCE and call.when == "teardown" and _current and item.get_closest_marker("process") is None and report.passed:
+        report.outcome = "failed"
+        started = ", ".join(f"{n} x {program}" for program, n in sorted(_current.items()))
+        report.longrepr = (
+            f"{item.nodeid} started processes ({started}) but is not marked `process`: call higbench.cli.main(argv) "
+            "in this process (the `higbench` fixture), or mark it @pytest.mark.process where the process is the point"
+        )
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    if not _by_test:
+        return
+    fast = [nodeid for nodeid, (_, slow) in _by_test.items() if not slow]
+    total = sum(sum(counts.values()) for counts, _ in _by_test.values())
+    terminalreporter.write_line(
+        f"process starts: {len(_by_test)} tests started {total} processes; {len(fast)} of them not marked slow "
+        f"(budget {BUDGET}); --process-starts lists them"
+    )
+    if config.getoption("--process-starts"):
+        for nodeid, (counts, slow) in sorted(_by_test.items()):
+            starts = ", ".join(f"{n} x {program}" for program, n in sorted(counts.items()))
+            terminalreporter.write_line(f"  {nodeid}{' (slow)' if slow else ''}: {starts}")
