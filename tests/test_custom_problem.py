@@ -3,16 +3,14 @@
 The problem is the recipe's (docs/recipe.md): examples/heat/ (``heat_problem.py`` and
 ``conf/problem/heat.yaml``), outside the package.
 The test suite registers it the way a user would: Hydra's search path for the YAML
-(``hydra.searchpath``) and the module on ``PYTHONPATH`` for its ``_target_``. It then goes
-through the real console entry point: it trains with HIG and with Adam, and a bad value of
-one of its own keys is refused like those of the built-in problems.
+(``hydra.searchpath``) and the module on the import path for its ``_target_`` (what
+``PYTHONPATH`` does). It then goes through the console entry point (``higbench.cli.main``, in
+this process): it trains with HIG and with Adam, and a bad value of one of its own keys is
+refused like those of the built-in problems.
 """
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -20,23 +18,15 @@ import pytest
 from higbench.results import load_run
 
 HERE = Path(__file__).resolve().parents[1] / "examples" / "heat"
-ROOT = HERE.parent.parent
-TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false", "threads=1"]
 
 
 @pytest.fixture
-def heat_cli(tmp_path):
-    """``higbench problem=heat ...`` with the test-only problem registered, from a fresh tmp dir."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(HERE), str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    env.pop("HYDRA_FULL_ERROR", None)
+def heat(higbench, monkeypatch):
+    """``higbench problem=heat ...`` (the tiny run) with the test-only problem registered, from a fresh tmp dir."""
+    monkeypatch.syspath_prepend(str(HERE))  # as PYTHONPATH=examples/heat
 
-    def run(*args: str) -> subprocess.CompletedProcess:
-        flags = [a for a in args if a.startswith("-")]
-        argv = [*flags, f"hydra.searchpath=[file://{HERE / 'conf'}]", "problem=heat", *TINY]
-        argv += [a for a in args if not a.startswith("-")]
-        return subprocess.run(
-            [sys.executable, "-m", "higbench.cli", *argv], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=180
-        )
+    def run(*args: str):
+        return higbench(f"hydra.searchpath=[file://{HERE / 'conf'}]", "problem=heat", *args)
 
     return run
 
@@ -53,9 +43,9 @@ def test_it_is_two_files_outside_higbench():
 
 
 @pytest.mark.parametrize("optimizer", ["hig", "adam", "sip"])  # sip: through its regularised inverse simulator
-def test_the_custom_problem_trains_through_the_cli(heat_cli, tmp_path, optimizer):
-    proc = heat_cli(f"optimizer={optimizer}")
-    assert proc.returncode == 0, proc.stderr
+def test_the_custom_problem_trains_through_the_cli(heat, tmp_path, optimizer):
+    code, _, err = heat(f"optimizer={optimizer}")
+    assert code == 0, err
     (path,) = sorted((tmp_path / "outputs").rglob("run.h5"))
     meta, curves = load_run(path)
     assert meta["status"] == "completed" and meta["problem"] == "heat" and meta["optimizer"] == optimizer
@@ -73,26 +63,25 @@ def test_the_custom_problem_trains_through_the_cli(heat_cli, tmp_path, optimizer
         ("batch_size=512", "batch_size=512: must not exceed problem.train_size=256"),
     ],
 )
-def test_its_keys_are_validated_like_the_built_in_ones(higbench, monkeypatch, tmp_path, override, message):
-    monkeypatch.syspath_prepend(str(HERE))  # in-process: the module on sys.path, as PYTHONPATH does
-    code, _, err = higbench(f"hydra.searchpath=[file://{HERE / 'conf'}]", "problem=heat", "optimizer=adam", override)
+def test_its_keys_are_validated_like_the_built_in_ones(heat, tmp_path, override, message):
+    code, _, err = heat("optimizer=adam", override)
     assert code == 2, err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"higbench: error: {message}"), err
     assert sorted(tmp_path.rglob("*")) == [], "a refused config wrote something"
 
 
-def test_a_base_config_key_its_yaml_does_not_list_can_be_set(heat_cli, tmp_path):
+def test_a_base_config_key_its_yaml_does_not_list_can_be_set(heat, tmp_path):
     """docs/configuration.md: every problem's base config holds ``init``; heat.yaml does not list it."""
-    proc = heat_cli("optimizer=adam", "problem.init=torch")
-    assert proc.returncode == 0, proc.stderr
+    code, _, err = heat("optimizer=adam", "problem.init=torch")
+    assert code == 0, err
     (path,) = sorted((tmp_path / "outputs").rglob("run.h5"))
     assert load_run(path)[0]["config"]["problem"]["init"] == "torch"
 
 
-def test_a_multirun_checks_its_jobs_before_the_sweep_starts(heat_cli, tmp_path):
-    proc = heat_cli("-m", "optimizer=adam", "problem.alpha=0.1,0.9")
-    assert proc.returncode == 2 and "problem.alpha=0.9: must be a number in (0, 0.5]" in proc.stderr, proc.stderr
+def test_a_multirun_checks_its_jobs_before_the_sweep_starts(heat, tmp_path):
+    code, _, err = heat("-m", "optimizer=adam", "problem.alpha=0.1,0.9")
+    assert code == 2 and "problem.alpha=0.9: must be a number in (0, 0.5]" in err, err
     assert sorted(tmp_path.rglob("*")) == []
 
 
