@@ -4,7 +4,7 @@ in this process, a signal mid-run: tests/in_process.py.
 
 Most tests call the CLI in this process: ``higbench.cli.main(argv)``, as the console script
 does, with its exit code from ``SystemExit``. What one run leaves behind in the process is put
-back after each test (``in_process``). A test that starts a process of its own is marked
+back after each test (``process_state``). A test that starts a process of its own is marked
 ``process`` (tests/process_starts.py counts them).
 """
 
@@ -41,29 +41,28 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-@pytest.fixture
-def in_process(tmp_path, monkeypatch):
-    """Run higbench in this process from a fresh tmp dir, and put back what a run changes in it.
+@pytest.fixture(autouse=True)
+def process_state(monkeypatch):
+    """Put back, after every test, what a run of higbench in this process changes in it.
 
     A run sets torch's thread count, installs SIGINT/SIGTERM handlers (a single run leaves
     them ignored until exit), records HIGBENCH_PARALLEL_JOBS in the environment, rewrites
     sys.argv and holds a lock on its directory until exit; Hydra adds logging handlers (to
-    this test's captured streams) and keeps its global state.
+    the test's captured streams) and keeps its global state. Autouse: many tests call
+    ``higbench.cli.main`` or ``train`` directly.
     """
     import torch
     from hydra.core.global_hydra import GlobalHydra
 
     from higbench import cli as entry
 
-    monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "argv", list(sys.argv))
-    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
     environ = dict(os.environ)
     threads = torch.get_num_threads()
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     loggers = {name: (lg.handlers[:], lg.level, lg.propagate, lg.disabled) for name, lg in _loggers()}
     try:
-        yield tmp_path
+        yield
     finally:
         GlobalHydra.instance().clear()
         getattr(entry, "release_dirs", lambda: None)()  # as at the process's exit
@@ -92,7 +91,7 @@ def _loggers():
 
 
 @pytest.fixture
-def higbench(in_process, capsys):
+def higbench(tmp_path, monkeypatch, capsys):
     """higbench(*argv) in this process, from a fresh tmp dir -> (exit code, stdout, stderr).
 
     The front door as a user meets it, without a new Python and torch per call; the tiny run
@@ -100,6 +99,9 @@ def higbench(in_process, capsys):
     the process itself is the point (signals, pipes, the entry point).
     """
     from higbench import cli as entry
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
 
     def _run(*args: str, tiny: bool = True):
         try:

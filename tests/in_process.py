@@ -65,3 +65,23 @@ def signal_when(path: Path, signum: int = signal.SIGINT, timeout: float = 120):
     finally:
         done.set()
         watcher.join()
+
+
+@contextlib.contextmanager
+def memory_cap(extra_bytes: int = 1 << 30):
+    """While the block runs, this process may map at most ``extra_bytes`` more address space
+    (RLIMIT_AS, as a child process with a cap would have): a reader that blows up in memory
+    raises MemoryError in the test instead of taking the machine's memory."""
+    import resource
+
+    import psutil
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    cap = psutil.Process().memory_info().vms + extra_bytes
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))

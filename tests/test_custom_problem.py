@@ -11,6 +11,7 @@ refused like those of the built-in problems.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -28,7 +29,8 @@ def heat(higbench, monkeypatch):
     def run(*args: str):
         return higbench(f"hydra.searchpath=[file://{HERE / 'conf'}]", "problem=heat", *args)
 
-    return run
+    yield run
+    sys.modules.pop("heat_problem", None)  # imported by the runs: gone with the path, as with a process
 
 
 def test_it_is_two_files_outside_higbench():

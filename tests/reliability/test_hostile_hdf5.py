@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import sys
 import textwrap
 import time
 from pathlib import Path
@@ -18,7 +16,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from rel_helpers import FAST, cli_env, compose_here, sha256, stopped_run, train_here
+from in_process import memory_cap
+from rel_helpers import FAST, compose_here, sha256, stopped_run, train_here
 
 from higbench import cli
 from higbench.results.index import load_runs
@@ -187,45 +186,36 @@ def test_parse_config_bounds_aliases_and_size():
 
 
 def test_alias_bomb_in_the_stored_config_is_a_corrupt_row_at_once(sources, tmp_path):
-    """In a child process with a memory cap: before, this took tens of seconds and GBs."""
+    """Under a memory cap: before, this took tens of seconds and GBs."""
     root, done, _ = sources
     tree = tmp_path / "tree"
     bad = copy_run(done, tree / "bomb")
     copy_run(done, tree / "good")
     with h5py.File(bad, "r+") as f:
         f.attrs["config"] = f.attrs["config"] + "\n" + BOMB
-    code = textwrap.dedent(
-        f"""
-        import resource, sys, time
-        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
-        from higbench.results.index import load_runs
-        t = time.perf_counter()
-        runs = load_runs({str(tree)!r})
-        status = dict(zip([p.split('/')[-2] for p in runs['path']], runs['status']))
-        print(status['bomb'], status['good'], round(time.perf_counter() - t, 3))
-        """
-    )
-    r = subprocess.run([sys.executable, "-c", code], env=cli_env(), capture_output=True, text=True, timeout=60)
-    assert r.returncode == 0, r.stderr[-2000:]
-    bomb, good, seconds = r.stdout.split()
-    assert (bomb, good) == ("corrupt", "completed") and float(seconds) < 5, r.stdout
+    t = time.perf_counter()
+    with memory_cap():
+        runs = load_runs(tree)
+    seconds = time.perf_counter() - t
+    status = dict(zip([p.split("/")[-2] for p in runs["path"]], runs["status"]))
+    assert (status["bomb"], status["good"]) == ("corrupt", "completed") and seconds < 5, (status, seconds)
     with pytest.raises(UnreadableRunFile, match="aliases"):
         load_run(bad)
 
 
-def test_resume_refuses_an_alias_bomb_config(sources, tmp_path):
-    """Through the CLI, in a child process with a memory cap (before: GBs, minutes)."""
+def test_resume_refuses_an_alias_bomb_config(sources, tmp_path, monkeypatch, capsys):
+    """Through the CLI, under a memory cap (before: GBs, minutes)."""
     root, _, stopped = sources
     run = copy_run(stopped, tmp_path / "run")
     with h5py.File(run, "r+") as f:
         f.attrs["config"] = f.attrs["config"] + "\n" + BOMB
     before = sha256(run)
-    cap = "import resource; resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30)); "
-    code = cap + f"from higbench import cli; cli.main([{f'resume={run.parent}'!r}])"
+    monkeypatch.chdir(tmp_path)
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=cli_env(), capture_output=True, text=True, timeout=120)
-    line = one_error_line(r.stderr)
-    assert r.returncode == 2 and "resume=" in line and "aliases" in line, line
+    with memory_cap(), pytest.raises(SystemExit) as info:
+        cli.main([f"resume={run.parent}"])
+    line = one_error_line(capsys.readouterr().err)
+    assert info.value.code == 2 and "resume=" in line and "aliases" in line, line
     assert time.perf_counter() - t < 60 and sha256(run) == before
 
 

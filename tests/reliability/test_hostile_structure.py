@@ -5,15 +5,12 @@ still listed) or one line for ``init_from=``; weights in another byte order are 
 from __future__ import annotations
 
 import shutil
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-from rel_helpers import FAST, cli_env, compose_here, sha256, train_here
+from rel_helpers import FAST, compose_here, sha256, train_here
 from test_front_door_security import refused
 
 from higbench.runfile.reader import MAX_DEPTH, MAX_OBJECTS, UnreadableRunFile, load_weights, read_head
@@ -56,15 +53,13 @@ def _inflated(path: Path) -> None:
                 ds[:] = 0.0
 
 
-INDEX = textwrap.dedent(
-    """
-    import sys
+def index_lines(tree: Path) -> list[str]:
+    """``load_runs`` of the tree, one line per run: its folder, status and error (in this
+    process: a C stack overflow in HDF5's visit, as once, ends the test session loudly)."""
     from higbench.results.index import load_runs
-    runs = load_runs(sys.argv[1])
-    for _, row in runs.sort_values("path").iterrows():
-        print(row["path"].split("/")[-2], row["status"], "|", row["error"])
-    """
-)
+
+    runs = load_runs(tree)
+    return [f"{row['path'].split('/')[-2]} {row['status']} | {row['error']}" for _, row in runs.sort_values("path").iterrows()]
 
 
 @pytest.mark.parametrize("shape", ["10000 nested groups", "30000 groups", "inflated columns"])
@@ -78,9 +73,7 @@ def test_a_hostile_structure_is_a_corrupt_row_and_the_other_runs_are_listed(shap
         _many(hostile, MAX_OBJECTS + 10_000)
     else:
         _inflated(hostile)
-    proc = subprocess.run([sys.executable, "-c", INDEX, str(tree)], capture_output=True, text=True, env=cli_env(), timeout=300)
-    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
-    lines = proc.stdout.strip().splitlines()
+    lines = index_lines(tree)
     assert lines[0].startswith("good completed"), lines
     assert lines[1].startswith("hostile corrupt"), lines
     why = {"10000 nested groups": f"more than {MAX_DEPTH} levels", "30000 groups": "objects", "inflated columns": "declare"}
