@@ -49,16 +49,23 @@ def test_wheel_install_finds_packaged_configs(tmp_path):
     assert install.returncode == 0, install.stderr
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
+    # The job-list sweeper (docs/sweeps.md: `higbench -m hydra/sweeper=joblist ...` from any
+    # directory, no PYTHONPATH) comes with the wheel too.
     where = subprocess.run(
-        [str(py), "-c", "import higbench.cli as c; print(c.config_dir())"],
+        [
+            str(py),
+            "-c",
+            "import higbench.cli as c, hydra_plugins.higbench_joblist_sweeper as j; print(c.config_dir()); print(j.__file__)",
+        ],
         cwd=elsewhere,
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert where.returncode == 0, where.stderr
-    conf = Path(where.stdout.strip())
+    conf, sweeper = map(Path, where.stdout.split())
     assert conf.is_relative_to(venv_site), f"{conf} is not inside the wheel install {venv_site}"
+    assert sweeper.is_relative_to(venv_site), f"{sweeper} is not inside the wheel install {venv_site}"
     assert "site-packages" in str(conf) and (conf / "config.yaml").is_file() and (conf / "problem" / "dipole_cnn.yaml").is_file()
     job = subprocess.run(
         [str(venv / "bin" / "higbench"), "problem=oscillator", "optimizer=adam", "--cfg", "job"],

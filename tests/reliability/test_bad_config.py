@@ -3,8 +3,8 @@ value, and nothing written (no run directory, no file, no change to existing fil
 
 The table runs the real entry point (``higbench.cli.main``: Hydra's app and its ``Checks``
 callback) in-process for speed; the job itself must never be reached. A few cases run the
-console entry as a subprocess end to end, including the in-job path (validation inside
-the Hydra job, which must remove the directory Hydra made).
+whole command line end to end, including the in-job path (validation inside the Hydra job,
+which must remove the directory Hydra made).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 from omegaconf import OmegaConf
-from rel_helpers import REPO, files_under, run_cli
+from rel_helpers import REPO, files_under
 
 from higbench import cli
 from higbench.config import ConfigError, validate
@@ -379,24 +379,24 @@ def test_config_error_names_key_and_value():
 # -- end to end, as a user runs it -----------------------------------------------------------
 
 
-def test_cli_exit_code_and_nothing_written_subprocess(tmp_path):
-    res = run_cli(["optimizer.lr=-1", f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path)
-    assert res.returncode == 2, res.stderr
-    assert res.stderr.strip() == "higbench: error: optimizer.lr=-1: refused by higbench.optim.JacobianPower: must be a number > 0"
-    res = run_cli(["problem.foo=1"], cwd=tmp_path)  # default run dir: outputs/ in the cwd
-    assert res.returncode == 2 and "problem.foo=1: unknown key" in res.stderr, res.stderr
-    res = run_cli(["-m", "optimizer.lr=0.1,-1", "budget.seconds=1"], cwd=tmp_path)
-    assert res.returncode == 2 and "optimizer.lr=-1" in res.stderr, res.stderr
+def test_cli_exit_code_and_nothing_written_end_to_end(higbench, tmp_path):
+    code, _, err = higbench("optimizer.lr=-1", f"hydra.run.dir={tmp_path}/run", tiny=False)
+    assert code == 2, err
+    assert err.strip() == "higbench: error: optimizer.lr=-1: refused by higbench.optim.JacobianPower: must be a number > 0"
+    code, _, err = higbench("problem.foo=1", tiny=False)  # default run dir: outputs/ in the cwd
+    assert code == 2 and "problem.foo=1: unknown key" in err, err
+    code, _, err = higbench("-m", "optimizer.lr=0.1,-1", "budget.seconds=1", tiny=False)
+    assert code == 2 and "optimizer.lr=-1" in err, err
     assert files_under(tmp_path) == []
 
 
-def test_in_job_validation_removes_what_hydra_made(tmp_path):
+def test_in_job_validation_removes_what_hydra_made(higbench, tmp_path):
     """Without the Checks callback (as for jobs an Optuna sweeper samples): the job validates
     and cleans up after itself."""
-    res = run_cli(["~hydra.callbacks.checks", "optimizer.kappa=7"], cwd=tmp_path)
-    assert res.returncode == 2, res.stderr
+    code, _, err = higbench("~hydra.callbacks.checks", "optimizer.kappa=7", tiny=False)
+    assert code == 2, err
     expected = "higbench: error: optimizer.kappa=7: refused by higbench.optim.JacobianPower: must be a number in [-1, 1]"
-    assert res.stderr.strip().splitlines()[-1] == expected
+    assert err.strip().splitlines()[-1] == expected
     assert files_under(tmp_path) == [], files_under(tmp_path)
 
 
