@@ -57,6 +57,7 @@ def process_state(monkeypatch):
     from higbench import cli as entry
 
     monkeypatch.setattr(sys, "argv", list(sys.argv))
+    hydra_was_initialized = GlobalHydra.instance().is_initialized()  # e.g. by a module-scoped compose fixture
     environ = dict(os.environ)
     threads = torch.get_num_threads()
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -64,7 +65,8 @@ def process_state(monkeypatch):
     try:
         yield
     finally:
-        GlobalHydra.instance().clear()
+        if not hydra_was_initialized:
+            GlobalHydra.instance().clear()
         getattr(entry, "release_dirs", lambda: None)()  # as at the process's exit
         torch.set_num_threads(threads)
         for s, handler in handlers.items():
@@ -125,3 +127,15 @@ def cli(tmp_path):
         return run_cli([*flags, *(TINY if tiny else []), *overrides], cwd=tmp_path, timeout=timeout)
 
     return _run
+
+
+@pytest.fixture
+def fresh_joblib_workers():
+    """joblib keeps its loky workers for the next sweep of this process, with the working
+    directory and environment they started with: each in-process joblib test gets its own."""
+    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
+    from joblib.externals.loky import get_reusable_executor
+
+    get_reusable_executor().shutdown(wait=True)
+    yield
+    get_reusable_executor().shutdown(wait=True)

@@ -236,34 +236,11 @@ def test_an_unknown_flag_is_one_line_not_argparse_usage(higbench, tmp_path):
     assert list(tmp_path.rglob("*")) == []
 
 
-@pytest.fixture
-def fresh_joblib_workers():
-    """joblib keeps its loky workers for the next sweep of this process, with the working
-    directory and environment they started with: each in-process joblib test gets its own."""
-    pytest.importorskip("hydra_plugins.hydra_joblib_launcher")
-    from joblib.externals.loky import get_reusable_executor
-
-    get_reusable_executor().shutdown(wait=True)
-    yield
-    get_reusable_executor().shutdown(wait=True)
-
-
-@pytest.mark.process  # joblib's workers
-def test_joblib_sweeps_record_how_many_jobs_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
-    from higbench.results import load_runs
-
-    code, _, err = higbench("-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "seed=1,2,3")
-    assert code == 0, err
-    runs = load_runs(tmp_path / "outputs")
-    assert len(runs) == 3 and list(runs["parallel_jobs"]) == [2.0, 2.0, 2.0]
-    code, _, err = higbench("-m", "seed=4")  # the basic launcher: one job at a time
-    assert code == 0 and list(load_runs(tmp_path / "outputs")["parallel_jobs"]).count(1.0) == 1, err
-
-
 @pytest.mark.process  # joblib's workers
 def test_joblib_jobs_from_a_job_list_record_that_they_shared_the_machine(higbench, tmp_path, fresh_joblib_workers):
     """The figures' launch: the joblist sweeper on joblib. Its jobs come from a file, not the
-    command line: two of them on two workers ran together, and both run files say so."""
+    command line: two of them on two workers ran together, and both run files say so. (A
+    sweep from the command line on joblib: tests/sweeps/test_sweep_launchers.py.)"""
     import json
 
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register

@@ -5,12 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from cases import TINY_RUN
 from cli_runner import cli_env, start_cli
-from conftest import TINY
 
 from higbench.results import load_runs
 
-SWEEP = ["-m", "optimizer=adam", "optimizer.lr=0.01,0.1", *TINY]
+SWEEP = ["-m", "optimizer=adam", "optimizer.lr=0.01,0.1", "problem=toy", *TINY_RUN]
 
 
 def start_together(cwd, *argvs):
@@ -18,6 +18,7 @@ def start_together(cwd, *argvs):
     return [(p, *p.communicate(timeout=300)) for p in procs]
 
 
+@pytest.mark.process  # two processes at once: each claims its directories
 def test_concurrent_sweeps_get_their_own_directories(tmp_path):
     """Same command twice, at once, with the default sweep directory of conf/config.yaml
     (outputs/sweeps/<date>/<time with microseconds>, relative to the working directory)."""

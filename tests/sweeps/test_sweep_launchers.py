@@ -1,7 +1,9 @@
 """A 2x2 toy sweep (conf/experiment/toy_lr_grid.yaml) through three Hydra launchers.
 
 Each must leave four completed run files that the results index finds, with the swept
-values in their configs, readable directory names and Hydra's multirun.yaml.
+values in their configs, readable directory names and Hydra's multirun.yaml. The basic and
+joblib launchers are started from this process (joblib's workers are processes of their own);
+submitit and Optuna (slow) through the CLI as a process.
 """
 
 from __future__ import annotations
@@ -9,10 +11,13 @@ from __future__ import annotations
 import joblib
 import pytest
 import yaml
+from cases import TINY_RUN
 from cli_runner import cli_env, run_cli
-from conftest import GRID, TINY
+from conftest import GRID
 
 from higbench.results import load_runs
+
+TINY = [*TINY_RUN, "problem=toy"]
 
 
 def sweep_cli(args: list[str], cwd, timeout: float = 180):
@@ -37,30 +42,34 @@ def check_sweep(sweep_dir):
     return runs
 
 
-def test_basic_launcher(tmp_path):
+def test_basic_launcher(higbench, tmp_path):
     sweep = tmp_path / "sweep"
-    sweep_cli(["-m", "+experiment=toy_lr_grid", *TINY, f"hydra.sweep.dir={sweep}"], tmp_path)
-    check_sweep(sweep)
+    code, _, err = higbench("-m", "+experiment=toy_lr_grid", "problem=toy", f"hydra.sweep.dir={sweep}")
+    assert code == 0, err
+    runs = check_sweep(sweep)
+    assert list(runs["parallel_jobs"]) == [1.0] * 4  # one job at a time
 
 
-def test_joblib_two_workers_cap_threads(tmp_path):
+@pytest.mark.process  # joblib's workers
+def test_joblib_two_workers_cap_threads(higbench, tmp_path, monkeypatch, fresh_joblib_workers):
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(var, raising=False)  # the launcher chooses its workers' threads
     sweep = tmp_path / "sweep"
-    sweep_cli(
-        [
-            "-m",
-            "+experiment=toy_lr_grid",
-            *TINY,
-            "threads=null",  # torch's default thread count (conf/config.yaml sets threads=1),
-            f"hydra.sweep.dir={sweep}",
-            "hydra/launcher=joblib",
-            "hydra.launcher.n_jobs=2",
-        ],
-        tmp_path,
+    code, _, err = higbench(
+        "-m",
+        "+experiment=toy_lr_grid",
+        "problem=toy",
+        "threads=null",  # torch's default thread count (the tiny run sets threads=1)
+        f"hydra.sweep.dir={sweep}",
+        "hydra/launcher=joblib",
+        "hydra.launcher.n_jobs=2",
     )
+    assert code == 0, err
     runs = check_sweep(sweep)
     # loky starts its workers with OMP_NUM_THREADS = cores // n_jobs; torch takes its default from it
     assert set(runs["env.torch_threads"]) == {max(joblib.cpu_count() // 2, 1)}
     assert runs["env.hostname"].notna().all()
+    assert list(runs["parallel_jobs"]) == [2.0] * 4  # each run file says how many jobs shared the machine
 
 
 @pytest.mark.slow
