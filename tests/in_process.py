@@ -85,3 +85,25 @@ def memory_cap(extra_bytes: int = 1 << 30):
         yield
     finally:
         resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
+@contextlib.contextmanager
+def seen_from_another_process(writer_file, to: Path, *, flush: bool = True):
+    """A run file still open for writing in this process, as a reader in another process meets
+    it: its bytes on disk (after a flush, or as they are mid-burst with ``flush=False``), copied
+    to ``to`` and locked there as HDF5 locks a file it writes (flock, exclusive) while the block
+    runs. After the block the lock is gone: what a writer killed at that moment (SIGKILL) leaves.
+    """
+    import fcntl
+    import shutil
+
+    if flush:
+        writer_file.flush()
+    Path(to).parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(writer_file.filename, to)
+    fd = os.open(to, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        yield Path(to)
+    finally:
+        os.close(fd)

@@ -3,16 +3,11 @@
 from __future__ import annotations
 
 import math
-import os
-import signal
-import subprocess
 import sys
-import textwrap
 
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import REPO
 from synthetic import write_run
 
 from higbench.results import best_runs, load_curves, load_runs
@@ -138,34 +133,24 @@ def test_unreadable_files_are_reported_not_fatal(tree):
     assert len(best_runs(runs.reset_index())) == 2
 
 
-WRITER = textwrap.dedent(
-    """
-    import sys
-    sys.path[:0] = [{repo!r}, {here!r}]
-    from synthetic import write_run
-    w = write_run(__import__("pathlib").Path({path!r}), optimizer="sgd", test_loss=[1.0, 0.5], close=False)
-    print("ready", flush=True)
-    sys.stdin.readline()
-    """
-)
+def test_run_being_written_and_killed_writer(tree, tmp_path):
+    """A live writer's file shows as running; after SIGKILL it reads up to the last flush.
+    (The writer is open in this process; the reader meets its bytes and its lock as another
+    process would: tests/in_process.py.)"""
+    from in_process import seen_from_another_process
 
-
-def test_run_being_written_and_killed_writer(tree):
-    """A live writer's file shows as running; after SIGKILL it reads up to the last flush."""
     path = tree / "live/run.h5"
-    code = WRITER.format(repo=str(REPO), here=os.path.dirname(os.path.dirname(__file__)), path=str(path))  # tests/: synthetic.py
-    proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    writer = write_run(tmp_path / "writing" / "run.h5", optimizer="sgd", test_loss=[1.0, 0.5], close=False)
     try:
-        assert proc.stdout.readline().strip() == "ready"
-        row = load_runs(tree).set_index("path").loc[str(path)]
-        assert row["status"] == "running" and row["error"]
-        assert len(best_runs(load_runs(tree))) == 2  # a running run is never a best run
+        with seen_from_another_process(writer.f, path):
+            row = load_runs(tree).set_index("path").loc[str(path)]
+            assert row["status"] == "running" and "being written" in row["error"], row["error"]
+            assert len(best_runs(load_runs(tree))) == 2  # a running run is never a best run
+        row = load_runs(tree).set_index("path").loc[str(path)]  # killed: the lock went with the writer
+        assert row["status"] == "running" and "no writer holds the file" in row["error"], row["error"]
+        assert row["final_test_loss"] == 0.5 and row["n_evals"] == 2  # what was flushed is there
     finally:
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=30)
-    row = load_runs(tree).set_index("path").loc[str(path)]
-    assert row["status"] == "running"  # the writer never closed it
-    assert row["final_test_loss"] == 0.5 and row["n_evals"] == 2  # what was flushed is there
+        writer.f.close()
 
 
 def test_cli_table_filters_and_best(tree, capsys):
@@ -197,12 +182,15 @@ def test_cli_table_filters_and_best(tree, capsys):
     assert "no_such_metric" in capsys.readouterr().err
 
 
-def test_cli_module_entry_point(tree):
-    proc = subprocess.run(
-        [sys.executable, "-m", "higbench.results", str(tree), "--best"], capture_output=True, text=True, cwd=REPO, timeout=120
-    )
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.startswith("2 of 5 runs")
+def test_cli_module_entry_point(tree, monkeypatch, capsys):
+    import runpy
+
+    monkeypatch.setattr(sys, "argv", ["higbench-results", str(tree), "--best"])
+    monkeypatch.delitem(sys.modules, "higbench.results.__main__")  # imported above: run afresh, as `-m` does
+    with pytest.raises(SystemExit) as info:
+        runpy.run_module("higbench.results", run_name="__main__")  # `python -m higbench.results`, in this process
+    assert info.value.code == 0, capsys.readouterr().err
+    assert capsys.readouterr().out.startswith("2 of 5 runs")
 
 
 def test_cli_best_keeps_dipole_mlp_and_cnn_apart(tree, capsys):
@@ -228,6 +216,7 @@ def test_only_unreadable_files_and_empty_root(tmp_path, capsys):
     assert results_main([str(empty)]) == 0
 
 
+@pytest.mark.process  # the index's reader processes (jobs=2)
 def test_parallel_reading_gives_the_same_tables(tree):
     runs, curves = load_runs(tree, curves=True)
     runs2, curves2 = load_runs(tree, curves=True, jobs=2)
