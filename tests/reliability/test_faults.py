@@ -91,9 +91,8 @@ def fill(directory: Path, leave: int) -> None:
         os.close(fd)
 
 
-def assert_stopped_by_disk(proc, run_file: Path, rows_before: int):
-    out, err = proc.communicate(timeout=90)
-    assert proc.returncode == 1, (out, err)
+def assert_stopped_by_disk(code: int, out: str, err: str, run_file: Path, rows_before: int):
+    assert code == 1, (out, err)
     line = one_error_line(err)
     assert "no space left" in line, line
     assert "completed" not in out
@@ -105,14 +104,28 @@ def assert_stopped_by_disk(proc, run_file: Path, rows_before: int):
     assert updates["step"].tolist() == list(range(1, len(updates) + 1))
 
 
+def after_rows(monkeypatch, n: int, fault) -> dict:
+    """``fault(writer)`` once, right after the flush that puts the run file's ``n``-th curve row
+    on disk (the run going on): a fault of the file system between two writes of a run in this
+    process. The returned dict gets ``rows``, the curve rows flushed when the fault came."""
+    flush, seen = RunFileWriter.flush, {}
+
+    def flush_then_fault(self):
+        flush(self)
+        rows = int(self.f["curves"]["step"].shape[0]) if "step" in self.f["curves"] else 0
+        if "rows" not in seen and rows >= n:
+            seen["rows"] = rows
+            fault(self)
+
+    monkeypatch.setattr(RunFileWriter, "flush", flush_then_fault)
+    return seen
+
+
 @pytest.mark.parametrize("leave", [300 * 1024, pytest.param(0, marks=pytest.mark.slow)], ids=["300KiB-left", "nothing-left"])
-def test_disk_filled_by_another_file_stops_the_run_with_a_readable_file(tmpfs, leave):
-    proc = start_cli([*LONG_RUN, "checkpoint_every=0.3", f"hydra.run.dir={tmpfs}/run"], cwd=tmpfs)
-    run_file = tmpfs / "run" / "run.h5"
-    wait_for_rows(run_file, 4, proc)
-    rows = table_rows(run_file)
-    fill(tmpfs, leave)
-    assert_stopped_by_disk(proc, run_file, rows)
+def test_disk_filled_by_another_file_stops_the_run_with_a_readable_file(tmpfs, leave, higbench, monkeypatch):
+    seen = after_rows(monkeypatch, 4, lambda writer: fill(tmpfs, leave))
+    code, out, err = higbench(*LONG_RUN, "checkpoint_every=0.3", f"hydra.run.dir={tmpfs}/run", tiny=False)
+    assert_stopped_by_disk(code, out, err, tmpfs / "run" / "run.h5", seen["rows"])
 
 
 def test_run_filling_the_disk_itself_stops_at_the_reserve(tmpfs):
@@ -144,7 +157,8 @@ def test_file_size_limit_reached_mid_run(tmp_path):
     rows = table_rows(run_file)
     size = run_file.stat().st_size
     resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (size + 1024 * 1024 + 64 * 1024, resource.RLIM_INFINITY))
-    assert_stopped_by_disk(proc, run_file, rows)
+    out, err = proc.communicate(timeout=90)
+    assert_stopped_by_disk(proc.returncode, out, err, run_file, rows)
 
 
 # -- 2. a checkpoint of another run ----------------------------------------------------------
@@ -376,24 +390,25 @@ def test_interrupted_sweep_is_completed_in_place(tmp_path):
 # -- 6. run file deleted or replaced under a live run ----------------------------------------
 
 
-@pytest.mark.parametrize(
-    "how", ["deleted", pytest.param("replaced", marks=pytest.mark.slow), pytest.param("dir-renamed", marks=pytest.mark.slow)]
-)
-def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
-    proc = start_cli([*LONG_RUN, "checkpoint_every=null", f"hydra.run.dir={tmp_path}/run"], cwd=tmp_path)
+@pytest.mark.parametrize("how", ["deleted", "replaced", "dir-renamed"])
+def test_run_file_deleted_or_replaced_while_running(tmp_path, how, higbench, monkeypatch):
     run_file = tmp_path / "run" / "run.h5"
-    wait_for_rows(run_file, 3, proc)
-    if how == "deleted":
-        run_file.unlink()
-    elif how == "dir-renamed":
-        os.rename(run_file.parent, tmp_path / "moved")
-    else:
-        other = tmp_path / "other.h5"
-        shutil.copy(run_file, other)
-        os.replace(other, run_file)
-        replacement = sha256(run_file)
-    out, err = proc.communicate(timeout=90)
-    assert proc.returncode == 1, (out, err)
+    replacement = {}
+
+    def fault(writer):
+        if how == "deleted":
+            run_file.unlink()
+        elif how == "dir-renamed":
+            os.rename(run_file.parent, tmp_path / "moved")
+        else:
+            other = tmp_path / "other.h5"
+            shutil.copy(run_file, other)
+            os.replace(other, run_file)
+            replacement["sha"] = sha256(run_file)
+
+    after_rows(monkeypatch, 3, fault)
+    code, out, err = higbench(*LONG_RUN, "checkpoint_every=null", f"hydra.run.dir={tmp_path}/run", tiny=False)
+    assert code == 1, (out, err)
     line = one_error_line(err)
     assert f"was {'replaced by another file' if how == 'replaced' else 'deleted'}" in line, line
     assert "completed" not in out and "run file:" not in out
@@ -404,7 +419,7 @@ def test_run_file_deleted_or_replaced_while_running(tmp_path, how):
         assert not run_file.exists()
         assert (run_file.parent / ".hydra" / "config.yaml").is_file(), "the run's other files went with it"
     else:
-        assert sha256(run_file) == replacement, "the run wrote into the file that replaced its own"
+        assert sha256(run_file) == replacement["sha"], "the run wrote into the file that replaced its own"
 
 
 # -- 7. unusable output locations ------------------------------------------------------------
