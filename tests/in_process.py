@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -107,3 +108,37 @@ def seen_from_another_process(writer_file, to: Path, *, flush: bool = True):
         yield Path(to)
     finally:
         os.close(fd)
+
+
+def launch_in_process(monkeypatch) -> list[list[str]]:
+    """Run the command lines ``higbench.jobs.launch`` starts (``python -m higbench.cli -m ...``)
+    in this process instead: the same arguments, environment variables and log file; the
+    process itself is not what such a test checks. Returns the command lines run."""
+    import subprocess
+
+    from higbench import cli, jobs
+
+    launched: list[list[str]] = []
+    real_run = subprocess.run  # the module is the one subprocess module: other commands (git) still run
+
+    def run(cmd, stdout=None, stderr=None, env=None, **kwargs):
+        if list(cmd[1:3]) != ["-m", "higbench.cli"]:
+            return real_run(cmd, stdout=stdout, stderr=stderr, env=env, **kwargs)
+        assert not kwargs, kwargs
+        launched.append(list(cmd))
+        with monkeypatch.context() as m:
+            for key, value in (env or {}).items():
+                if os.environ.get(key) != value:
+                    m.setenv(key, value)
+            out = stdout if stdout is not None else sys.stdout
+            err = out if stderr == subprocess.STDOUT else (stderr if stderr is not None else sys.stderr)
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                try:
+                    cli.main(list(cmd[3:]))
+                    code = 0
+                except SystemExit as exc:
+                    code = exc.code or 0
+        return subprocess.CompletedProcess(cmd, code)
+
+    monkeypatch.setattr(jobs.subprocess, "run", run)
+    return launched

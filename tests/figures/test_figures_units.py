@@ -160,19 +160,14 @@ def test_launch_sends_every_job_in_one_multirun_longest_first(tmp_path, monkeypa
     assert jobs[0][:2] == ["optimizer=hig", "seed=0"] and len(jobs) == 5  # the longest run starts first
 
 
-def test_joblist_sweeper_runs_a_job_list(tmp_path):
+def test_joblist_sweeper_runs_a_job_list(higbench, tmp_path):
     """The plugin through Hydra: two jobs that are no cartesian product, in one multirun."""
-    import subprocess
-    import sys
-
-    root = Path(__file__).resolve().parents[2]
     jobs = tmp_path / "jobs.json"
     jobs.write_text(json.dumps([["optimizer=hig", "budget.max_updates=2"], ["optimizer=adam", "seed=1", "budget.max_updates=3"]]))
-    cmd = [sys.executable, "-m", "higbench.cli", "-m", "problem=toy", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}"]
-    cmd += ["budget.seconds=5", "eval_unit=updates", "eval_every=1", "progress=false", f"hydra.sweep.dir={tmp_path / 's'}"]
-    env = {**__import__("os").environ, "PYTHONPATH": str(root)}
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    args = ["-m", "problem=toy", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={jobs}"]
+    args += ["budget.seconds=5", "eval_unit=updates", "eval_every=1", "progress=false", f"hydra.sweep.dir={tmp_path / 's'}"]
+    code, out, err = higbench(*args, tiny=False)
+    assert code == 0, out[-2000:] + err[-2000:]
     made = sorted(p.parent.name for p in (tmp_path / "s").rglob("run.h5"))
     assert len(made) == 2 and "optimizer=adam" in made[1] and "seed=1" in made[1]
 
@@ -211,7 +206,11 @@ def test_a_stopped_figure_run_is_resumed_in_place_for_the_rest_of_its_budget(tmp
     runs.resolve([job], runs.run_index(tmp_path))
     assert job.status == "interrupted" and not job.done and job.resume_from == run.resolve()
     assert job.launch_overrides() == [f"resume={run.resolve().parent}"]
+    from in_process import launch_in_process
+
+    launched = launch_in_process(monkeypatch)  # the launcher's command line, run here
     written = runs.launch([job], tmp_path, n_jobs=1, log=lambda _: None)
+    assert len(launched) == 1
     assert written == [run.resolve()]  # the run continued where it was: no new run file
     head = read_head(run)
     assert str(head.attrs["status"]) == "completed" and int(head.attrs["steps"]) == 1000, dict(head.attrs)
