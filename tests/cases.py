@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from higbench.problems.base import registry
+from higbench.problems.base import FixedDataProblem, registry
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
@@ -25,6 +25,9 @@ TINY_RUN = ("budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", 
 # ``problem=NAME`` takes (one class may have several: dipole and dipole_cnn).
 PROBLEMS = sorted(registry())
 PROBLEM_CONFIGS = sorted(p.stem for p in (CONF / "problem").glob("*.yaml"))
+# Problems whose train and test sets are drawn once from ``problem.data_seed`` (Poisson draws
+# its training samples from the run's seed).
+FIXED_DATA_PROBLEMS = sorted(name for name, cls in registry().items() if issubclass(cls, FixedDataProblem))
 
 # Optimizers: one YAML each in conf/optimizer/ (``optimizer=NAME``).
 OPTIMIZERS = sorted(p.stem for p in (CONF / "optimizer").glob("*.yaml"))

@@ -12,22 +12,21 @@ test (setup, call and teardown), and
   API;
 * prints, at the end, how many tests started processes and, with ``--process-starts``, which.
 
-Small system tools are not counted (``NOT_COUNTED``): ``git``, with which every run records the
-checkout's revision (higbench/runner/revision.py), and the tools that make a fault.
+Only Python processes are counted (an interpreter, a console script, a worker or fork); small
+system tools are not: ``git``, with which every run records the checkout's revision
+(higbench/runner/revision.py), and the tools a few tests use to make a fault.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
-# Small system tools, milliseconds each: the run's revision lookup (git, in every run), and the
-# tools a few tests use to make a fault (a tmpfs to fill, an immutable file).
-NOT_COUNTED = {"git", "mount", "umount", "chattr"}
 BUDGET = 15  # tests of the default suite (not slow) that may start processes (issue 34)
 
 ENFORCE = False  # fail unmarked tests that start processes
@@ -36,19 +35,29 @@ _current: Counter | None = None  # the running test's starts, by program
 _by_test: dict[str, tuple[Counter, bool]] = {}  # node id -> (starts by program, marked slow)
 
 
-def _record(program: str) -> None:
-    if _current is not None and program not in NOT_COUNTED:
+def _record(program: str | None) -> None:
+    if _current is not None and program is not None:
         _current[program] += 1
 
 
-def _program(args) -> str:
-    """The program's name: the first word of a shell command line, else the first argument."""
+def _program(args) -> str | None:
+    """ "python", or the name of a Python console script (higbench, pip), of the program a
+    command line starts (the first word of a shell command line, else the first argument);
+    None for any other program: small system tools, milliseconds each (git, with which every
+    run records the checkout's revision; mount, chattr, uname)."""
     if isinstance(args, str | bytes | os.PathLike):
         first = (os.fsdecode(args).split() or [""])[0]
     else:
         first = os.fsdecode(list(args)[0])
-    name = Path(first).name
-    return "python" if name.startswith("python") else name
+    if Path(first).name.startswith("python"):
+        return "python"
+    path = shutil.which(first)
+    try:
+        with open(path or first, "rb") as f:
+            shebang = f.readline(200)
+    except OSError:
+        return None
+    return Path(first).name if shebang.startswith(b"#!") and b"python" in shebang else None
 
 
 def _wrap_starts(monkeypatch: pytest.MonkeyPatch) -> None:

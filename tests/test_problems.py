@@ -4,6 +4,7 @@ import math
 
 import pytest
 import torch
+from cases import FIXED_DATA_PROBLEMS, PROBLEM_CONFIGS
 from hydra import compose, initialize_config_dir
 
 from higbench.config import config_dir
@@ -23,6 +24,11 @@ def make(problem, *overrides, dtype=torch.float64):
     return build_problem(cfg.problem, dtype=dtype, device=torch.device("cpu"), seed=0), cfg
 
 
+def test_every_problem_config_has_its_facts_here():
+    """A new problem (tests/cases.py finds it in conf/problem/) states its sizes below."""
+    assert sorted(PARAMETER_COUNTS) == PROBLEM_CONFIGS and sorted(OUTPUT_SIZES) == PROBLEM_CONFIGS
+
+
 @pytest.mark.parametrize("problem,count", PARAMETER_COUNTS.items())
 def test_parameter_counts(problem, count):
     p, _ = make(problem)
@@ -34,7 +40,10 @@ def test_dipole_model_switch_by_key():
     assert count_parameters(p.build_model()) == 21984
 
 
-@pytest.mark.parametrize("problem,y_size", [("toy", 2), ("oscillator", 4), ("poisson", 64), ("dipole", 28), ("dipole_cnn", 28)])
+OUTPUT_SIZES = {"toy": 2, "oscillator": 4, "poisson": 64, "dipole": 28, "dipole_cnn": 28}
+
+
+@pytest.mark.parametrize("problem,y_size", OUTPUT_SIZES.items())
 def test_outputs_and_loss_shapes(problem, y_size):
     p, cfg = make(problem)
     model = p.build_model()
@@ -106,7 +115,7 @@ def test_dipole_targets_are_normalised_superpositions_of_phi2_phi3():
     assert set(m) == {"low_energy_loss", "high_energy_loss"} and max(v.abs().max() for v in m.values()) < 1e-12
 
 
-@pytest.mark.parametrize("problem", ["toy", "oscillator", "dipole"])
+@pytest.mark.parametrize("problem", FIXED_DATA_PROBLEMS)
 def test_data_is_seeded(problem):
     a, _ = make(problem)
     b, _ = make(problem)
@@ -125,7 +134,7 @@ def test_glorot_initialisation_is_default_and_biases_are_zero():
     assert q.build_model()[0].bias.abs().max() > 0
 
 
-@pytest.mark.parametrize("problem", ["toy", "oscillator", "dipole"])
+@pytest.mark.parametrize("problem", FIXED_DATA_PROBLEMS)
 def test_train_then_test_from_one_data_seed_generator(problem):
     """sample_datasets draws train first, then test, from one generator: the order the
     published runs were made with (swapping it, or a second generator, changes the data)."""

@@ -8,11 +8,12 @@ import copy
 
 import pytest
 import torch
+from cases import PROBLEM_CONFIGS
 from omegaconf import OmegaConf
 
 from higbench.problems.base import build_problem
 
-PROBLEMS = ("toy", "oscillator", "dipole", "dipole_cnn", "poisson")
+PROBLEMS = PROBLEM_CONFIGS
 
 
 def problem_node(name: str, **changes) -> dict:
@@ -47,7 +48,7 @@ def test_validation_set_is_disjoint_and_leaves_train_and_test_unchanged(name):
     assert (distance > 0).all(), "a validation sample is also a training or test sample"
 
 
-@pytest.mark.parametrize("name", ["toy", "oscillator", "dipole", "poisson"])
+@pytest.mark.parametrize("name", PROBLEMS)
 def test_each_problem_declares_its_targets_budget_and_held_out_variants(name):
     node = problem_node(name)
     assert node["targets"] and all(t > 0 for t in node["targets"])
