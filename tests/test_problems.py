@@ -25,8 +25,12 @@ def make(problem, *overrides, dtype=torch.float64):
 
 
 def test_every_problem_config_has_its_facts_here():
-    """A new problem (tests/cases.py finds it in conf/problem/) states its sizes below."""
+    """A new problem (tests/cases.py finds it in conf/problem/) states its sizes below, and its
+    short-horizon case for the optimizer tests (tests/optim/optim_helpers.py)."""
+    from optim.optim_helpers import CASES
+
     assert sorted(PARAMETER_COUNTS) == PROBLEM_CONFIGS and sorted(OUTPUT_SIZES) == PROBLEM_CONFIGS
+    assert sorted(CASES) == PROBLEM_CONFIGS
 
 
 @pytest.mark.parametrize("problem,count", PARAMETER_COUNTS.items())

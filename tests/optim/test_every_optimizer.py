@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from cases import OPTIMIZERS
 from omegaconf import OmegaConf
 from optim_helpers import CASES, compose_cfg, flat, setup
 
@@ -24,7 +25,6 @@ from higbench.runner.updates import build_update
 from higbench.schema import locate
 
 CONF = Path(__file__).resolve().parents[2] / "conf" / "optimizer"
-OPTIMIZERS = sorted(p.stem for p in CONF.glob("*.yaml"))
 NEEDS_INVERSE = {n for n in OPTIMIZERS if OmegaConf.load(CONF / f"{n}.yaml")._target_.endswith("ScaleInvariantPhysics")}
 WITH_INVERSE = {"toy", "poisson"}
 # GN, HIG, LM: their own tests take them through every problem, against references (test_update_paths.py, test_lm.py).

@@ -5,7 +5,7 @@ import math
 
 import pytest
 import torch
-from optim_helpers import flat, setup
+from optim_helpers import CASES, flat, setup
 from torch import nn
 
 from higbench.optim import inversion
@@ -108,7 +108,7 @@ def test_runner_update_reduces_the_loss(case):
 
 
 @pytest.mark.parametrize("optimizer", ["lm", "lbfgs"])
-@pytest.mark.parametrize("case", ["toy", "oscillator", "poisson", "dipole", "dipole_cnn"])
+@pytest.mark.parametrize("case", sorted(CASES))  # every problem config (tests/test_problems.py checks)
 def test_runs_on_every_problem(case, optimizer):
     extra = ["problem.hidden=[16]"] if case == "poisson" else []
     if optimizer == "lbfgs":
