@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from test_front_door_security import TINY
+from cases import TINY_RUN
 
 from higbench import cli
 
@@ -16,7 +16,7 @@ def completed(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
 
     def make(name: str) -> Path:
-        cli.main([*TINY, "problem=toy", "optimizer=adam", f"hydra.run.dir={tmp_path / name}"])
+        cli.main([*TINY_RUN, "problem=toy", "optimizer=adam", f"hydra.run.dir={tmp_path / name}"])
         return tmp_path / name / "run.h5"
 
     return make

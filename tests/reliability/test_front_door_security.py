@@ -11,10 +11,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from cases import TINY_RUN
 
 from higbench import cli
 
-TINY = ["budget.max_updates=2", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false", "threads=1"]
+TINY = list(TINY_RUN)  # the one tiny run (tests/cases.py)
 
 
 def sha(path: Path) -> str:
