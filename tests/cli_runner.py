@@ -1,8 +1,9 @@
 """The one helper that runs higbench as a process of its own.
 
-Use it where the process is the point: signals, pipes, exit codes, concurrent runs, the
-installed entry point. Everything else calls the CLI in this process (the ``higbench``
-fixture in tests/conftest.py) or composes configs with Hydra's compose API.
+Use it where the process is the point: signals, pipes, concurrent runs, the installed entry
+point; mark such a test ``process`` (tests/process_starts.py). Everything else calls the CLI
+in this process (the ``higbench`` fixture in tests/conftest.py) or composes configs with
+Hydra's compose API (tests/in_process.py).
 """
 
 from __future__ import annotations

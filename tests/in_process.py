@@ -16,6 +16,59 @@ import time
 from pathlib import Path
 
 
+@contextlib.contextmanager
+def restored_process_state():
+    """Put back, when the block ends, what a run of higbench in this process changes in it.
+
+    A run sets torch's thread count, installs SIGINT/SIGTERM handlers (a single run leaves
+    them ignored until exit), records HIGBENCH_PARALLEL_JOBS in the environment, rewrites
+    sys.argv and holds a lock on its directory until exit; Hydra adds logging handlers (to
+    the streams of the moment) and keeps its global state.
+    """
+    import logging
+
+    import torch
+    from hydra.core.global_hydra import GlobalHydra
+
+    from higbench import cli
+
+    argv = list(sys.argv)
+    hydra_was_initialized = GlobalHydra.instance().is_initialized()  # e.g. by a module-scoped compose fixture
+    environ = dict(os.environ)
+    threads = torch.get_num_threads()
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    loggers = {name: (lg.handlers[:], lg.level, lg.propagate, lg.disabled) for name, lg in _loggers(logging)}
+    try:
+        yield
+    finally:
+        sys.argv[:] = argv
+        if not hydra_was_initialized:
+            GlobalHydra.instance().clear()
+        getattr(cli, "release_dirs", lambda: None)()  # as at the process's exit
+        torch.set_num_threads(threads)
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+        if dict(os.environ) != environ:
+            os.environ.clear()
+            os.environ.update(environ)
+        for name, lg in _loggers(logging):
+            before, level, propagate, disabled = loggers.get(name, ([], logging.NOTSET, True, False))
+            for h in lg.handlers[:]:
+                if h not in before:
+                    lg.removeHandler(h)
+                    h.close()
+            lg.setLevel(level)
+            lg.propagate, lg.disabled = propagate, disabled
+
+
+def _loggers(logging):
+    """The root logger and every named one."""
+    yield "", logging.getLogger()
+    for name, lg in list(logging.root.manager.loggerDict.items()):
+        if isinstance(lg, logging.Logger):
+            yield name, lg
+
+
 def compose_here(overrides=()):
     """The config ``higbench <overrides>`` would run, composed in-process (no Hydra run dir)."""
     from hydra import compose, initialize_config_dir
