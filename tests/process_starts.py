@@ -6,10 +6,10 @@ three ways a process starts (``subprocess.Popen``, ``os.fork``, and the fork-exe
 multiprocessing and joblib's workers use) for the whole session, counts the starts of each
 test (setup, call and teardown), and
 
-* fails a test that starts one unless it is marked ``process`` (the few tests where the
-  process is the point: signals, pipes, the installed wheel, parallel sweeps); everything
-  else calls ``higbench.cli.main`` in this process or composes configs with Hydra's compose
-  API;
+* fails a test of the default suite that starts one unless it is marked ``process`` (the few
+  tests where the process is the point: signals, pipes, the installed wheel, parallel sweeps);
+  everything else calls ``higbench.cli.main`` in this process or composes configs with
+  Hydra's compose API (tests marked ``slow`` are counted, not failed);
 * prints, at the end, how many tests started processes and, with ``--process-starts``, which.
 
 Only Python processes are counted (an interpreter, a console script, a worker or fork); small
@@ -29,7 +29,7 @@ import pytest
 
 BUDGET = 15  # tests of the default suite (not slow) that may start processes (issue 34)
 
-ENFORCE = False  # fail unmarked tests that start processes
+ENFORCE = True  # fail a test of the default suite (not slow) that starts processes unmarked
 
 _current: Counter | None = None  # the running test's starts, by program
 _by_test: dict[str, tuple[Counter, bool]] = {}  # node id -> (starts by program, marked slow)
@@ -115,7 +115,8 @@ def pytest_runtest_protocol(item, nextitem):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
-    if ENFORCE and call.when == "teardown" and _current and item.get_closest_marker("process") is None and report.passed:
+    unmarked = item.get_closest_marker("process") is None and item.get_closest_marker("slow") is None
+    if ENFORCE and call.when == "teardown" and _current and unmarked and report.passed:
         report.outcome = "failed"
         started = ", ".join(f"{n} x {program}" for program, n in sorted(_current.items()))
         report.longrepr = (

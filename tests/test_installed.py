@@ -5,6 +5,10 @@ import sys
 import sysconfig
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.process  # a wheel installed into a venv of its own
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

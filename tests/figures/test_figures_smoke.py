@@ -9,12 +9,15 @@ Slow: the whole smoke preset (every figure and table).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -23,17 +26,31 @@ import pytest
 
 from higbench.runfile.reader import load_run
 
+pytestmark = pytest.mark.process  # the figures' joblib rounds start workers (in this process otherwise)
+
 REPO = Path(__file__).resolve().parents[2]
 IDS = ["fig1", "fig2b", "table2", "fig3c", "fig4c"]
 
 
-def figures(*args: str, cwd: Path, timeout: float = 600) -> tuple[subprocess.CompletedProcess, float]:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), *filter(None, [os.environ.get("PYTHONPATH")])]))
+def figures(*args: str, cwd: Path, timeout: float = 600) -> tuple[SimpleNamespace, float]:
+    """``python -m higbench.figures *args`` from ``cwd``, in this process (its runs too:
+    tests/in_process.py ``launch_in_process``) -> (returncode, stdout, stderr), seconds."""
+    from in_process import launch_in_process, restored_process_state
+
+    from higbench.figures.__main__ import main
+
+    out, err = io.StringIO(), io.StringIO()
     t0 = time.perf_counter()
-    proc = subprocess.run(
-        [sys.executable, "-m", "higbench.figures", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
-    )
+    with restored_process_state(), pytest.MonkeyPatch.context() as mp:
+        mp.chdir(cwd)
+        launch_in_process(mp)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(args))
+            except SystemExit as exc:
+                code = exc.code
     elapsed = time.perf_counter() - t0
+    proc = SimpleNamespace(returncode=code or 0, stdout=out.getvalue(), stderr=err.getvalue())
     assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout[-4000:]}\nstderr:\n{proc.stderr[-4000:]}"
     return proc, elapsed
 

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import subprocess
 
+import pytest
 from cli_runner import CLI, cli_env
 
 from higbench.results import load_runs
+
+pytestmark = pytest.mark.process  # the pipe is the point
 
 
 def test_training_goes_on_when_its_output_pipe_closes(tmp_path):

@@ -10,6 +10,8 @@ from rel_helpers import FAST, start_cli
 
 from higbench.runfile.reader import load_run
 
+pytestmark = pytest.mark.process  # concurrent CLI processes racing for a directory
+
 SHORT = ["budget.seconds=1", "eval_every=0.25", "checkpoint_every=0.5", *FAST]
 
 

@@ -90,6 +90,7 @@ def killed_writers(tmp_path_factory):
     return root, flushed
 
 
+@pytest.mark.process
 @pytest.mark.slow  # known rare failure (see below): kept out of the CI suite, run by `make test-slow`
 def test_killed_writer_file_is_readable_up_to_its_last_flush(killed_writers):
     """Plain HDF5 has no atomic flush: a SIGKILL inside a flush that allocates file space

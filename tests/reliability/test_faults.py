@@ -148,6 +148,7 @@ def test_run_filling_the_disk_itself_stops_at_the_reserve(tmpfs):
     assert flushed > 10, "the disk filled at once: the test did not exercise appends"
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_file_size_limit_reached_mid_run(tmp_path):
     """RLIMIT_FSIZE lowered on a live run (no root needed): same outcome as a full disk."""
@@ -202,6 +203,7 @@ def test_checkpoint_without_run_id_or_with_more_rows_is_refused(tmp_path, monkey
         assert sha256(run) == before and load_run(run)[0]["status"] == "interrupted"
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_new_run_does_not_adopt_a_stray_checkpoint(tmp_path, monkeypatch):
     a = tmp_path / "a" / "run.h5"
@@ -266,6 +268,7 @@ def _killed_at_creation(run_dir: Path, config_yaml: str | None = None) -> Path:
     return run_dir / "run.h5"
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_dir_of_a_run_killed_at_creation_can_be_started_again(tmp_path):
     from omegaconf import OmegaConf
@@ -287,6 +290,7 @@ def test_dir_of_a_run_killed_at_creation_can_be_started_again(tmp_path):
     assert meta["status"] == "completed" and meta["config"]["optimizer"]["name"] == "sgd"
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_killed_before_first_checkpoint(tmp_path):
     """Updates recorded, no checkpoint: resume says why (not 'set checkpoint_every'); a run with no update restarts."""
@@ -311,6 +315,7 @@ def test_killed_before_first_checkpoint(tmp_path):
     assert checkpoint.recorded_nothing(empty_dir / "run.h5")
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_large_unreadable_file_is_never_taken_over(tmp_path):
     d = tmp_path / "garbage"
@@ -336,6 +341,7 @@ def _sweep_state(sweep: Path) -> dict[str, str]:
     }
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_completed_sweep_run_again_changes_nothing(tmp_path):
     sweep = tmp_path / "sweep"
@@ -350,6 +356,7 @@ def test_completed_sweep_run_again_changes_nothing(tmp_path):
         assert _sweep_state(sweep) == before, "an existing run's files changed"
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_interrupted_sweep_is_completed_in_place(tmp_path):
     """Sweep stopped by SIGINT in its second job: one command resumes it, runs the third, keeps the first."""
@@ -476,6 +483,7 @@ def test_output_disk_full_at_start(tmpfs, tmp_path, monkeypatch, capsys):
     assert not (tmpfs / "run").exists()
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_output_disk_full_at_start_by_file_size_limit(tmp_path):
     """No root needed: RLIMIT_FSIZE of the CLI process below what a run needs."""

@@ -33,6 +33,8 @@ from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner.checkpoint import checkpoint_path, resume_config
 
+pytestmark = pytest.mark.process  # SIGINT and SIGKILL to CLI processes, a resume through the CLI
+
 VICTIM = ["problem=toy", "budget.seconds=30", "eval_unit=updates", "eval_every=5", "checkpoint_every=0.3", *FAST]
 RUNS = {
     "sigint": (["optimizer=sgd"], signal.SIGINT),

@@ -18,6 +18,7 @@ from higbench.runfile.reader import load_run
 
 pytestmark = [
     pytest.mark.slow,
+    pytest.mark.process,  # chattr on the file of a live CLI process
     pytest.mark.skipif(os.geteuid() != 0 or shutil.which("chattr") is None, reason="chattr +i needs root"),
 ]
 

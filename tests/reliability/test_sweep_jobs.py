@@ -90,6 +90,7 @@ def test_the_job_list_sweeper_refuses_a_fifo(tmp_path):
     assert isinstance(error, ValueError) and "not a regular file" in str(error), outcome
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_ctrl_c_in_a_joblib_sweep_loses_no_job(tmp_path):
     """SIGINT to a parallel sweep's process group, both jobs training and neither past its

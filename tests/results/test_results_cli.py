@@ -1,3 +1,7 @@
+import pytest
+
+
+@pytest.mark.process  # the pipe is the point
 def test_results_into_a_closed_pipe_is_quiet(tmp_path):
     """`higbench-results ROOT | head -1`: no BrokenPipeError traceback when the reader leaves."""
     import subprocess

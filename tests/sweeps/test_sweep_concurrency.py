@@ -35,6 +35,7 @@ def test_concurrent_sweeps_get_their_own_directories(tmp_path):
     assert sorted(runs["optimizer.lr"]) == [0.01, 0.01, 0.1, 0.1]
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_forced_same_sweep_dir_never_overwrites(tmp_path):
     """Even when both sweeps are told the same directory, a run file has one writer: each job's

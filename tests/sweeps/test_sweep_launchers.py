@@ -72,6 +72,7 @@ def test_joblib_two_workers_cap_threads(higbench, tmp_path, monkeypatch, fresh_j
     assert list(runs["parallel_jobs"]) == [2.0] * 4  # each run file says how many jobs shared the machine
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_joblib_explicit_threads(tmp_path):
     """`threads=N` wins over the launcher's cap (torch.set_num_threads in the job)."""
@@ -94,6 +95,7 @@ def test_joblib_explicit_threads(tmp_path):
     assert len(runs) == 1 and runs["env.torch_threads"].tolist() == [3]
 
 
+@pytest.mark.process
 @pytest.mark.slow
 def test_submitit_local(tmp_path):
     sweep = tmp_path / "sweep"
@@ -115,6 +117,7 @@ def test_submitit_local(tmp_path):
     assert set(runs["env.torch_threads"]) == {1}
 
 
+@pytest.mark.process
 @pytest.mark.slow
 @pytest.mark.optuna
 def test_optuna_sweeper(tmp_path):
