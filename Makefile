@@ -48,7 +48,9 @@ run: install
 	$(BIN)/higbench problem=oscillator optimizer=hig budget.seconds=60
 
 # Default test suite (no test marked slow); CI runs this through .ci/run. Tests marked
-# `optuna` are skipped, with the reason shown, unless the optuna extra is installed.
+# `optuna` are skipped, with the reason shown, unless the optuna extra is installed. Its last
+# lines say how many tests started processes (tests/process_starts.py; at most 15, each marked
+# `process`); PYTEST_ARGS=--process-starts lists them.
 test: install-dev
 	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_ARGS)
 

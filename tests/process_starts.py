@@ -10,7 +10,8 @@ test (setup, call and teardown), and
   tests where the process is the point: signals, pipes, the installed wheel, parallel sweeps);
   everything else calls ``higbench.cli.main`` in this process or composes configs with
   Hydra's compose API (tests marked ``slow`` are counted, not failed);
-* prints, at the end, how many tests started processes and, with ``--process-starts``, which.
+* prints, at the end, how many tests started processes and, with ``--process-starts``, which;
+  more than ``BUDGET`` of the default suite fail the session.
 
 Only Python processes are counted (an interpreter, a console script, a worker or fork); small
 system tools are not: ``git``, with which every run records the checkout's revision
@@ -125,6 +126,16 @@ def pytest_runtest_makereport(item, call):
         )
 
 
+def _over_budget() -> list[str]:
+    fast = [nodeid for nodeid, (_, slow) in _by_test.items() if not slow]
+    return fast if len(fast) > BUDGET else []
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if _over_budget() and exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
 def pytest_terminal_summary(terminalreporter, config):
     if not _by_test:
         return
@@ -134,7 +145,12 @@ def pytest_terminal_summary(terminalreporter, config):
         f"process starts: {len(_by_test)} tests started {total} processes; {len(fast)} of them not marked slow "
         f"(budget {BUDGET}); --process-starts lists them"
     )
-    if config.getoption("--process-starts"):
+    if _over_budget():
+        terminalreporter.write_line(
+            f"process starts: more than {BUDGET} tests of the default suite started processes: run the rest in this process",
+            red=True,
+        )
+    if config.getoption("--process-starts") or _over_budget():
         for nodeid, (counts, slow) in sorted(_by_test.items()):
             starts = ", ".join(f"{n} x {program}" for program, n in sorted(counts.items()))
             terminalreporter.write_line(f"  {nodeid}{' (slow)' if slow else ''}: {starts}")
