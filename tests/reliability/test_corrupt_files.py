@@ -14,6 +14,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from rel_helpers import FAST, REPO, cli_env
 
+from higbench.plan import Plan
 from higbench import cli
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
@@ -56,7 +57,7 @@ def _train_small(path, *overrides):
                     *overrides,
                 ],
             )
-        return train(cfg, path)
+        return train(Plan.for_run(cfg, path))
     finally:
         torch.set_num_threads(threads)
 

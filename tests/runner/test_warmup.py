@@ -6,6 +6,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
+from higbench.plan import Plan
 from higbench import cli
 from higbench.runfile.reader import load_weights
 from higbench.runner import train as train_mod
@@ -26,9 +27,9 @@ def test_warm_up_changes_nothing_but_is_recorded(optimizer, tmp_path, monkeypatc
     cfg = config("problem=oscillator", "problem.steps=8", "batch_size=8", f"optimizer={optimizer}")
     threads = torch.get_num_threads()
     try:
-        train_mod.train(cfg, tmp_path / "a.h5")
+        train_mod.train(Plan.for_run(cfg, tmp_path / "a.h5"))
         monkeypatch.setattr(train_mod, "warm_up", lambda problem, jacobian: 0.0)
-        train_mod.train(cfg, tmp_path / "b.h5")
+        train_mod.train(Plan.for_run(cfg, tmp_path / "b.h5"))
     finally:
         torch.set_num_threads(threads)
     a, b = load_weights(tmp_path / "a.h5"), load_weights(tmp_path / "b.h5")
