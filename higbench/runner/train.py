@@ -226,8 +226,8 @@ def _update_cost(cfg: DictConfig, device: torch.device) -> float:
     with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
         try:
             _device, problem = _setup(cfg, device=device)
-            warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))
             model, update = build(cfg, problem)
+            warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))
             estimate = check_memory(cfg, problem, model, update)
         except ConfigError:  # too large for this device's memory
             return math.inf
@@ -559,8 +559,8 @@ def train(plan: Plan) -> RunSummary:
     cfg, run_path, state = OmegaConf.create(plan.task()), Path(plan.run_path), plan.checkpoint
     placed = choose_placement(cfg, state)
     device, problem = _setup(cfg, device=placed.device if placed else None)
-    warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     model, update = build(cfg, problem)
+    warmup_s = warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
     if plan.initial_weights is not None:
         check_initial_weights(model, plan.initial_weights, cfg.init_from)
         model.load_state_dict({k: torch.as_tensor(v) for k, v in plan.initial_weights.items()})

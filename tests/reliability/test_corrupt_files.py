@@ -14,8 +14,8 @@ import torch
 from hydra import compose, initialize_config_dir
 from rel_helpers import FAST, REPO, cli_env
 
-from higbench.plan import Plan
 from higbench import cli
+from higbench.plan import Plan
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
 from higbench.runner.train import train

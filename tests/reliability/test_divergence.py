@@ -10,9 +10,9 @@ import torch
 from hydra import compose, initialize_config_dir
 from rel_helpers import FAST
 
-from higbench.plan import Plan
 from higbench import cli
 from higbench.optim import hig as hig_mod  # the GN/HIG step the runner calls
+from higbench.plan import Plan
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runner import train as train_mod
 from higbench.runner.updates import UpdateResult

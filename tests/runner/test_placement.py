@@ -8,8 +8,8 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from higbench.plan import Plan
 from higbench import cli
+from higbench.plan import Plan
 from higbench.runfile.reader import load_weights
 from higbench.runner import placement
 from higbench.runner import train as train_mod

@@ -7,9 +7,9 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
-from higbench.plan import Plan
 from higbench import cli
 from higbench.errors import ConfigError
+from higbench.plan import Plan
 from higbench.runner import train as train_mod
 
 
