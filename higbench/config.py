@@ -10,7 +10,7 @@
 * Across keys: one of the budgets set, the batch size against the data set, ``device``,
   ``threads`` and ``${hydra:...}`` references that this job's Hydra config cannot resolve.
   Files are not read here: ``init_from``'s run file is read once, by the plan
-  (``higbench.plan``).
+  (``higbench.runner.plan``).
 
 ``validate(cfg)`` raises ``ConfigError`` for the first problem; the CLI turns it into
 ``higbench: error: key=value: why`` and exit code 2 before anything is written.
@@ -181,7 +181,7 @@ def validate(cfg: DictConfig | dict) -> None:
 
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
-    # init_from's file is read (and checked) once, by the plan: higbench.plan.load_initial_weights
+    # init_from's file is read (and checked) once, by the plan: higbench.runner.plan.load_initial_weights
 
 
 def max_threads() -> int:
