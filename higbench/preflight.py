@@ -357,6 +357,8 @@ class Preflight(Callback):
         existing = Path(str(config.hydra.sweep.dir)) / "multirun.yaml"
         self._multirun_yaml = (existing, existing.read_bytes()) if existing.is_file() else None
 
+    # Hydra's wart: a sweep run again into its directory overwrites the sweep's multirun.yaml
+    # (tests/sweeps/test_sweep_launchers.py, the sweep completed with resume=true).
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-rerun-<time>.yaml."""
         if self._multirun_yaml is None:
