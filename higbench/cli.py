@@ -231,13 +231,13 @@ def _dir_key(plan: Plan, task_cfg) -> str:
     return "resume" if task_cfg.get("resume") or plan.resume else "hydra.run.dir"
 
 
-def _train(plan: Plan):
+def _train(plan: Plan, parent: int | None):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner.train import train
 
     try:
-        return train(plan.with_parallel_jobs(parallel_jobs(HydraConfig.get())))
+        return train(plan.in_sweep(parallel_jobs(HydraConfig.get()), parent))
     except RunFileExists as exc:
         raise ConfigError("hydra.run.dir", str(plan.run_path.parent), str(exc)) from None
     except RunFileBusy as exc:
@@ -261,7 +261,11 @@ class JobFailed(Exception):
 
 def _run_job(plan: Plan, multirun: bool) -> float:
     start = plan.start_config()
-    summary = _train(plan)
+    # A launcher's worker (joblib) is a process of its own: if the sweep's parent is killed
+    # alone (a scheduler's SIGTERM to its pid), the worker's run stops cleanly, resumable,
+    # instead of training on, orphaned; and the worker then exits instead of lingering.
+    parent = None if invocation().main else os.getppid()
+    summary = _train(plan, parent)
     # The file is closed with its status: a stop signal now must not end the process with
     # 128+signal while the file says completed. Ignored while reporting (and, for a single
     # run, until exit); a sweep gets its handlers back for the next job.
@@ -272,13 +276,13 @@ def _run_job(plan: Plan, multirun: bool) -> float:
         for s, handler in previous.items():
             signal.signal(s, handler)
     if summary.status == "interrupted":
-        _interrupted(summary, multirun)
+        _interrupted(summary, multirun, parent)
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
 
 
-def _interrupted(summary, multirun: bool) -> None:
+def _interrupted(summary, multirun: bool, parent: int | None = None) -> None:
     """Say how to continue (the sweep, or the run if it left a checkpoint), exit 128+signal."""
     from higbench.runner import checkpoint
 
@@ -291,6 +295,10 @@ def _interrupted(summary, multirun: bool) -> None:
         print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
     signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
     sys.stdout.flush()
+    if parent is not None and os.getppid() != parent:  # an orphaned worker: nobody takes its result
+        sys.stderr.flush()
+        logging.shutdown()
+        os._exit(128 + int(signum))
     sys.exit(128 + int(signum))
 
 

@@ -186,6 +186,7 @@ class Invocation:
     jobs: int = 0  # sweep jobs this process ran, and how many failed (the sweep's last line)
     failed: int = 0
     job_started: bool = False  # errors after a job started are the job's, not the command line's
+    main: bool = False  # opened by ``cli.main`` (False: a launcher's worker process, or code calling the job)
 
 
 _INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higbench_invocation")
@@ -193,7 +194,7 @@ _INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higben
 
 @contextlib.contextmanager
 def new_invocation():
-    token = _INVOCATION.set(Invocation())
+    token = _INVOCATION.set(Invocation(main=True))
     try:
         yield _INVOCATION.get()
     finally:
