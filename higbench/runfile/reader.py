@@ -463,6 +463,13 @@ def load_logs(path: str | Path) -> dict[str, np.ndarray]:
         return {name: ds[()] for name, ds in f["logs"].items()} if "logs" in f else {}
 
 
+def load_final(path: str | Path) -> dict[str, np.ndarray]:
+    """Arrays of the final evaluation, e.g. ``test_losses`` (one per test sample); {} when the
+    run recorded none (it was interrupted, failed, or is older than this record)."""
+    with _open(path) as f:
+        return {name: _native(ds[()]) for name, ds in f["final"].items()} if "final" in f else {}
+
+
 def load_weights(path: str | Path) -> dict[str, np.ndarray]:
     """Final weights as {state_dict name: array}; ``RefusedRunFile`` if they are not arrays of
     real numbers (complex ones would lose their imaginary part in a real network)."""

@@ -146,6 +146,16 @@ class StopSignals:
 
 
 @torch.no_grad()
+def per_sample_losses(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> np.ndarray:
+    """The loss of each sample of ``batch`` (float64): the values whose mean ``evaluate`` reports."""
+    parts = []
+    for start in range(0, len(batch), chunk):
+        part = batch[start : start + chunk]
+        parts.append(problem.loss(problem.outputs(model, part), part.targets).double().cpu().numpy())
+    return np.concatenate(parts)
+
+
+@torch.no_grad()
 def evaluate(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> dict[str, float]:
     """Mean test loss and extra metrics over ``batch`` (in chunks to bound memory)."""
     sums: dict[str, float] = {}
@@ -514,6 +524,12 @@ class TrainingRun:
         writer.write_weights({k: v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}, self.step)
         writer.f.attrs["steps"] = self.step
         writer.f.attrs["wall_time"] = self.clock()
+        # The final evaluation's test loss sample by sample (outside the clock: it stopped
+        # above): a few samples can carry most of a mean (the oscillator's heavy tail), and
+        # the median or a percentile are then read from the file without training again.
+        if status in ("completed", "diverged"):  # an interrupted run has no final evaluation yet
+            self.model.eval()
+            writer.write_final({"test_losses": per_sample_losses(self.problem, self.model, self.test)}, self.step)
         writer.check_file()
         self.sinks.close(status, reason, self.step)
 
