@@ -5,9 +5,9 @@ inverts it, either through the Gram matrix K = J J^T (rows x rows) or the thin S
 ``estimate_bytes`` gives the peak of that step (the dominant arrays; model, data and
 first-order optimizers are small next to it). ``check`` compares it with the memory
 available now (psutil's available memory, or less where the process's address space is
-capped, ``ulimit -v``; free CUDA memory on a GPU) or a configured cap (``memory_limit_mb``) and raises ``ConfigError`` with the estimate and the
-largest batch size that fits, so a run fails in a second instead of being killed by the
-OS an hour in.
+capped, ``ulimit -v``; free CUDA memory on a GPU) or a configured cap (``memory_limit_mb``)
+and raises ``ConfigError`` with the estimate and the largest batch size that fits, so a run
+fails in a second instead of being killed by the OS an hour in.
 
 The model is deliberately simple and errs on the large side; a faster Jacobian path
 (structured, never materialising J) can refine ``estimate_bytes`` without changing callers.
