@@ -51,6 +51,7 @@ from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
+from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.reader import load_weights
@@ -182,7 +183,7 @@ def load_initial_weights(model: torch.nn.Module, path: str, problem_name: str) -
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
     """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
-    if not hasattr(update.optimizer, "last_spectrum"):  # only the Jacobian-power family builds J
+    if not uses_jacobian(update.optimizer):  # only the Jacobian-power family builds J (optim.contract)
         return None
     with torch.no_grad():
         y = problem.outputs(model, problem.test_set()[:1])
@@ -332,7 +333,7 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dic
 
 
 def _is_jacobian_power(opt_cfg) -> bool:
-    return hasattr(get_class(opt_cfg._target_), "step_structured")
+    return uses_jacobian(get_class(opt_cfg._target_))
 
 
 def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
@@ -363,7 +364,7 @@ class TrainingRun:
         self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
         self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
         self.by_updates = cfg.get("eval_unit", "seconds") == "updates"
-        self.records_spectrum = hasattr(update.optimizer, "last_spectrum")
+        self.records_spectrum = uses_jacobian(update.optimizer)
         self.spectrum: dict = {}
         self.step, self.epoch, self.position = 0, 0, 0
         self.batch_losses: list[float] = []

@@ -31,5 +31,5 @@ def warm_up(problem: Problem, jacobian: bool) -> float:
         if jacobian and type(problem).outputs is Problem.outputs:
             with torch.no_grad():
                 u = model(batch.net_inputs)
-            solver_jacobian(problem.physics, batch.inputs, u)
+            solver_jacobian(problem.physics, batch.inputs, u, "batched", problem.physics_jacobian)  # its adjoint, where declared
     return time.perf_counter() - t0
