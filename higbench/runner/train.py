@@ -33,7 +33,6 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -337,17 +336,10 @@ def _is_jacobian_power(opt_cfg) -> bool:
 
 
 def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
-    """Optional sinks named by the config (``tensorboard: true``: event files beside the run file)."""
-    if not cfg.get("tensorboard"):
-        return []
-    from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
+    """The side sinks the config names (the ``sink`` group; ``tensorboard=true``), beside the run file."""
+    from higbench.runner.sinks import build_side_sinks, side_sink_specs
 
-    try:
-        return [TensorBoardSink(run_path.parent)]
-    except (OSError, AttributeError) as exc:  # its directory became a file or a link after the checks; a
-        # TensorBoard whose writer's internals moved (tensorboard._hold_event_file): a view, not the run
-        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
-        return []
+    return build_side_sinks(side_sink_specs(cfg), run_path.parent)
 
 
 class TrainingRun:
