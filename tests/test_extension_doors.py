@@ -295,3 +295,13 @@ def test_a_sink_that_cannot_work_is_refused_before_the_run_file(higbench, ext, t
     (line,) = err.strip().splitlines()
     assert code == 2 and line.startswith(f"higbench: error: {key}") and why in line, err
     assert not list(tmp_path.rglob("run.h5"))
+
+
+def test_the_shipped_sink_without_its_extra_is_refused_before_the_run_file(higbench, tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # import fails as if not installed
+    code, _out, err = higbench("threads=1", "problem=toy", "optimizer=adam", "sink=tensorboard")
+    (line,) = err.strip().splitlines()
+    assert code == 2 and "needs the tensorboard package" in line, err
+    assert not list(tmp_path.rglob("run.h5")) and not list(tmp_path.rglob("tensorboard"))
