@@ -85,6 +85,8 @@ class JacobianPower(torch.optim.Optimizer, StepReporter):
             an integer; or None for torch's count as it is. Restored after each update.
     """
 
+    uses_jacobian = True  # the step contract (optim.contract): J is built; memory guard, spectrum, warm-up
+
     def __init__(
         self,
         params,
@@ -153,8 +155,6 @@ class JacobianPower(torch.optim.Optimizer, StepReporter):
         # sets the threads (the runner), it passes None.
         self.threads = threads
         self._gram_rows: int | None = None  # b·|y| of the last update: what "auto" threads go by
-
-    uses_jacobian = True  # the step contract: J is built (memory guard, spectrum, warm-up)
 
     @property
     def last_timings(self) -> dict[str, float]:
