@@ -275,6 +275,21 @@ def test_sinks_are_chosen_together_and_tensorboard_true_is_the_shipped_one(higbe
     assert len(list((path.parent / "tensorboard").iterdir())) == 1
 
 
+def test_side_sinks_are_checked_without_building_them(ext):
+    from omegaconf import OmegaConf
+
+    from higbench.errors import ConfigError
+    from higbench.runner.sinks import check_side_sinks, side_sink_specs
+
+    module = ext.module("row_counter", ROW_COUNTER)
+    good = OmegaConf.create({"tensorboard": True, "sink": {"counts": {"_target_": f"{module}.RowCounter"}}})
+    assert list(side_sink_specs(good)) == ["counts", "tensorboard"]
+    check_side_sinks(good)
+    assert not list(ext.root.rglob("*.txt"))  # nothing built, nothing written
+    with pytest.raises(ConfigError, match=r"^sink\.bad\._target_=os\.path: is not a higbench"):
+        check_side_sinks(OmegaConf.create({"sink": {"bad": {"_target_": "os.path"}}}))
+
+
 @pytest.mark.parametrize(
     ("yaml", "key", "why"),
     [

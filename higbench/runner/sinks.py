@@ -188,6 +188,13 @@ def side_sink_class(name: str, spec: object) -> type[Sink]:
     return cls
 
 
+def check_side_sinks(cfg) -> None:
+    """ConfigError unless every side sink the config names imports as a ``Sink`` (nothing is built:
+    a check for before any work, e.g. of every job of a sweep)."""
+    for name, spec in side_sink_specs(cfg).items():
+        side_sink_class(name, spec)
+
+
 def build_side_sinks(specs: dict[str, dict], run_dir: Path) -> list[Sink]:
     """Each spec's sink on ``run_dir``, in order; ConfigError (none left open) for a spec that
     cannot work, one line and no sink for one that cannot start here (``OSError``; TensorBoard's
