@@ -55,9 +55,9 @@ from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
 from higbench.errors import EXIT_BAD_INPUT, ConfigError, given_value, output_never_fails, quiet_broken_pipe
-from higbench.plan import Plan
 from higbench.preflight import Preflight, composition_error, config_dir, invocation, new_invocation, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers

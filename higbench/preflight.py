@@ -5,7 +5,7 @@ Hydra calls ``on_run_start`` / ``on_multirun_start`` of the callbacks listed und
 any directory. For a single run, one pass decides it, before anything is written:
 
 1. validate the config (``higbench.config``: keys, types, ranges);
-2. make its plan (``higbench.plan.make_plan``: the output policy, the stored config of a run
+2. make its plan (``higbench.runner.plan.make_plan``: the output policy, the stored config of a run
    to continue, its checkpoint, the ``init_from`` weights, each read once).
 
 The plan goes to the job through this command line's ``Invocation``; the job builds the
@@ -48,8 +48,8 @@ from higbench.config import (
     validate,
 )
 from higbench.errors import ConfigError, dotted_get, fail, given_value
-from higbench.plan import Plan, load_initial_weights, make_plan
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan, load_initial_weights, make_plan
 
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 

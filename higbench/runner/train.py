@@ -51,11 +51,11 @@ from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
 from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
-from higbench.plan import Plan
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
+from higbench.runner.plan import Plan
 from higbench.runner.progress import Progress, announce, start_text
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
 from higbench.runner.threads import fit_to_work, resolve_threads
@@ -542,7 +542,7 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
 
 
 def train(plan: Plan) -> RunSummary:
-    """Run one experiment as planned (``higbench.plan``); write its run file.
+    """Run one experiment as planned (``higbench.runner.plan``); write its run file.
 
     The problem, the network and the optimizer are built once, here; the plan's inputs are
     checked against them (``init_from`` weights, a checkpoint) and the memory guard runs, all
