@@ -26,7 +26,8 @@ What an optimizer class declares, on the class (``StepReporter``'s attributes):
 
 A new optimizer class is one module plus one YAML file in ``conf/optimizer/``: subclass
 ``torch.optim.Optimizer`` (and ``StepReporter`` when it times its own phases), take the
-closure, return the loss before the update. docs/architecture.md has the worked example.
+closure, return the loss before the update. tests/test_extension_doors.py has a worked one
+(``SignDescent``) trained from outside the package; docs/architecture.md lists every door.
 """
 
 from __future__ import annotations
