@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
 import threading
 import time
@@ -103,10 +104,15 @@ class TrainingClock:
 
 
 class StopSignals:
-    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now."""
+    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now.
 
-    def __init__(self):
+    ``parent``: a sweep worker's launcher; once it is gone (killed alone, its workers
+    re-parented), the run stops as if sent SIGTERM: interrupted, checkpointed, resumable.
+    """
+
+    def __init__(self, parent: int | None = None):
         self.signum: int | None = None
+        self.parent = parent
         self._previous: dict[int, object] = {}
 
     def _handler(self, signum, frame):
@@ -133,6 +139,8 @@ class StopSignals:
         self._previous.clear()
 
     def check(self) -> None:
+        if self.signum is None and self.parent is not None and os.getppid() != self.parent:
+            self.signum = signal.SIGTERM  # the sweep that launched this job is gone
         if self.signum is not None:
             raise Interrupted(signal.Signals(self.signum).name)
 
@@ -579,7 +587,7 @@ def train(plan: Plan) -> RunSummary:
         cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
     )
     clock.resume()
-    signals = StopSignals().install()
+    signals = StopSignals(parent=plan.stop_with_parent).install()
     status, reason, final_test = _run(run, signals)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume
