@@ -263,6 +263,14 @@ def test_a_sink_is_one_module_and_one_yaml_file(higbench, ext, tmp_path):
     assert (status, step, updates, evals) == ("completed", "3", "3", "4")  # evaluations at steps 0, 1, 2, 3
     assert "sv_quantiles" in logs.split(",")
 
+    from higbench.results.index import config_id, setting_config
+    from higbench.runfile.reader import read_head
+
+    config = read_head(path).config
+    assert config["sink"] == {"counts": {"_target_": f"{module}.RowCounter", "file_name": "rows.txt"}}
+    without = {**config, "sink": None}  # a sink is a view: the same experiment, the same setting
+    assert config_id(config) == config_id(without) and setting_config(config) == setting_config(without)
+
 
 def test_sinks_are_chosen_together_and_tensorboard_true_is_the_shipped_one(higbench, ext, tmp_path):
     pytest.importorskip("tensorboard", reason="the tensorboard extra is not installed (it is in the dev extra)")
