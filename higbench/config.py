@@ -67,6 +67,7 @@ class RunConfig:
     resume: Any = value(None, **_COSMETIC)  # null | true | false | a run dir or run file
     memory_limit_mb: Optional[float] = value(None, gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
     tensorboard: bool = value(False, **_COSMETIC)  # also write TensorBoard event files (higbench.runner.tensorboard)
+    sink: Any = value(None, **_COSMETIC)  # side sinks, NAME -> {_target_, ...}: the conf/sink/ group (higbench.runner.sinks)
 
 
 # The lists each rule is read from (derived from the metadata above, never written twice):

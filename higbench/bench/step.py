@@ -114,10 +114,10 @@ def compose(cfg: Config):
 def is_jacobian_power(optimizer: str) -> bool:
     from hydra.utils import get_class
 
-    from higbench.optim.hig import JacobianPower
+    from higbench.optim.contract import uses_jacobian
 
     c = compose(Config("toy", optimizer, 1))
-    return issubclass(get_class(c.optimizer._target_), JacobianPower)
+    return uses_jacobian(get_class(c.optimizer._target_))
 
 
 class Runner:

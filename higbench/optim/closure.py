@@ -35,6 +35,9 @@ class LossClosure:
     moves (the runner sets it, so a diverging step is recorded and never applied).
     outputs_fn: y computed some other way (a problem with its own ``outputs``); the
     Jacobian-power optimizers then differentiate through it generically.
+    physics_jacobian: the problem's own solver Jacobian, ``physics_jacobian(inputs, u)`` ->
+    (y, A) or None (``Problem.physics_jacobian``: a hand-derived adjoint); None, or a None
+    answer, means autograd through ``physics``. The Jacobian-power optimizers use it.
     inverse: the problem's inverse simulator with this batch's inputs bound,
     ``inverse(y_target, u0) -> u`` (``Problem.inverse_simulator``); None where the problem has
     none. The SIP optimizer (``higbench.optim.sip``) needs it; the others ignore it.
@@ -54,6 +57,7 @@ class LossClosure:
     guard: bool = False
     outputs_fn: Callable[[], torch.Tensor] | None = None
     inverse: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None
+    physics_jacobian: Callable[..., tuple[torch.Tensor, torch.Tensor] | None] | None = None
     derivative_s: float = field(default=0.0, init=False)
     calls: int = field(default=0, init=False)
     first_mean: torch.Tensor | None = field(default=None, init=False)

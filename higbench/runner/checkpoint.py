@@ -335,7 +335,9 @@ def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, res
 def _standard_layout(optimizer) -> bool:
     """torch.optim's classes and higbench's Jacobian-power family: torch's state_dict layout,
     per-parameter state shaped as the parameter (or scalars, or L-BFGS's flat histories)."""
-    return type(optimizer).__module__.startswith("torch.optim") or hasattr(optimizer, "last_spectrum")
+    from higbench.optim.contract import uses_jacobian
+
+    return type(optimizer).__module__.startswith("torch.optim") or uses_jacobian(optimizer)
 
 
 def _check_plain_tree(node, max_numel: int, refuse, depth: int = 0, key: str = "optimizer") -> None:

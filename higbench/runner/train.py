@@ -34,7 +34,6 @@ import contextlib
 import math
 import os
 import signal
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -51,6 +50,7 @@ from omegaconf import DictConfig, OmegaConf
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
+from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.writer import RunFileWriter
@@ -201,7 +201,7 @@ def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
     """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
-    if not hasattr(update.optimizer, "last_spectrum"):  # only the Jacobian-power family builds J
+    if not uses_jacobian(update.optimizer):  # only the Jacobian-power family builds J (optim.contract)
         return None
     with torch.no_grad():
         y = problem.outputs(model, problem.test_set()[:1])
@@ -330,21 +330,14 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dic
 
 
 def _is_jacobian_power(opt_cfg) -> bool:
-    return hasattr(get_class(opt_cfg._target_), "step_structured")
+    return uses_jacobian(get_class(opt_cfg._target_))
 
 
 def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
-    """Optional sinks named by the config (``tensorboard: true``: event files beside the run file)."""
-    if not cfg.get("tensorboard"):
-        return []
-    from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
+    """The side sinks the config names (the ``sink`` group; ``tensorboard=true``), beside the run file."""
+    from higbench.runner.sinks import build_side_sinks, side_sink_specs
 
-    try:
-        return [TensorBoardSink(run_path.parent)]
-    except (OSError, AttributeError) as exc:  # its directory became a file or a link after the checks; a
-        # TensorBoard whose writer's internals moved (tensorboard._hold_event_file): a view, not the run
-        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
-        return []
+    return build_side_sinks(side_sink_specs(cfg), run_path.parent)
 
 
 class TrainingRun:
@@ -361,7 +354,7 @@ class TrainingRun:
         self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
         self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
         self.by_updates = cfg.get("eval_unit", "seconds") == "updates"
-        self.records_spectrum = hasattr(update.optimizer, "last_spectrum")
+        self.records_spectrum = uses_jacobian(update.optimizer)
         self.spectrum: dict = {}
         self.step, self.epoch, self.position = 0, 0, 0
         self.batch_losses: list[float] = []

@@ -30,6 +30,6 @@ def warm_up(problem: Problem, model: torch.nn.Module, jacobian: bool) -> float:
         if jacobian and type(problem).outputs is Problem.outputs:
             with torch.no_grad():
                 u = model(batch.net_inputs)
-            solver_jacobian(problem.physics, batch.inputs, u)
+            solver_jacobian(problem.physics, batch.inputs, u, "batched", problem.physics_jacobian)  # its adjoint, where declared
     model.zero_grad(set_to_none=True)  # the run's first update starts from no gradient, as without it
     return time.perf_counter() - t0
