@@ -58,6 +58,7 @@ import torch
 
 from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
 from higbench.dtypes import DTYPES
+from higbench.results.display import fmt, md_table
 from higbench.runner.updates import synchronize
 
 PHASES = ("jacobian_s", "inversion_s", "apply_s")
@@ -277,19 +278,9 @@ def paper_configs(naive_all: bool) -> list[list[Config]]:
     return groups
 
 
-def fmt(x, digits=3) -> str:
-    if x is None or (isinstance(x, float) and x != x):
-        return "-"
-    if isinstance(x, float):
-        return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
-    return str(x)
-
-
-def markdown_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
-    lines = ["| " + " | ".join(title for _, title in columns) + " |", "|" + "---|" * len(columns)]
-    for r in rows:
-        lines.append("| " + " | ".join(fmt(r.get(key)) for key, _ in columns) + " |")
-    return "\n".join(lines)
+def dict_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
+    """``rows`` (dicts) as a Markdown table of ``columns`` ((key, title) pairs), numbers by ``fmt``."""
+    return "\n".join(md_table([title for _, title in columns], [[fmt(r.get(key)) for key, _ in columns] for r in rows]))
 
 
 def targets(rows: list[dict]) -> list[dict]:
@@ -414,7 +405,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
     for problem, table in PROBLEM_TABLES.items():
         sub = [r for r in rows if r["problem"] == problem]
         if sub:
-            parts += [f"## Table {table}: {problem}", "", markdown_table(sub, columns), ""]
+            parts += [f"## Table {table}: {problem}", "", dict_table(sub, columns), ""]
     speedups = []
     for r in rows:
         if r["jacobian"] == "naive":
@@ -440,7 +431,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         parts += [
             "## Naive path (torch.func J + SVD) against the structured path",
             "",
-            markdown_table(
+            dict_table(
                 speedups,
                 [
                     ("problem", "problem"),
@@ -459,7 +450,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         parts += [
             "## Targets",
             "",
-            markdown_table(
+            dict_table(
                 goal,
                 [
                     ("target", "figure"),

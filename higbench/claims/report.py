@@ -21,12 +21,12 @@ from higbench.claims.rules import (
     end_time,
     finish,
     loss_at,
-    md_table,
     median,
     rule_why,
     seed_spread,
     sidecar_seeds,
 )
+from higbench.results.display import fmt, md_table
 
 HEADER = """# Reproduction report
 
@@ -89,10 +89,6 @@ def collect(out_dir: Path) -> list[dict]:
     return out
 
 
-def _num(v) -> str:
-    return "-" if v is None else f"{v:.2g}"
-
-
 def reference_entry(runs_of) -> dict:
     """A sidecar's ``reference`` entry (figure ref_oscillator): the authors' loss points and
     update times beside higbench's (``runs_of(optimizer)``: the figure's runs of it) at the
@@ -127,7 +123,7 @@ def reference_section(infos: dict[str, dict]) -> list[str]:
         "higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n",
         *md_table(
             ["optimizer", "training time [s]", "authors' code", "higbench"],
-            [[r["optimizer"], f"{r['t']:g}", _num(r["reference"]), _num(r["higbench"])] for r in info["loss_points"]],
+            [[r["optimizer"], f"{r['t']:g}", fmt(r["reference"], 2), fmt(r["higbench"], 2)] for r in info["loss_points"]],
         ),
         "",
         *md_table(
@@ -138,8 +134,8 @@ def reference_section(infos: dict[str, dict]) -> list[str]:
                     r["optimizer"],
                     r["batch_size"],
                     f"{r['update_s']:g}",
-                    _num(r.get("higbench_update_s")),
-                    _num(r.get("memory_gb")),
+                    fmt(r.get("higbench_update_s"), 2),
+                    fmt(r.get("memory_gb"), 2),
                 ]
                 for r in info["update_seconds"]
             ],

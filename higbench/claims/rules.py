@@ -14,30 +14,14 @@ import string
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from higbench.bench.paper import PAPER_COSTS
 from higbench.claims.reference import TRACE_SECONDS
+from higbench.results.display import sci
 
-OPTIMIZER_NAMES = {
-    "adam": "Adam",
-    "sgd": "SGD",
-    "adagrad": "Adagrad",
-    "adadelta": "Adadelta",
-    "rmsprop": "RMSprop",
-    "gn": "GN",
-    "hig": "HIG",
-    "lbfgs": "L-BFGS",
-    "lm": "Levenberg-Marquardt",
-    "adamw": "AdamW",
-    "muon": "Muon",
-    "soap": "SOAP",
-    "shampoo": "Shampoo",
-    "sip": "SIP",
-}
 REPRODUCED, PARTLY, NOT, NA = "reproduced", "partly", "not", "n/a"
 CAUSES = {
     "budget": "too short a budget (the trend points the paper's way)",
@@ -225,32 +209,6 @@ def below(a: str, b: str) -> Callable[[dict], bool]:
 def require(*groups, what: str) -> None:
     if any(not g for g in groups):
         raise Missing(what)
-
-
-def sci(v: float) -> str:
-    """1.234e-05 -> '1.2e-5'."""
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return str(v)
-    m, x = f"{v:.1e}".split("e")
-    return f"{m}e{int(x)}"
-
-
-def num(v: Any) -> str:
-    """Compact number for labels: 0.0003 -> 3e-4, 1.0 -> 1, 128 -> 128."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return str(v)
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e5):
-        return str(int(v))
-    if 1e-2 <= abs(v) < 1e3:
-        return f"{v:g}"
-    m, e = f"{v:.0e}".split("e")
-    return f"{m}e{int(e)}"
-
-
-def md_table(header: list[str], rows: list) -> list[str]:
-    """The lines of a GitHub table (without the tabulate package)."""
-    lines = ["| " + " | ".join(map(str, r)) + " |" for r in [header, *rows]]
-    return [lines[0], "|" + "---|" * len(header), *lines[1:]]
 
 
 def median(values: Iterable[float]) -> float:
