@@ -1,4 +1,4 @@
-"""scripts/time_to_loss.py: thresholds read from a run's curves, table written (no training here)."""
+"""scripts/time_to_loss.py: the problem's targets read from a run's curves, table written (no training here)."""
 
 import sys
 from pathlib import Path
@@ -12,21 +12,23 @@ import time_to_loss  # noqa: E402
 sys.path.remove(str(ROOT / "scripts"))
 
 
-def test_time_to_first_evaluation_at_or_below():
-    curves = pd.DataFrame({"wall_time": [0.0, 5.0, 10.0, 15.0], "test_loss": [1.0, 2e-3, 1e-3, 5e-6]})
-    assert time_to_loss.time_to(curves, 1e-3) == 10.0  # at or below
-    assert time_to_loss.time_to(curves, 1e-5) == 15.0
-    assert time_to_loss.time_to(curves, 1e-7) is None  # not reached
-
-
-def test_table_marks_unreached_thresholds(tmp_path):
+def test_table_marks_unreached_targets_and_leaves_other_problems_targets_blank(tmp_path):
     row = {"problem": "oscillator", "optimizer": "hig", "batch_size": 128, "budget_s": 10.0, "status": "completed"}
-    row |= {"updates": 7, "final_test_loss": 2e-4}
-    row |= {f"t_{t:.0e}": (3.0 if t >= 1e-3 else None) for t in time_to_loss.THRESHOLDS}
-    time_to_loss.write([row], tmp_path, "note")
+    row |= {"updates": 7, "final_test_loss": 2e-4, "t_1e-02": 3.0, "t_1e-03": None}
+    other = {**row, "problem": "poisson", "t_1e-02": None, "t_1e-03": None, "t_1e+01": 1.5}
+    other.pop("t_1e-02"), other.pop("t_1e-03")
+    time_to_loss.write([row, other], tmp_path, "note")
     text = (tmp_path / "time_to_loss.md").read_text()
-    assert "| oscillator | hig | 128 | 10 | completed | 7 | 3 | - | - | - | - | 0.0002 |" in text
-    assert pd.read_csv(tmp_path / "time_to_loss.csv").loc[0, "t_1e-03"] == 3.0
+    assert "| problem | optimizer | b | budget (s) | status | updates | to 1e+01 (s) | to 1e-02 (s) | to 1e-03 (s) |" in text
+    assert "| oscillator | hig | 128 | 10 | completed | 7 |  | 3 | - | 0.0002 |" in text
+    assert "| poisson | hig | 128 | 10 | completed | 7 | 1.5 |  |  | 0.0002 |" in text
+    assert pd.read_csv(tmp_path / "time_to_loss.csv").loc[0, "t_1e-02"] == 3.0
+
+
+def test_runs_are_jobs_of_the_one_launcher():
+    (job,) = time_to_loss.jobs_of(["oscillator:gn:seed=7,problem.coupling=2"], 60.0, 2.0, ["threads=auto"])
+    assert job.seed == 7 and job.overrides["problem.coupling"] == 2  # values as Hydra reads them
+    assert job.override_list()[:4] == ["problem=oscillator", "optimizer=gn", "budget.seconds=60.0", "eval_every=2.0"]
 
 
 def test_run_spec_carries_its_own_overrides():
