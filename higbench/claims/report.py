@@ -9,7 +9,6 @@ is always the rules of this revision on the measured values committed beside it.
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter
 from pathlib import Path
@@ -22,6 +21,7 @@ from higbench.claims.rules import (
     finish,
     loss_at,
     median,
+    read_sidecars,
     rule_why,
     seed_spread,
     sidecar_seeds,
@@ -57,16 +57,8 @@ def _cell(text: str) -> str:
 
 
 def sidecars(out_dir: Path) -> dict[str, dict]:
-    """Every figure sidecar (<id>.json with an "id") in out_dir, unreadable ones skipped."""
-    figs = {}
-    for path in sorted(Path(out_dir).glob("*.json")):
-        try:
-            info = json.loads(path.read_text())
-        except ValueError:
-            continue
-        if isinstance(info, dict) and "id" in info:
-            figs[info["id"]] = info
-    return figs
+    """Every figure sidecar (<id>.json with an "id") in out_dir (``rules.read_sidecars``)."""
+    return read_sidecars(out_dir)
 
 
 def collect(out_dir: Path) -> list[dict]:
