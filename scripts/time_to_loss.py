@@ -5,7 +5,8 @@ conf/problem_optimizer/) for a training-clock budget, one run after another by d
 (``--jobs 2``: two at once, each on one thread, for a 2-core machine), through
 ``higbench.jobs.run_missing`` (a run already under ``--out`` with the same identity is reused),
 then reads each run file's curves and reports, per target of its problem (``problem.targets``,
-``higbench.results.targets``), the training clock (``wall_time``: evaluations excluded, as in
+``higbench.results.targets``, and each decade below them that one of the problem's runs
+reached), the training clock (``wall_time``: evaluations excluded, as in
 the paper) of the first evaluation whose test loss is at or below it. The resolution is the
 evaluation interval (``--eval-every``, seconds of training clock).
 
@@ -37,7 +38,21 @@ from higbench.results.targets import for_problem, time_to  # noqa: E402
 DEFAULT_RUNS = ("oscillator:lbfgs", "oscillator:hig", "oscillator:adam", "oscillator:gn:seed=7", "oscillator:lm")
 
 
-def summarise(run_file: Path) -> dict:
+def levels(targets: tuple[float, ...], lowest: float | None = None) -> list[float]:
+    """The problem's targets, then each decade below the lowest of them down to ``lowest`` (the
+    lowest loss some run of the problem reached): a long run goes further than the levels the
+    problem is judged at, and the table follows it there."""
+    out = list(targets)
+    if targets and lowest is not None and 0 < lowest < min(targets):
+        k = math.ceil(math.log10(min(targets))) - 1
+        while 10.0**k >= lowest * (1 - 1e-12):
+            out.append(10.0**k)
+            k -= 1
+    return out
+
+
+def summarise(run_file: Path, lowest: float | None = None) -> dict:
+    """One run's row: its config, status and the training clock at each ``levels`` (None: not reached)."""
     from higbench.runfile.reader import load_run
 
     meta, curves = load_run(run_file)
@@ -57,7 +72,7 @@ def summarise(run_file: Path) -> dict:
         "best_test_loss": float(curves["test_loss"].min()) if len(curves) else math.nan,
         "run_file": str(run_file),
     }
-    for target in for_problem(cfg):  # the run's problem's targets (its stored config's)
+    for target in levels(for_problem(cfg), lowest):  # the run's problem's targets (its stored config's), and below
         seconds = time_to(curves["test_loss"], curves["wall_time"], target)
         out[column(target)] = seconds if math.isfinite(seconds) else None
     return out
@@ -163,11 +178,14 @@ def main(argv=None) -> None:
         for job in run_missing(jobs, args.out, n_jobs=args.jobs, launcher="basic" if args.jobs == 1 else "joblib"):
             print(f"{job.sweep}: not done ({job.status}); left out of the table", file=sys.stderr)
         files = [job.path for job in jobs if job.path is not None]
+    first = [summarise(f) for f in files]
+    lowest = {}  # per problem: the lowest loss any of its runs reached (how far below its targets the table goes)
+    for row in first:
+        lowest[row["problem"]] = min(lowest.get(row["problem"], math.inf), row["best_test_loss"])
     rows = []
-    for f in files:
-        row = summarise(f)
-        rows.append(row)
-        print(json.dumps(row), flush=True)
+    for f, row in zip(files, first):
+        rows.append(summarise(f, lowest[row["problem"]]))
+        print(json.dumps(rows[-1]), flush=True)
     load = os.getloadavg()[0]
     jobs = f"{args.jobs} runs at once, 1 thread each" if args.jobs > 1 else "one run at a time"
     if args.from_runs is not None:

@@ -4,6 +4,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -41,3 +42,11 @@ def test_run_spec_carries_its_own_overrides():
             assert bad in str(err)
         else:
             raise AssertionError(f"{bad!r} accepted")
+
+
+def test_levels_go_below_the_targets_as_far_as_a_run_went():
+    targets = (1e-2, 1e-3, 1e-4, 3e-5)  # the oscillator's
+    assert time_to_loss.levels(targets) == list(targets)
+    assert time_to_loss.levels(targets, 1e-3) == list(targets)  # no run below the targets: nothing added
+    assert time_to_loss.levels(targets, 6.1e-7) == pytest.approx([*targets, 1e-5, 1e-6])
+    assert time_to_loss.levels(targets, 1e-6) == pytest.approx([*targets, 1e-5, 1e-6])  # reached exactly
