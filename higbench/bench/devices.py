@@ -48,7 +48,10 @@ def thread_share(threads: int) -> dict:
 
 
 def run_side_by_side(problem: str, optimizer: str, seconds: float, out: Path, threads: dict, extra=()) -> dict[str, Path]:
-    """Both devices' runs of one problem at once; their run files by device."""
+    """Both devices' runs of one problem at once; their run files by device. Not through
+    ``higbench.jobs.launch``: the measurement is two processes started together, each with its
+    own thread share (an environment per process), and always run anew (no reuse: a run from
+    another moment of the machine would not be side by side)."""
     dirs = {d: out / f"{problem}_{optimizer}" / d for d in DEVICES}
     procs = {
         d: subprocess.Popen(run_command(problem, optimizer, d, seconds, dirs[d], extra), env=thread_share(threads[d]),
