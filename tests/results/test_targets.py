@@ -99,3 +99,18 @@ def test_no_other_module_holds_targets_or_the_time_to_target_rule():
         for m in DUPLICATES.finditer(path.read_text()):
             found.append(f"{path.relative_to(ROOT)}: {m.group(0).strip()}")
     assert not found, found
+
+
+def test_profile_without_targets_times_the_problem_configs_targets(tmp_path, capsys):
+    """higbench-results --plot: toy runs whose files predate problem.targets are timed at the
+    shipped toy config's targets; a problem whose runs recorded their own are timed at those."""
+    from higbench.results.__main__ import main as results_main
+
+    for seed in range(2):
+        write_run(tmp_path / f"toy{seed}/run.h5", config_extra={"seed": seed}, test_loss=[1.0, 0.05, 0.004])
+        write_run(tmp_path / f"osc{seed}/run.h5", problem="oscillator", problem_extra={"targets": [0.5, 0.04]},
+                  config_extra={"seed": seed}, test_loss=[1.0, 0.3, 0.03])  # fmt: skip
+    assert results_main([str(tmp_path), "--plot", str(tmp_path / "c.png")]) == 0
+    rows = [line.split(" <= ")[:2] for line in capsys.readouterr().out.splitlines() if " <= " in line]
+    timed = {(p.strip(), float(rest.split()[0])) for p, rest in rows}
+    assert timed == {("toy", t) for t in targets.for_problem("toy")} | {("oscillator", 0.5), ("oscillator", 0.04)}
