@@ -288,6 +288,14 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     return new
 
 
+def composed_value(key: str, *overrides: str) -> Any:
+    """One value of the config the CLI composes for ``overrides``: ``composed_value("optimizer.lr",
+    "problem=poisson", "optimizer=adam")`` is the pair's default (conf/problem_optimizer/: the
+    paper's rate), read where the CLI reads it instead of typed again."""
+    with hydra_conf():
+        return dotted_get(compose(tuple(overrides)), key)
+
+
 def parse_overrides(overrides: Sequence[str]) -> dict[str, Any]:
     """``["seed=7", "problem.hidden=[64,128,64]"]`` -> ``{"seed": 7, "problem.hidden": [64, 128, 64]}``:
     values as Hydra's override grammar reads them (what ``Job.overrides`` holds)."""

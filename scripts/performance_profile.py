@@ -35,7 +35,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from higbench.jobs import Job, compose, hydra_conf, run_missing  # noqa: E402
+from higbench.jobs import Job, composed_value, run_missing  # noqa: E402
 from higbench.results.display import md_table, optimizer_name  # noqa: E402
 from higbench.results.targets import for_problem, league_seconds  # noqa: E402
 
@@ -54,8 +54,7 @@ def budget_s(problem: str) -> float:
 @cache
 def paper_lr(problem: str, optimizer: str = "adam") -> float:
     """The learning rate ``higbench problem=P optimizer=O`` runs at (conf/problem_optimizer/)."""
-    with hydra_conf():
-        return float(compose((f"problem={problem}", f"optimizer={optimizer}"))["optimizer"]["lr"])
+    return float(composed_value("optimizer.lr", f"problem={problem}", f"optimizer={optimizer}"))
 
 
 def job(problem: str, optimizer: str, seed: int, lr: float | None = None) -> Job:

@@ -18,3 +18,10 @@ def test_a_probe_run_is_a_job_with_hydra_values_and_its_parent():
     child = probe_runs.as_job([*probe_poisson_data.job("fourier", "hig", 0.01, 20), "seed=3"], "continued", parent)
     assert child.seed == 3 and child.parent is parent
     assert child.override_list()[-1] == "init_from=/runs/adam/run.h5"  # the reuse rule knows it by its parent's identity
+
+
+def test_the_probes_paper_adam_rate_is_the_pair_configs():
+    import yaml
+
+    pair = yaml.safe_load((ROOT / "conf" / "problem_optimizer" / "poisson_adam.yaml").read_text())
+    assert probe_poisson_data.paper_adam_lr() == pair["optimizer"]["lr"]
