@@ -54,8 +54,9 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
-from higbench.errors import EXIT_BAD_INPUT, ConfigError, output_never_fails, quiet_broken_pipe
-from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
+from higbench.errors import EXIT_BAD_INPUT, ConfigError, given_value, output_never_fails, quiet_broken_pipe
+from higbench.plan import Plan
+from higbench.preflight import Preflight, composition_error, config_dir, invocation, new_invocation, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
@@ -64,14 +65,13 @@ log = logging.getLogger("higbench")
 
 # -- the job's directory: claimed, Hydra's files written by us, never through a link ----------
 
-_CLAIMS: list[int] = []  # directory descriptors this process holds a lock on (released at exit)
 
-
-def claim_dir(output_dir: Path, key: str) -> None:
-    """Lock the job's directory for this process (flock on the directory itself, no file).
+@contextlib.contextmanager
+def claimed_dir(output_dir: Path, key: str):
+    """Hold a lock on the job's directory while the job runs (flock on the directory itself).
 
     Two runs started into one directory at the same moment: the second finds it held and is
-    refused, before it writes anything. The lock lasts as long as the process.
+    refused, before it writes anything.
     """
     fd = os.open(output_dir, os.O_RDONLY | os.O_DIRECTORY)
     try:
@@ -80,9 +80,11 @@ def claim_dir(output_dir: Path, key: str) -> None:
         os.close(fd)
         raise ConfigError(key, str(output_dir), "another higbench process is running in it; refusing to overwrite it") from None
     except OSError:  # a file system without locks: the run file's exclusive creation still decides
+        pass
+    try:
+        yield
+    finally:
         os.close(fd)
-        return
-    _CLAIMS.append(fd)
 
 
 def guard_log_files(output_dir: Path, key: str) -> None:
@@ -112,11 +114,6 @@ def _open_log(filename: str, encoding: str | None):
         raise OSError(f"{filename} is not the run's own log file (not a regular file, or has a second hard link)")
     os.set_blocking(fd, True)
     return os.fdopen(fd, "a", encoding=encoding or "utf-8")
-
-
-def release_dirs() -> None:
-    while _CLAIMS:
-        os.close(_CLAIMS.pop())
 
 
 def write_job_files(output_dir: Path, label: str, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
@@ -183,18 +180,17 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 # -- the job ---------------------------------------------------------------------------------
 
 
-def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
-    """Claim the directory, check it is still what the plan saw, write Hydra's files."""
+def _prepare(plan: Plan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
+    """Check the directory is still what the plan saw, write Hydra's files (the caller holds it)."""
     from higbench.runner import checkpoint
 
-    key = "resume" if plan.task.get("resume") or plan.resume else "hydra.run.dir"
-    claim_dir(output_dir, key)
-    if not plan.resume and not plan.restart and os.path.lexists(plan.run_path):  # made after the plan
+    key = _dir_key(plan, task_cfg)
+    if plan.policy == "new" and os.path.lexists(plan.run_path):  # made after the plan
         raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
-    if plan.restart and not plan.resume:
-        stopped = plan.restart.startswith("stopped")  # checkpoint.stopped_without_checkpoint
+    if plan.restart:
+        stopped = plan.why.startswith("stopped")  # checkpoint.stopped_without_checkpoint
         aside = checkpoint.move_aside(plan.run_path, "stopped" if stopped else "empty")
-        what = plan.restart if stopped else f"recorded nothing ({plan.restart})"
+        what = plan.why if stopped else f"recorded nothing ({plan.why})"
         print(f"higbench: {plan.run_path} {what}; moved to {aside.name}, starting the run again", file=sys.stderr)
     if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
         aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
@@ -219,14 +215,18 @@ def parallel_jobs(hydra_cfg: DictConfig) -> int:
     return min(workers, int(os.environ.get("HIGBENCH_SWEEP_JOBS", workers)))  # a sweep of 2 jobs: 2 at most
 
 
-def _train(plan: RunPlan, overrides: list[str], multirun: bool):
+def _dir_key(plan: Plan, task_cfg) -> str:
+    """The key a refusal about the job's directory names: the one the user gave for it."""
+    return "resume" if task_cfg.get("resume") or plan.resume else "hydra.run.dir"
+
+
+def _train(plan: Plan):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner.train import train
 
-    os.environ["HIGBENCH_PARALLEL_JOBS"] = str(parallel_jobs(HydraConfig.get()))  # the run file's env records it
     try:
-        return train(OmegaConf.create(plan.task), plan.run_path, overrides=overrides, resume=plan.resume)
+        return train(plan.with_parallel_jobs(parallel_jobs(HydraConfig.get())))
     except RunFileExists as exc:
         raise ConfigError("hydra.run.dir", str(plan.run_path.parent), str(exc)) from None
     except RunFileBusy as exc:
@@ -248,12 +248,9 @@ class JobFailed(Exception):
         self.written = written
 
 
-def _run_job(plan: RunPlan, overrides: list[str], multirun: bool) -> float:
-    from higbench.runner.progress import announce, start_text
-
+def _run_job(plan: Plan, multirun: bool) -> float:
     start = plan.start_config()
-    announce(start.get("progress", True), start_text(start))  # replaces the checks' transient line
-    summary = _train(plan, overrides, multirun)
+    summary = _train(plan)
     # The file is closed with its status: a stop signal now must not end the process with
     # 128+signal while the file says completed. Ignored while reporting (and, for a single
     # run, until exit); a sweep gets its handlers back for the next job.
@@ -342,27 +339,24 @@ def _report_kept_run(run_path: Path, why: str) -> float:
     return loss if math.isfinite(loss) else math.inf
 
 
-_JOB_STARTED = False  # set once a job runs: errors after that are the job's, not the command line's
-_SWEEP = {"jobs": 0, "failed": 0}  # this process's sweep jobs (the basic launcher runs them all here)
-
-
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _hydra_main(cfg: DictConfig) -> float:
-    global _JOB_STARTED
-    _JOB_STARTED = True
+    shared = invocation()
+    shared.job_started = True
     hydra_cfg = HydraConfig.get()
     output_dir = Path(hydra_cfg.runtime.output_dir)
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     overrides = list(hydra_cfg.overrides.task)
-    _SWEEP["jobs"] += 1
+    shared.jobs += 1
     made: list[Path] = []
     try:
         guard_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
-            return _report_kept_run(plan.run_path, plan.kept)
-        made = _prepare(plan, output_dir, hydra_cfg, cfg)
-        return _run_job(plan, overrides, multirun)
+            return _report_kept_run(plan.run_path, plan.why)
+        with claimed_dir(output_dir, _dir_key(plan, cfg)):
+            made = _prepare(plan, output_dir, hydra_cfg, cfg)
+            return _run_job(plan, multirun)
     except ConfigError as exc:  # refused before its run file: nothing of it stays
         remove_job_files(made)
         remove_hydra_outputs(output_dir, None)
@@ -370,7 +364,7 @@ def _hydra_main(cfg: DictConfig) -> float:
             refuse(exc)
         # One job of a sweep refused: it fails alone (one line), the others run; the sweep says how many failed.
         print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise JobFailed(str(exc), written=False) from None
     except JobFailed as exc:
         if not exc.written:
@@ -379,16 +373,14 @@ def _hydra_main(cfg: DictConfig) -> float:
         if not multirun:
             refuse(exc, code=1)
         print(f"higbench: error: {exc}", file=sys.stderr, flush=True)
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise
     except Exception:
         if not multirun:
             raise
         traceback.print_exc()  # this job's traceback now; the sweep goes on and says how many failed
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise
-    finally:
-        release_dirs()
     raise AssertionError("unreachable: refuse() exits")
 
 
@@ -404,9 +396,16 @@ def main(argv: list[str] | None = None) -> None:
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
 
     register()  # hydra/sweeper=joblist, also where Hydra's plugin scan cannot see it (an editable install)
+    # Hydra's documented switch: with it Hydra raises its composition errors instead of printing
+    # a traceback hint and exiting 1, so they become one line, exit 2 (tests/reliability/test_bad_config.py)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
-    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
-    _SWEEP.update(jobs=0, failed=0)
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    with new_invocation():
+        _run(argv, full_error)
+
+
+def _run(argv: list[str], full_error: str | None) -> None:
+    """Hydra's app until done (run again where a problem's own key needs ``++``); its ends as lines."""
     try:
         with output_never_fails():  # `higbench ... | head -3`: the output stops, the training goes on
             while argv is not None:
@@ -429,15 +428,14 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run_app(argv: list[str]) -> list[str] | None:
     """Hydra's app on ``argv``; None when done, or the command line to run it again with."""
-    global _JOB_STARTED
-    _JOB_STARTED = False
+    invocation().job_started = False
     sys.argv = [sys.argv[0], *argv]
     overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
     try:
         with quiet_broken_pipe():
             _hydra_main()
     except (HydraException, OmegaConfBaseException, ValueError) as exc:
-        if _JOB_STARTED:
+        if invocation().job_started:
             _sweep_failed(exc)
             raise
         error = composition_error(exc, overrides)
@@ -450,7 +448,7 @@ def _run_app(argv: list[str]) -> list[str] | None:
 
 def _sweep_failed(exc: BaseException) -> None:
     """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
-    failed, jobs = _SWEEP["failed"], _SWEEP["jobs"]
+    failed, jobs = invocation().failed, invocation().jobs
     count = f"{failed} of {jobs} sweep jobs failed" if failed else "a sweep job failed"
     first = " ".join(str(exc).split())
     again = "resume=true with the same hydra.sweep.dir runs them again"

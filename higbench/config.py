@@ -8,8 +8,9 @@
 * ``optimizer``: the optimizer's own constructor, called on a dummy parameter: torch's
   checks for torch.optim classes, ``JacobianPower``'s for GN/HIG.
 * Across keys: one of the budgets set, the batch size against the data set, ``device``,
-  ``threads``, ``init_from`` (a readable run file of the same problem with weights) and
-  ``${hydra:...}`` references that this job's Hydra config cannot resolve.
+  ``threads`` and ``${hydra:...}`` references that this job's Hydra config cannot resolve.
+  Files are not read here: ``init_from``'s run file is read once, by the plan
+  (``higbench.plan``).
 
 ``validate(cfg)`` raises ``ConfigError`` for the first problem; the CLI turns it into
 ``higbench: error: key=value: why`` and exit code 2 before anything is written.
@@ -175,8 +176,7 @@ def validate(cfg: DictConfig | dict) -> None:
 
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
-    if top["init_from"]:
-        check_init_from_file(top["init_from"], problem["name"])
+    # init_from's file is read (and checked) once, by the plan: higbench.plan.load_initial_weights
 
 
 def max_threads() -> int:
@@ -335,35 +335,6 @@ def _dummy_loss(optimizer, param):
         loss = (param**2).sum()
         loss.backward()
     return loss
-
-
-def check_init_from_file(path: str, problem_name: str) -> None:
-    """``init_from``: an existing, readable run file of the same problem with final weights.
-
-    The shapes of the weights against this config's network are checked later, once the
-    network is built (``higbench.runner.train.preflight``), still before anything is written.
-    """
-    from higbench.runfile.reader import UnreadableRunFile, read_head, run_file_path
-
-    p = run_file_path(path)
-    if not p.is_file():
-        raise ConfigError("init_from", path, "no such run file")
-    try:
-        head = read_head(p)
-    except UnreadableRunFile as exc:
-        raise ConfigError("init_from", path, str(exc).split(": ", 1)[-1]) from None
-    if not head.has_weights:
-        raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
-    if head.problem and head.problem != problem_name:
-        raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
-    if head.status == "diverged":  # its weights, finite or not, are where it failed
-        raise ConfigError("init_from", path, "run diverged; a diverged run cannot start another")
-
-
-def init_from_path(path: str) -> Path:
-    from higbench.runfile.reader import run_file_path
-
-    return run_file_path(path)
 
 
 _HYDRA_REFERENCE = re.compile(r"\$\{hydra:([^}]+)\}")
