@@ -96,3 +96,6 @@ def test_summary_targets_are_the_problem_configs():
     assert P.summary_targets({"problem": {"name": "poisson"}}) == tuple(shipped_problem("poisson")["targets"])
     assert P.summary_targets({"problem": {"name": "poisson", "targets": [5.0, 0.5]}}) == (5.0, 0.5)
     assert P.summary_targets({"problem": {"name": "not_shipped"}}) == ()
+    from omegaconf import OmegaConf  # the composed config the CLI holds
+
+    assert P.summary_targets(OmegaConf.create({"problem": {"name": "toy", "targets": [0.1]}})) == (0.1,)
