@@ -280,7 +280,9 @@ def paper_configs(naive_all: bool) -> list[list[Config]]:
 
 def dict_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
     """``rows`` (dicts) as a Markdown table of ``columns`` ((key, title) pairs), numbers by ``fmt``."""
-    return "\n".join(md_table([title for _, title in columns], [[fmt(r.get(key)) for key, _ in columns] for r in rows]))
+    return "\n".join(
+        md_table([title for _, title in columns], [[fmt(r.get(key), grouped=True) for key, _ in columns] for r in rows])
+    )
 
 
 def targets(rows: list[dict]) -> list[dict]:

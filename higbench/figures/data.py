@@ -22,7 +22,7 @@ import pandas as pd
 
 from higbench.figures.spec import Figure, Preset
 from higbench.jobs import Job
-from higbench.results.display import OPTIMIZER_NAMES, md_table, num
+from higbench.results.display import OPTIMIZER_NAMES, fmt, md_table, num
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 
 COLUMNS = ("panel", "series", "seed", "run", "x_name", "x", "y_name", "y")  # of a figure's data table
@@ -247,5 +247,4 @@ def _match(value: Any, want: Any) -> bool:
 
 def _markdown(df: pd.DataFrame, index: bool) -> str:
     frame = df.reset_index() if index else df
-    cell = lambda v: ("-" if math.isnan(v) else f"{v:.3g}") if isinstance(v, float) else str(v)  # noqa: E731
-    return "\n".join(md_table(list(frame.columns), [map(cell, row) for row in frame.itertuples(index=False)]))
+    return "\n".join(md_table(list(frame.columns), [map(fmt, row) for row in frame.itertuples(index=False)]))

@@ -62,11 +62,11 @@ def _missing(x: Any) -> bool:
     return x is None or (isinstance(x, float) and math.isnan(x))
 
 
-def fmt(x: Any, digits: int = 3, *, exponent: bool = False) -> str:
+def fmt(x: Any, digits: int = 3, *, exponent: bool = False, grouped: bool = False) -> str:
     """A number in a table or a progress line: None and NaN as ``-``; a float to ``digits``
-    significant digits (``0.000123``; 1000 and more as a whole number with separators:
-    ``12,345``), or with ``exponent`` in exponent form with ``digits`` decimals
-    (``1.234e-05``); anything else (ints, text) as ``str``."""
+    significant digits (``0.000123``, ``2.64e+03``), with ``grouped`` 1000 and more as a whole
+    number with separators (``12,345``: timings in milliseconds), with ``exponent`` in
+    exponent form with ``digits`` decimals (``1.234e-05``); anything else (ints, text) as ``str``."""
     if isinstance(x, np.floating) or (exponent and isinstance(x, int | np.integer) and not isinstance(x, bool)):
         x = float(x)
     if _missing(x):
@@ -74,7 +74,7 @@ def fmt(x: Any, digits: int = 3, *, exponent: bool = False) -> str:
     if isinstance(x, float):
         if exponent:
             return f"{x:.{digits}e}"
-        return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
+        return f"{x:,.0f}" if grouped and abs(x) >= 1000 else f"{x:.{digits}g}"
     return str(x)
 
 

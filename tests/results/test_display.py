@@ -43,7 +43,8 @@ def test_markdown_table():
         (math.nan, {}, "-"),
         (np.float32("nan"), {"exponent": True}, "-"),
         (0.000123456, {}, "0.000123"),
-        (12345.6, {}, "12,346"),  # 1000 and more: whole, with separators
+        (2640.4, {}, "2.64e+03"),
+        (12345.6, {"grouped": True}, "12,346"),  # 1000 and more: whole, with separators
         (0.5, {"digits": 2}, "0.5"),
         (7, {}, "7"),
         ("hig", {}, "hig"),
