@@ -5,14 +5,17 @@
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
 One pass, in order: Hydra composes; ``higbench.preflight.Preflight`` (a Hydra callback,
-before Hydra creates anything) validates, decides the output/resume policy (a ``RunPlan``)
-and builds the network once for the checks that need it; the job claims its directory
-(``claim_dir``: of two runs started into one directory, the second is refused with
-nothing written), writes Hydra's files itself (``write_job_files``: never through a link,
-never over another run's) and trains. Hydra's own composition errors (an unknown key or
-config, an override that does not parse) become the same one line,
-``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written. Sweep jobs are
-planned in the job (sweepers whose jobs cannot be listed in advance, e.g. Optuna).
+before Hydra creates anything) validates and makes the run's ``Plan``
+(``higbench.runner.plan``: the output policy and the inputs, read once); the job claims its
+directory (``claimed_dir``: of two runs started into one directory, the second is refused
+with nothing written), writes Hydra's files itself (``write_job_files``: never through a
+link, never over another run's) and calls ``runner.train.train(plan)``, which builds the
+network and optimizer once and checks them before its run file exists. Hydra's own
+composition errors (an unknown key or config, an override that does not parse) become the
+same one line, ``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written.
+Sweep jobs are planned in the job (sweepers whose jobs cannot be listed in advance, e.g.
+Optuna). What higbench does here that Hydra would do itself is each marked "Hydra's wart",
+with the test that shows why.
 
 Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
 refused. The only way to write into an existing run file is ``resume=`` (see
@@ -55,9 +58,9 @@ from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
 from higbench.errors import EXIT_BAD_INPUT, ConfigError, given_value, output_never_fails, quiet_broken_pipe
-from higbench.plan import Plan
 from higbench.preflight import Preflight, composition_error, config_dir, invocation, new_invocation, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
@@ -87,6 +90,8 @@ def claimed_dir(output_dir: Path, key: str):
         os.close(fd)
 
 
+# Hydra's wart: its file handler opens <run dir>/higbench.log by path, following a link planted
+# there (tests/reliability/test_own_files_only.py::test_a_log_link_planted_after_the_checks_is_not_written_through).
 def guard_log_files(output_dir: Path, key: str) -> None:
     """The job's log file is never opened through a link, and never one with a second hard link.
 
@@ -116,6 +121,9 @@ def _open_log(filename: str, encoding: str | None):
     return os.fdopen(fd, "a", encoding=encoding or "utf-8")
 
 
+# Hydra's wart (why conf/config.yaml sets hydra.output_subdir: null): Hydra writes .hydra/*.yaml by
+# path, through links and over a continued run's own record, before the job can check anything
+# (tests/reliability/test_front_door_security.py::test_job_files_are_created_exclusively_and_never_through_links).
 def write_job_files(output_dir: Path, label: str, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
     """Hydra's ``.hydra/{config,hydra,overrides}.yaml`` of this job, created exclusively.
 
@@ -147,6 +155,9 @@ def remove_job_files(made: list[Path]) -> None:
             path.rmdir() if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
+# Hydra's wart: it makes the job's directory (and its log handler) before the job runs, so a job
+# refused in the job would leave an empty directory (tests/reliability/test_bad_config.py::
+# test_bad_input_is_refused_and_nothing_is_written: files_under(work) == []).
 def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
     """Undo what Hydra made for a job refused before it wrote anything (no run file there).
 
@@ -220,13 +231,13 @@ def _dir_key(plan: Plan, task_cfg) -> str:
     return "resume" if task_cfg.get("resume") or plan.resume else "hydra.run.dir"
 
 
-def _train(plan: Plan):
+def _train(plan: Plan, parent: int | None):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner.train import train
 
     try:
-        return train(plan.with_parallel_jobs(parallel_jobs(HydraConfig.get())))
+        return train(plan.in_sweep(parallel_jobs(HydraConfig.get()), parent))
     except RunFileExists as exc:
         raise ConfigError("hydra.run.dir", str(plan.run_path.parent), str(exc)) from None
     except RunFileBusy as exc:
@@ -250,7 +261,11 @@ class JobFailed(Exception):
 
 def _run_job(plan: Plan, multirun: bool) -> float:
     start = plan.start_config()
-    summary = _train(plan)
+    # A launcher's worker (joblib) is a process of its own: if the sweep's parent is killed
+    # alone (a scheduler's SIGTERM to its pid), the worker's run stops cleanly, resumable,
+    # instead of training on, orphaned; and the worker then exits instead of lingering.
+    parent = None if invocation().main else os.getppid()
+    summary = _train(plan, parent)
     # The file is closed with its status: a stop signal now must not end the process with
     # 128+signal while the file says completed. Ignored while reporting (and, for a single
     # run, until exit); a sweep gets its handlers back for the next job.
@@ -261,13 +276,13 @@ def _run_job(plan: Plan, multirun: bool) -> float:
         for s, handler in previous.items():
             signal.signal(s, handler)
     if summary.status == "interrupted":
-        _interrupted(summary, multirun)
+        _interrupted(summary, multirun, parent)
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
 
 
-def _interrupted(summary, multirun: bool) -> None:
+def _interrupted(summary, multirun: bool, parent: int | None = None) -> None:
     """Say how to continue (the sweep, or the run if it left a checkpoint), exit 128+signal."""
     from higbench.runner import checkpoint
 
@@ -280,6 +295,10 @@ def _interrupted(summary, multirun: bool) -> None:
         print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
     signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
     sys.stdout.flush()
+    if parent is not None and os.getppid() != parent:  # an orphaned worker: nobody takes its result
+        sys.stderr.flush()
+        logging.shutdown()
+        os._exit(128 + int(signum))
     sys.exit(128 + int(signum))
 
 
@@ -395,7 +414,9 @@ def main(argv: list[str] | None = None) -> None:
         return _print_sweep_configs(argv)
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
 
-    register()  # hydra/sweeper=joblist, also where Hydra's plugin scan cannot see it (an editable install)
+    # Hydra's plugin scan misses hydra_plugins/ of an editable install: register the job-list
+    # sweeper ourselves (tests/figures/test_figures_units.py::test_joblist_sweeper_runs_a_job_list).
+    register()
     # Hydra's documented switch: with it Hydra raises its composition errors instead of printing
     # a traceback hint and exiting 1, so they become one line, exit 2 (tests/reliability/test_bad_config.py)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
@@ -441,7 +462,10 @@ def _run_app(argv: list[str]) -> list[str] | None:
         error = composition_error(exc, overrides)
         if not getattr(error, "addable", False):
             refuse(error)
-        GlobalHydra.instance().clear()  # a problem's own key its YAML does not list: add it
+        # Hydra refuses a key its struct config lacks; a key of the problem's own Config that its
+        # YAML does not list is the user's to set, so the app runs again with ++key
+        # (tests/test_custom_problem.py::test_a_base_config_key_its_yaml_does_not_list_can_be_set).
+        GlobalHydra.instance().clear()
         return [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
     return None
 
@@ -456,6 +480,8 @@ def _sweep_failed(exc: BaseException) -> None:
     sys.exit(1)
 
 
+# Hydra's wart: with -m, --cfg prints the sweep's primary config, not its jobs'
+# (tests/test_cli.py::test_multirun_cfg_job_prints_each_jobs_config).
 def _print_sweep_configs(argv: list[str]) -> None:
     """``higbench -m ... --cfg job``: print every job's config (Hydra allows one mode flag)."""
     from higbench.preflight import sweep_configs
@@ -482,6 +508,9 @@ _PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
 _INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
 
 
+# Hydra's wart: its argparse takes the overrides as one positional group, so a flag after an
+# override is a usage error (tests/test_cli.py::test_an_unknown_flag_is_one_line_not_argparse_usage
+# also runs flags placed anywhere: the `higbench` fixture puts the tiny budget first).
 def _flags_first(argv: list[str]) -> list[str]:
     """Hydra's flags (with their values) before the overrides: argparse takes the overrides
     as one group, so ``higbench seed=0 -m lr=1`` would otherwise be its usage text."""
@@ -494,6 +523,9 @@ def _flags_first(argv: list[str]) -> list[str]:
     return [*flags, *overrides]
 
 
+# Hydra's warts: argparse answers a bad flag with a multi-line usage text, and --experimental-rerun
+# unpickles the file it names (tests/test_cli.py::test_an_unknown_flag_is_one_line_not_argparse_usage,
+# tests/reliability/test_own_files_only.py::test_hydra_experimental_rerun_is_refused_before_the_pickle_is_read).
 def _refuse_early(argv: list[str]) -> ConfigError | None:
     """Command lines Hydra's argparse would answer with its usage text: one line instead."""
     for i, arg in enumerate(argv):

@@ -10,7 +10,7 @@
 * Across keys: one of the budgets set, the batch size against the data set, ``device``,
   ``threads`` and ``${hydra:...}`` references that this job's Hydra config cannot resolve.
   Files are not read here: ``init_from``'s run file is read once, by the plan
-  (``higbench.plan``).
+  (``higbench.runner.plan``).
 
 ``validate(cfg)`` raises ``ConfigError`` for the first problem; the CLI turns it into
 ``higbench: error: key=value: why`` and exit code 2 before anything is written.
@@ -85,9 +85,6 @@ def optimizer_kwargs(opt_cfg: Any) -> dict:
     return {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
 
 
-ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
-
-
 DIRNAME_BYTES = 200  # a job directory's name at most (file systems: 255, with the job number before it)
 
 
@@ -106,13 +103,21 @@ def flat_dirname(name: str) -> str:
     return flat[: DIRNAME_BYTES - 17].decode(errors="ignore") + "~" + hashlib.sha256(flat).hexdigest()[:16]
 
 
-# Registered on import, as the schema: the CLI imports this module before Hydra composes, and
-# Hydra hands its resolvers to the launchers' workers with its other global state.
-OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
+def register_with_hydra() -> None:
+    """What conf/config.yaml needs from Python: the schema (``higbench_schema``, first in its
+    defaults) and the ``higbench.flat_dirname`` resolver of its sweep subdir. Idempotent.
+    Hydra hands both to its launchers' workers with its other global state."""
+    ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
+    OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
 
 
 def config_dir() -> str:
-    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
+    """conf/ of a checkout (or editable install), else the copy shipped in the wheel.
+
+    Everything that composes higbench's config asks for it here, so the schema and resolver
+    it needs are registered here (``register_with_hydra``), not as a side effect of an import.
+    """
+    register_with_hydra()
     checkout = Path(__file__).resolve().parent.parent / "conf"
     if (checkout / "config.yaml").is_file():
         return str(checkout)
@@ -176,7 +181,7 @@ def validate(cfg: DictConfig | dict) -> None:
 
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
-    # init_from's file is read (and checked) once, by the plan: higbench.plan.load_initial_weights
+    # init_from's file is read (and checked) once, by the plan: higbench.runner.plan.load_initial_weights
 
 
 def max_threads() -> int:

@@ -51,7 +51,7 @@ from higbench.runfile.reader import RUN_FILE
 from higbench.runner.checkpoint import RESUMABLE_STATUSES, checkpoint_path
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
-LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
+LAUNCH_OVERRIDES = ("progress=false", "threads=1")
 PARALLEL_SECONDS = 30  # a round with less training than this runs on Hydra's basic launcher (no worker start-up)
 PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # the checkout (or site-packages) holding higbench
 

@@ -5,7 +5,7 @@ Hydra calls ``on_run_start`` / ``on_multirun_start`` of the callbacks listed und
 any directory. For a single run, one pass decides it, before anything is written:
 
 1. validate the config (``higbench.config``: keys, types, ranges);
-2. make its plan (``higbench.plan.make_plan``: the output policy, the stored config of a run
+2. make its plan (``higbench.runner.plan.make_plan``: the output policy, the stored config of a run
    to continue, its checkpoint, the ``init_from`` weights, each read once).
 
 The plan goes to the job through this command line's ``Invocation``; the job builds the
@@ -48,8 +48,8 @@ from higbench.config import (
     validate,
 )
 from higbench.errors import ConfigError, dotted_get, fail, given_value
-from higbench.plan import Plan, load_initial_weights, make_plan
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan, load_initial_weights, make_plan
 
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 
@@ -186,6 +186,7 @@ class Invocation:
     jobs: int = 0  # sweep jobs this process ran, and how many failed (the sweep's last line)
     failed: int = 0
     job_started: bool = False  # errors after a job started are the job's, not the command line's
+    main: bool = False  # opened by ``cli.main`` (False: a launcher's worker process, or code calling the job)
 
 
 _INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higbench_invocation")
@@ -193,7 +194,7 @@ _INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higben
 
 @contextlib.contextmanager
 def new_invocation():
-    token = _INVOCATION.set(Invocation())
+    token = _INVOCATION.set(Invocation(main=True))
     try:
         yield _INVOCATION.get()
     finally:
@@ -357,6 +358,8 @@ class Preflight(Callback):
         existing = Path(str(config.hydra.sweep.dir)) / "multirun.yaml"
         self._multirun_yaml = (existing, existing.read_bytes()) if existing.is_file() else None
 
+    # Hydra's wart: a sweep run again into its directory overwrites the sweep's multirun.yaml
+    # (tests/sweeps/test_sweep_launchers.py, the sweep completed with resume=true).
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-rerun-<time>.yaml."""
         if self._multirun_yaml is None:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from higbench.plan import Plan
 from higbench.runfile.writer import RunFileWriter
+from higbench.runner.plan import Plan
 
 
 def write_run(

@@ -17,21 +17,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
-# How the per-sample losses of a batch become the scalar every optimizer differentiates.
-LOSS_REDUCTIONS = ("mean", "sum")
-
-
-def reduce_loss(per_sample: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
-    """The objective: the batch mean (default) or the batch sum of the per-sample losses.
-
-    The sum scales the gradient by b (the convention of the reference's Poisson script).
-    A scalar ``per_sample`` is returned as it is.
-    """
-    if reduction not in LOSS_REDUCTIONS:
-        raise ValueError(f"loss_reduction={reduction!r}: expected one of {LOSS_REDUCTIONS}")
-    if per_sample.ndim == 0:
-        return per_sample
-    return per_sample.sum() if reduction == "sum" else per_sample.mean()
+from higbench.losses import reduce_loss  # the one reduction rule, shared with the problems
 
 
 class NonFiniteStep(ArithmeticError):

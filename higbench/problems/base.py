@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from higbench.optim.closure import LOSS_REDUCTIONS, reduce_loss
+from higbench.losses import LOSS_REDUCTIONS, reduce_loss
 from higbench.problems.networks import INIT_SCHEMES, initialise
 from higbench.schema import value
 

@@ -64,34 +64,29 @@ def summary_thresholds(initial_test_loss: float) -> tuple[float, ...]:
     return tuple(10.0**e for e in (top - 1, top - 2, top - 3))
 
 
-_transient = False  # a start line without newline on the terminal, to be replaced
-
-
 def announce(enabled: bool, text: str, transient: bool = False) -> None:
     """A line before the (possibly slow) set-up, so the terminal is never silent.
 
     transient: only on a terminal, and replaced by whatever comes next (the real start line,
     or the one-line error of a refused config), so refused input still shows one line.
     """
-    global _transient
     if not enabled:
         return
     if transient:
         if sys.stderr.isatty():
             sys.stderr.write(f"{job_label()}{text}")
             sys.stderr.flush()
-            _transient = True
         return
     clear_transient()
     _line(f"{job_label()}{text}")
 
 
 def clear_transient() -> None:
-    global _transient
-    if _transient:
+    """Erase a transient line (nothing to remember: on a terminal, erasing the current line
+    is harmless where the cursor already stands at the start of an empty one)."""
+    if sys.stderr.isatty():
         sys.stderr.write("\r\033[K")  # back to the line's start, erase it
         sys.stderr.flush()
-        _transient = False
 
 
 def _line(text: str) -> None:

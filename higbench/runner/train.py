@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
 import sys
 import threading
@@ -51,11 +52,11 @@ from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
 from higbench.optim.structured import mlp_factor_values
-from higbench.plan import Plan
 from higbench.problems.base import Batch, Problem, build_problem
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
+from higbench.runner.plan import Plan
 from higbench.runner.progress import Progress, announce, start_text
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
 from higbench.runner.threads import fit_to_work, resolve_threads
@@ -103,10 +104,15 @@ class TrainingClock:
 
 
 class StopSignals:
-    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now."""
+    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now.
 
-    def __init__(self):
+    ``parent``: a sweep worker's launcher; once it is gone (killed alone, its workers
+    re-parented), the run stops as if sent SIGTERM: interrupted, checkpointed, resumable.
+    """
+
+    def __init__(self, parent: int | None = None):
         self.signum: int | None = None
+        self.parent = parent
         self._previous: dict[int, object] = {}
 
     def _handler(self, signum, frame):
@@ -133,6 +139,8 @@ class StopSignals:
         self._previous.clear()
 
     def check(self) -> None:
+        if self.signum is None and self.parent is not None and os.getppid() != self.parent:
+            self.signum = signal.SIGTERM  # the sweep that launched this job is gone
         if self.signum is not None:
             raise Interrupted(signal.Signals(self.signum).name)
 
@@ -549,7 +557,7 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
 
 
 def train(plan: Plan) -> RunSummary:
-    """Run one experiment as planned (``higbench.plan``); write its run file.
+    """Run one experiment as planned (``higbench.runner.plan``); write its run file.
 
     The problem, the network and the optimizer are built once, here; the plan's inputs are
     checked against them (``init_from`` weights, a checkpoint) and the memory guard runs, all
@@ -586,7 +594,7 @@ def train(plan: Plan) -> RunSummary:
         cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
     )
     clock.resume()
-    signals = StopSignals().install()
+    signals = StopSignals(parent=plan.stop_with_parent).install()
     status, reason, final_test = _run(run, signals)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume

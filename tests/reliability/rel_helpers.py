@@ -61,7 +61,7 @@ def train_here(cfg, path, **kwargs):
     """``train`` in this process, restoring torch's thread count (a run sets its own)."""
     import torch
 
-    from higbench.plan import Plan
+    from higbench.runner.plan import Plan
     from higbench.runner.train import train
 
     threads = torch.get_num_threads()

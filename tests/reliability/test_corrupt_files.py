@@ -15,9 +15,9 @@ from hydra import compose, initialize_config_dir
 from rel_helpers import FAST, REPO, cli_env
 
 from higbench import cli
-from higbench.plan import Plan
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
+from higbench.runner.plan import Plan
 from higbench.runner.train import train
 
 # A writer that appends and flushes as the runner does at each evaluation (a burst of

@@ -12,9 +12,9 @@ from rel_helpers import FAST
 
 from higbench import cli
 from higbench.optim import hig as hig_mod  # the GN/HIG step the runner calls
-from higbench.plan import Plan
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 from higbench.runner.updates import UpdateResult
 
 BASE = ["budget.seconds=20", "budget.max_updates=40", "eval_unit=updates", "eval_every=3", "checkpoint_every=null", *FAST]

@@ -10,9 +10,9 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from higbench import cli
-from higbench.plan import Plan
 from higbench.runfile.reader import load_run, load_weights
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 
 
 def config(optimizer):

@@ -9,8 +9,8 @@ from hydra import compose, initialize_config_dir
 
 from higbench import cli
 from higbench.errors import ConfigError
-from higbench.plan import Plan
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 
 
 def config(*overrides):

@@ -59,6 +59,7 @@ class Plan:
     checkpoint: Mapping[str, Any] | None = None
     overrides: tuple[str, ...] = ()  # the command line's task overrides (the run file records them)
     parallel_jobs: int = 1  # jobs of this sweep sharing the machine (the run file's /env records it)
+    stop_with_parent: int | None = None  # a launcher worker's parent pid: the run stops cleanly once it is gone
 
     @property
     def resume(self) -> bool:
@@ -84,8 +85,10 @@ class Plan:
 
         return OmegaConf.create({**self.task(), "resume": True if self.resume else None})
 
-    def with_parallel_jobs(self, n: int) -> Plan:
-        return dataclasses.replace(self, parallel_jobs=int(n))
+    def in_sweep(self, parallel_jobs: int, stop_with_parent: int | None) -> Plan:
+        """The plan of a sweep's job: how many jobs share the machine, and the pid of the
+        launcher whose exit must stop it (a worker process), if any."""
+        return dataclasses.replace(self, parallel_jobs=int(parallel_jobs), stop_with_parent=stop_with_parent)
 
     @classmethod
     def for_run(cls, cfg, run_path: str | Path, *, resume: bool = False, overrides=()) -> Plan:
