@@ -35,8 +35,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from higbench.display import md_table, optimizer_name  # noqa: E402
 from higbench.jobs import Job, composed_value, run_missing  # noqa: E402
-from higbench.results.display import md_table, optimizer_name  # noqa: E402
 from higbench.results.targets import for_problem, league_seconds  # noqa: E402
 
 PROBLEMS = ("toy", "oscillator", "dipole", "poisson")

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import jacobian_power
 from higbench.optim.sip import newton_step_in_y
-from higbench.results.display import md_table
 
 ALPHAS = (0.01, 0.1, 1.0, 10.0)
 METHODS = ("gd", "gn", "hig", "sip")

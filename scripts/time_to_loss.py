@@ -30,7 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from higbench.results.display import fmt, md_table  # noqa: E402
+from higbench.display import fmt, md_table  # noqa: E402
 from higbench.results.targets import for_problem, time_to  # noqa: E402
 
 # GN at the paper's settings diverges for most seeds; seed 7 is its stable one (figure 2b's seed search).

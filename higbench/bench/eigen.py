@@ -24,9 +24,9 @@ import time
 import numpy as np
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import gram_eigen
 from higbench.optim.tridiagonal import blas_threads
-from higbench.results.display import md_table
 
 
 def _route(K: torch.Tensor) -> None:

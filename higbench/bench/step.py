@@ -57,8 +57,8 @@ from pathlib import Path
 import torch
 
 from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
+from higbench.display import fmt, md_table
 from higbench.dtypes import DTYPES
-from higbench.results.display import fmt, md_table
 from higbench.runner.updates import synchronize
 
 PHASES = ("jacobian_s", "inversion_s", "apply_s")

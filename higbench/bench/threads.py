@@ -15,8 +15,8 @@ import time
 
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import gram_eigen
-from higbench.results.display import md_table
 
 
 def time_eigen(n: int, threads: int, repeats: int) -> float:

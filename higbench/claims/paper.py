@@ -50,7 +50,7 @@ from higbench.claims.rules import (
     stable,
     updates_of,
 )
-from higbench.results.display import OPTIMIZER_NAMES, num, sci
+from higbench.display import OPTIMIZER_NAMES, num, sci
 
 # -- toy (figure 1) -------------------------------------------------------------------------
 # Paper 2.1, appendix B.1. fig1's sweeps: "toy" (γ x Adam, GN, HIG) and "adam_tuned".

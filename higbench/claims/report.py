@@ -26,7 +26,7 @@ from higbench.claims.rules import (
     seed_spread,
     sidecar_seeds,
 )
-from higbench.results.display import fmt, md_table
+from higbench.display import fmt, md_table
 
 HEADER = """# Reproduction report
 

@@ -24,7 +24,7 @@ import pandas as pd
 
 from higbench.bench.paper import PAPER_COSTS
 from higbench.claims.reference import TRACE_SECONDS
-from higbench.results.display import sci
+from higbench.display import sci
 
 REPRODUCED, PARTLY, NOT, NA = "reproduced", "partly", "not", "n/a"
 CAUSES = {

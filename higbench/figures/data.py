@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from higbench.display import OPTIMIZER_NAMES, fmt, md_table, num
 from higbench.figures.spec import Figure, Preset
 from higbench.jobs import Job
-from higbench.results.display import OPTIMIZER_NAMES, fmt, md_table, num
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 
 COLUMNS = ("panel", "series", "seed", "run", "x_name", "x", "y_name", "y")  # of a figure's data table

@@ -10,10 +10,10 @@ import numpy as np
 
 from higbench.claims.paper import HE, LE
 from higbench.claims.rules import PAPER, float32_loss
+from higbench.display import OPTIMIZER_NAMES
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid
-from higbench.results.display import OPTIMIZER_NAMES
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 270})
 GRID = Budget(seconds={"paper": 3600, "quick": 20, "standard": 120})

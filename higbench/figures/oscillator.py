@@ -12,10 +12,10 @@ import numpy as np
 from higbench.claims.paper import FIG2B_OPTIMIZERS, FIG2C_BATCHES, GD_GRIDS
 from higbench.claims.reference import OSCILLATOR_CURVES
 from higbench.claims.report import reference_entry
+from higbench.display import COLORS, OPTIMIZER_NAMES, sci
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid
-from higbench.results.display import COLORS, OPTIMIZER_NAMES, sci
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 120, "standard": 240, "long": 900})
 GRID = Budget(seconds={"paper": 3600, "quick": 12, "standard": 15, "long": 120})  # long: osc-6 past its 15 s

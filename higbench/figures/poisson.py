@@ -16,10 +16,10 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import POISSON_ADAM_LR as ADAM_LR
+from higbench.display import COLORS, sci
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Series, legend, new_figure
 from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep
-from higbench.results.display import COLORS, sci
 
 MAIN = Budget(seconds={"paper": 3600, "quick": 60, "standard": 60, "long": 3000})
 ADAM_LRS, HIG_LRS, TUNED_CONT_LRS = [1e-4, 1e-3, 1e-2], [0.005, 0.02, 0.1], [3e-4, 1e-3]  # not given in the paper

@@ -13,10 +13,10 @@ from __future__ import annotations
 import pandas as pd
 
 from higbench.bench.tables import PAPER_TIMINGS, PROBLEMS, bench_file, timing_frame
+from higbench.display import OPTIMIZER_NAMES, num
 from higbench.figures.data import FigureData
 from higbench.figures.oscillator import FIG2B, FIG2B_OPTIMIZERS
 from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep, paper_setting
-from higbench.results.display import OPTIMIZER_NAMES, num
 
 TITLES = {
     t: f"{p}: memory, update duration and Jacobian duration for Adam and HIG"

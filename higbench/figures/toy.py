@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import TOY_OPTIMIZERS, TOY_TUNED_LRS
+from higbench.display import COLORS, OPTIMIZER_NAMES
 from higbench.figures.data import FigureData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, Sweep
-from higbench.results.display import COLORS, OPTIMIZER_NAMES
 
 GAMMAS = (1.0, 0.01)
 BUDGET = Budget(seconds={"paper": 120, "quick": 30, "standard": 60})

@@ -17,7 +17,7 @@ import math
 import sys
 import time
 
-from higbench.results.display import fmt
+from higbench.display import fmt
 
 REDRAW_S = 0.5  # a bar redraw at most this often: per-update redraws would cost time on tiny updates
 MIN_BAR = 10  # characters of bar kept at any terminal width
@@ -46,18 +46,11 @@ def start_text(cfg) -> str:
     return f"{cfg.problem.name}/{cfg.optimizer.name}: {verb}, batch size {cfg.batch_size}, budget {budget_text} (training clock)"
 
 
-def summary_targets(cfg) -> tuple[float, ...]:
-    """Test-loss levels the end-of-run summary times: the run's problem's targets (its config's
-    ``problem.targets``, else the shipped problem config's: ``results.targets.for_problem``)."""
-    from higbench.results.targets import for_problem
-
-    return for_problem(cfg)
-
-
 def summary_thresholds(initial_test_loss: float) -> tuple[float, ...]:
     """For a caller that knows only the initial test loss (not a target: no problem owns these):
     the three decades below that loss's decade (Poisson, starting at ~440: 10, 1, 0.1; a loss
-    starting near 0.5: 1e-2, 1e-3, 1e-4). A caller with the run's config uses ``summary_targets``."""
+    starting near 0.5: 1e-2, 1e-3, 1e-4). A caller with the run's config times its problem's
+    targets instead (``higbench.results.targets.for_problem(cfg)``: the problem config owns them)."""
     if not math.isfinite(initial_test_loss) or initial_test_loss <= 0:
         return ()
     top = math.floor(math.log10(initial_test_loss))

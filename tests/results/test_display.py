@@ -1,5 +1,5 @@
 """One display table (every shipped optimizer's name and colour), one Markdown table writer and
-one number formatter (higbench.results.display), and no copies of them elsewhere."""
+one number formatter (higbench.display), and no copies of them elsewhere."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from matplotlib.colors import is_color_like, to_rgba
 
-from higbench.results import display
+from higbench import display
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,7 +62,7 @@ def test_compact_numbers_for_losses_and_labels():
     assert [display.num(v) for v in (3e-4, 1.0, 128, 0.25, True, 1e-10)] == ["3e-4", "1", "128", "0.25", "True", "1e-10"]
 
 
-# A copy of the table, the writer or a formatter anywhere but higbench/results/display.py
+# A copy of the table, the writer or a formatter anywhere but higbench/display.py
 COPIES = re.compile(
     r"^\s*(COLORS|OPTIMIZER_NAMES|OPTIMIZERS)\s*[:=][^=\n]*\{"  # a dict of names or colours
     r"|---\||\| --- \|"  # a Markdown table's separator row
@@ -74,7 +74,7 @@ COPIES = re.compile(
 def test_no_other_module_holds_the_display_table_a_table_writer_or_a_formatter():
     found = []
     for path in sorted([*(ROOT / "higbench").rglob("*.py"), *(ROOT / "scripts").glob("*.py")]):
-        if path == ROOT / "higbench" / "results" / "display.py":
+        if path == ROOT / "higbench" / "display.py":
             continue
         for m in COPIES.finditer(path.read_text()):
             found.append(f"{path.relative_to(ROOT)}: {m.group(0).strip()}")

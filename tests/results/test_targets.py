@@ -43,6 +43,9 @@ def test_a_runs_stored_targets_win_over_the_shipped_ones():
     assert targets.for_problem({"problem": {"name": "toy"}}) == targets.for_problem("toy")  # predates the key
     assert targets.for_problem({"problem": {"name": "my_own_problem"}}) == ()  # out of tree, none declared
     assert targets.for_problem("../problem/toy") == ()  # never a path outside conf/problem
+    from omegaconf import OmegaConf  # the composed config the CLI holds (its end-of-run summary)
+
+    assert targets.for_problem(OmegaConf.create({"problem": {"name": "toy", "targets": [0.1]}})) == (0.1,)
 
 
 def test_the_rule_is_the_first_evaluation_at_or_below_the_target():

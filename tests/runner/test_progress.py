@@ -87,15 +87,3 @@ def test_piped_by_updates_and_without_budget(monkeypatch):
 )
 def test_summary_thresholds_are_relative_to_where_the_loss_started(initial, expected):
     assert P.summary_thresholds(initial) == pytest.approx(expected)
-
-
-def test_summary_targets_are_the_problem_configs():
-    """The summary times the problem's own targets: a stored config's, else the shipped one's."""
-    from higbench.results.targets import shipped_problem
-
-    assert P.summary_targets({"problem": {"name": "poisson"}}) == tuple(shipped_problem("poisson")["targets"])
-    assert P.summary_targets({"problem": {"name": "poisson", "targets": [5.0, 0.5]}}) == (5.0, 0.5)
-    assert P.summary_targets({"problem": {"name": "not_shipped"}}) == ()
-    from omegaconf import OmegaConf  # the composed config the CLI holds
-
-    assert P.summary_targets(OmegaConf.create({"problem": {"name": "toy", "targets": [0.1]}})) == (0.1,)

@@ -1,6 +1,7 @@
 """How results are shown: each optimizer's name and colour, the Markdown table writer and the
-number formatters. The one copy of each, for the figures, the claims, the results tables, the
-benchmarks and the scripts (low in the layers, so every one of them may import it).
+number formatters. The one copy of each, for the figures, the claims, the results tables, a
+run's progress lines, the benchmarks and the scripts (it imports nothing of higbench and sits
+in the lowest layer, so every one of them may import it).
 
 A new optimizer (conf/optimizer/<name>.yaml) gets its row in ``OPTIMIZERS``; a test checks that
 every shipped optimizer config has one.
