@@ -58,8 +58,12 @@ def _problem_node(source: str | Mapping | Any) -> tuple[str, Mapping]:
     return str(node.get("name") or ""), node
 
 
+MAX_TARGETS = 32  # more levels than this in a stored config is not a problem's targets (a crafted file)
+
+
 def _levels(values: Any) -> tuple[float, ...] | None:
-    if values is None or isinstance(values, str) or not hasattr(values, "__iter__"):
+    """Stored targets as floats; None for anything else (text, too many, not numbers)."""
+    if values is None or isinstance(values, str) or not hasattr(values, "__len__") or len(values) > MAX_TARGETS:
         return None
     try:
         return tuple(float(v) for v in values)

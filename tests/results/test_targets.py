@@ -43,6 +43,8 @@ def test_a_runs_stored_targets_win_over_the_shipped_ones():
     assert targets.for_problem({"problem": {"name": "toy"}}) == targets.for_problem("toy")  # predates the key
     assert targets.for_problem({"problem": {"name": "my_own_problem"}}) == ()  # out of tree, none declared
     assert targets.for_problem("../problem/toy") == ()  # never a path outside conf/problem
+    for bad in ("1e-3", ["a"], [1e-3] * (targets.MAX_TARGETS + 1)):  # a crafted file's: the shipped ones instead
+        assert targets.for_problem({"problem": {"name": "toy", "targets": bad}}) == targets.for_problem("toy")
     from omegaconf import OmegaConf  # the composed config the CLI holds (its end-of-run summary)
 
     assert targets.for_problem(OmegaConf.create({"problem": {"name": "toy", "targets": [0.1]}})) == (0.1,)
