@@ -25,3 +25,23 @@ def test_the_probes_paper_adam_rate_is_the_pair_configs():
 
     pair = yaml.safe_load((ROOT / "conf" / "problem_optimizer" / "poisson_adam.yaml").read_text())
     assert probe_poisson_data.paper_adam_lr() == pair["optimizer"]["lr"]
+
+
+def test_run_missing_launches_only_what_is_not_done(monkeypatch, tmp_path):
+    """The one reuse rule: done jobs are reused, waiting ones wait, the rest go to jobs.launch once,
+    and the jobs are resolved again after it; what is still not done is returned."""
+    from higbench import jobs
+
+    done, todo, waiting = (probe_runs.as_job([f"seed={s}"], "x") for s in range(3))
+    state = {"resolved": 0, "launched": []}
+
+    def resolve(js, index):
+        state["resolved"] += 1
+        done.status, waiting.status = "completed", "waiting"
+        todo.status = "completed" if state["launched"] else "missing"
+
+    monkeypatch.setattr(jobs, "resolve", resolve)
+    monkeypatch.setattr(jobs, "run_index", lambda root: {})
+    monkeypatch.setattr(jobs, "launch", lambda js, root, **kw: state["launched"].append(list(js)))
+    left = jobs.run_missing([done, todo, waiting], tmp_path, n_jobs=1, log=lambda text: None)
+    assert state["launched"] == [[todo]] and state["resolved"] == 2 and left == [waiting]
