@@ -133,9 +133,9 @@ def test_nan_gradient_is_caught(tmp_path, monkeypatch):
     def build(problem, model, opt_cfg):
         calls = {"n": 0}
 
-        def poison(grad):  # the 4th backward pass yields a NaN gradient (finite loss)
-            calls["n"] += 1
-            return grad * float("nan") if calls["n"] == 4 else grad
+        def poison(grad):  # the 4th update's backward pass yields a NaN gradient (finite loss);
+            calls["n"] += 1  # the first pass is the warm-up's, through the run's own network
+            return grad * float("nan") if calls["n"] == 5 else grad
 
         next(model.parameters()).register_hook(poison)
         return real(problem, model, opt_cfg)
