@@ -187,6 +187,15 @@ _CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  #
 _UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
+def final_test_spread(per_sample: np.ndarray | None) -> dict[str, float]:
+    """The final evaluation's test losses sample by sample (/final/test_losses) as a median
+    and a 95th percentile: a mean carried by a few samples (the oscillator's heavy tail) is
+    then seen for what it is. NaN for runs that recorded none (interrupted, older files)."""
+    if per_sample is None or not len(per_sample):
+        return {"final_test_median": math.nan, "final_test_p95": math.nan}
+    return {"final_test_median": float(np.median(per_sample)), "final_test_p95": float(np.percentile(per_sample, 95))}
+
+
 def _summarise(
     run: RunTables, thresholds: Sequence[float] | None, want_curves: bool
 ) -> tuple[dict, dict[str, np.ndarray] | None]:
@@ -266,6 +275,8 @@ def _summarise(
         for t in thresholds:
             row[threshold_column(t)] = math.nan
 
+    row.update(final_test_spread(run.tables.get("final", {}).get("test_losses")))
+
     raw = run.tables.get("updates", {})
     # Spectrum columns cut apart: they may be shorter than the timings (a file from before they
     # were recorded, resumed by a version that records them), which must not shorten those.
@@ -294,7 +305,7 @@ def read_run_summary(
     thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets)."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
-    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS}
+    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": ("test_losses",)}
     try:
         summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
         note = summary.pop("curves_note", "")

@@ -360,10 +360,9 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
 
 
 def _columns(f: h5py.File, group: str, names: Sequence[str] | None, budget: ReadBudget) -> dict[str, np.ndarray]:
-    try:
-        gid = h5py.h5g.open(f.id, group.encode())
-    except KeyError:
+    if group not in f:  # an optional group (``final``: completed runs only)
         return {}
+    gid = h5py.h5g.open(f.id, group.encode())
     if names is None:
         names = [gid.get_objname_by_idx(i).decode() for i in range(gid.get_num_objs())]
     size = f.id.get_filesize()

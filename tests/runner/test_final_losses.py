@@ -7,6 +7,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from higbench.config import config_dir
+from higbench.results.index import read_run_summary
 from higbench.runfile.reader import load_final, load_run
 from higbench.runner import train as train_mod
 from higbench.runner.plan import Plan
@@ -33,6 +34,8 @@ def test_final_per_sample_losses_average_to_the_last_test_loss(tmp_path):
     assert losses.shape == (300,) and losses.dtype == np.float64 and (losses >= 0).all()
     assert np.isclose(losses.mean(), curves["test_loss"].iloc[-1], rtol=1e-12, atol=0)
     assert losses.std() > 0  # one value per sample, not the mean repeated
+    row, _ = read_run_summary(tmp_path / "run.h5")  # the index's robust view of the same evaluation
+    assert row["final_test_median"] == np.median(losses) and row["final_test_p95"] == np.percentile(losses, 95)
 
 
 def test_a_run_without_a_final_evaluation_has_no_final_record(tmp_path, monkeypatch):
