@@ -72,7 +72,8 @@ lint: install-dev
 bench: install
 	$(BIN)/python -m higbench.bench.step
 
-# Training-clock seconds to test loss 1e-3..1e-7: oscillator HIG, GN (seed 7), Adam, L-BFGS, LM at
+# Training-clock seconds to the oscillator's test-loss targets (problem.targets) and each decade below
+# them some run reached: oscillator HIG, GN (seed 7), Adam, L-BFGS, LM at
 # paper settings, TTL_BUDGET seconds of training clock per run (default 15 minutes), TTL_JOBS at once.
 TTL_BUDGET ?= 900
 TTL_JOBS ?= 1

@@ -5,14 +5,17 @@
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
 One pass, in order: Hydra composes; ``higbench.preflight.Preflight`` (a Hydra callback,
-before Hydra creates anything) validates, decides the output/resume policy (a ``RunPlan``)
-and builds the network once for the checks that need it; the job claims its directory
-(``claim_dir``: of two runs started into one directory, the second is refused with
-nothing written), writes Hydra's files itself (``write_job_files``: never through a link,
-never over another run's) and trains. Hydra's own composition errors (an unknown key or
-config, an override that does not parse) become the same one line,
-``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written. Sweep jobs are
-planned in the job (sweepers whose jobs cannot be listed in advance, e.g. Optuna).
+before Hydra creates anything) validates and makes the run's ``Plan``
+(``higbench.runner.plan``: the output policy and the inputs, read once); the job claims its
+directory (``claimed_dir``: of two runs started into one directory, the second is refused
+with nothing written), writes Hydra's files itself (``write_job_files``: never through a
+link, never over another run's) and calls ``runner.train.train(plan)``, which builds the
+network and optimizer once and checks them before its run file exists. Hydra's own
+composition errors (an unknown key or config, an override that does not parse) become the
+same one line, ``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written.
+Sweep jobs are planned in the job (sweepers whose jobs cannot be listed in advance, e.g.
+Optuna). What higbench does here that Hydra would do itself is each marked "Hydra's wart",
+with the test that shows why.
 
 Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
 refused. The only way to write into an existing run file is ``resume=`` (see
@@ -54,9 +57,10 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.config import check_hydra_references
-from higbench.errors import EXIT_BAD_INPUT, ConfigError, output_never_fails, quiet_broken_pipe
-from higbench.preflight import Preflight, RunPlan, composition_error, config_dir, given_value, precheck, refuse, take_plan
+from higbench.errors import EXIT_BAD_INPUT, ConfigError, given_value, output_never_fails, quiet_broken_pipe
+from higbench.preflight import Preflight, composition_error, config_dir, invocation, new_invocation, precheck, refuse, take_plan
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
@@ -64,14 +68,13 @@ log = logging.getLogger("higbench")
 
 # -- the job's directory: claimed, Hydra's files written by us, never through a link ----------
 
-_CLAIMS: list[int] = []  # directory descriptors this process holds a lock on (released at exit)
 
-
-def claim_dir(output_dir: Path, key: str) -> None:
-    """Lock the job's directory for this process (flock on the directory itself, no file).
+@contextlib.contextmanager
+def claimed_dir(output_dir: Path, key: str):
+    """Hold a lock on the job's directory while the job runs (flock on the directory itself).
 
     Two runs started into one directory at the same moment: the second finds it held and is
-    refused, before it writes anything. The lock lasts as long as the process.
+    refused, before it writes anything.
     """
     fd = os.open(output_dir, os.O_RDONLY | os.O_DIRECTORY)
     try:
@@ -80,11 +83,15 @@ def claim_dir(output_dir: Path, key: str) -> None:
         os.close(fd)
         raise ConfigError(key, str(output_dir), "another higbench process is running in it; refusing to overwrite it") from None
     except OSError:  # a file system without locks: the run file's exclusive creation still decides
+        pass
+    try:
+        yield
+    finally:
         os.close(fd)
-        return
-    _CLAIMS.append(fd)
 
 
+# Hydra's wart: its file handler opens <run dir>/higbench.log by path, following a link planted
+# there (tests/reliability/test_own_files_only.py::test_a_log_link_planted_after_the_checks_is_not_written_through).
 def guard_log_files(output_dir: Path, key: str) -> None:
     """The job's log file is never opened through a link, and never one with a second hard link.
 
@@ -114,11 +121,9 @@ def _open_log(filename: str, encoding: str | None):
     return os.fdopen(fd, "a", encoding=encoding or "utf-8")
 
 
-def release_dirs() -> None:
-    while _CLAIMS:
-        os.close(_CLAIMS.pop())
-
-
+# Hydra's wart (why conf/config.yaml sets hydra.output_subdir: null): Hydra writes .hydra/*.yaml by
+# path, through links and over a continued run's own record, before the job can check anything
+# (tests/reliability/test_front_door_security.py::test_job_files_are_created_exclusively_and_never_through_links).
 def write_job_files(output_dir: Path, label: str, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
     """Hydra's ``.hydra/{config,hydra,overrides}.yaml`` of this job, created exclusively.
 
@@ -150,6 +155,9 @@ def remove_job_files(made: list[Path]) -> None:
             path.rmdir() if path.is_dir() and not path.is_symlink() else path.unlink()
 
 
+# Hydra's wart: it makes the job's directory (and its log handler) before the job runs, so a job
+# refused in the job would leave an empty directory (tests/reliability/test_bad_config.py::
+# test_bad_input_is_refused_and_nothing_is_written: files_under(work) == []).
 def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
     """Undo what Hydra made for a job refused before it wrote anything (no run file there).
 
@@ -183,18 +191,17 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 # -- the job ---------------------------------------------------------------------------------
 
 
-def _prepare(plan: RunPlan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
-    """Claim the directory, check it is still what the plan saw, write Hydra's files."""
+def _prepare(plan: Plan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
+    """Check the directory is still what the plan saw, write Hydra's files (the caller holds it)."""
     from higbench.runner import checkpoint
 
-    key = "resume" if plan.task.get("resume") or plan.resume else "hydra.run.dir"
-    claim_dir(output_dir, key)
-    if not plan.resume and not plan.restart and os.path.lexists(plan.run_path):  # made after the plan
+    key = _dir_key(plan, task_cfg)
+    if plan.policy == "new" and os.path.lexists(plan.run_path):  # made after the plan
         raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
-    if plan.restart and not plan.resume:
-        stopped = plan.restart.startswith("stopped")  # checkpoint.stopped_without_checkpoint
+    if plan.restart:
+        stopped = plan.why.startswith("stopped")  # checkpoint.stopped_without_checkpoint
         aside = checkpoint.move_aside(plan.run_path, "stopped" if stopped else "empty")
-        what = plan.restart if stopped else f"recorded nothing ({plan.restart})"
+        what = plan.why if stopped else f"recorded nothing ({plan.why})"
         print(f"higbench: {plan.run_path} {what}; moved to {aside.name}, starting the run again", file=sys.stderr)
     if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
         aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
@@ -219,14 +226,18 @@ def parallel_jobs(hydra_cfg: DictConfig) -> int:
     return min(workers, int(os.environ.get("HIGBENCH_SWEEP_JOBS", workers)))  # a sweep of 2 jobs: 2 at most
 
 
-def _train(plan: RunPlan, overrides: list[str], multirun: bool):
+def _dir_key(plan: Plan, task_cfg) -> str:
+    """The key a refusal about the job's directory names: the one the user gave for it."""
+    return "resume" if task_cfg.get("resume") or plan.resume else "hydra.run.dir"
+
+
+def _train(plan: Plan, parent: int | None):
     """Train per the plan; the run file's refusals become ConfigError, faults one line."""
     from higbench.runfile.writer import DiskFull, RunFileBusy, RunFileExists, RunFileFault, RunFileReadOnly
     from higbench.runner.train import train
 
-    os.environ["HIGBENCH_PARALLEL_JOBS"] = str(parallel_jobs(HydraConfig.get()))  # the run file's env records it
     try:
-        return train(OmegaConf.create(plan.task), plan.run_path, overrides=overrides, resume=plan.resume)
+        return train(plan.in_sweep(parallel_jobs(HydraConfig.get()), parent))
     except RunFileExists as exc:
         raise ConfigError("hydra.run.dir", str(plan.run_path.parent), str(exc)) from None
     except RunFileBusy as exc:
@@ -248,12 +259,13 @@ class JobFailed(Exception):
         self.written = written
 
 
-def _run_job(plan: RunPlan, overrides: list[str], multirun: bool) -> float:
-    from higbench.runner.progress import announce, start_text
-
+def _run_job(plan: Plan, multirun: bool) -> float:
     start = plan.start_config()
-    announce(start.get("progress", True), start_text(start))  # replaces the checks' transient line
-    summary = _train(plan, overrides, multirun)
+    # A launcher's worker (joblib) is a process of its own: if the sweep's parent is killed
+    # alone (a scheduler's SIGTERM to its pid), the worker's run stops cleanly, resumable,
+    # instead of training on, orphaned; and the worker then exits instead of lingering.
+    parent = None if invocation().main else os.getppid()
+    summary = _train(plan, parent)
     # The file is closed with its status: a stop signal now must not end the process with
     # 128+signal while the file says completed. Ignored while reporting (and, for a single
     # run, until exit); a sweep gets its handlers back for the next job.
@@ -264,13 +276,13 @@ def _run_job(plan: RunPlan, overrides: list[str], multirun: bool) -> float:
         for s, handler in previous.items():
             signal.signal(s, handler)
     if summary.status == "interrupted":
-        _interrupted(summary, multirun)
+        _interrupted(summary, multirun, parent)
     # The return value is what sweepers (Optuna) minimise; a diverged run scores worst.
     loss = summary.final_test_loss
     return loss if summary.status == "completed" and math.isfinite(loss) else float("inf")
 
 
-def _interrupted(summary, multirun: bool) -> None:
+def _interrupted(summary, multirun: bool, parent: int | None = None) -> None:
     """Say how to continue (the sweep, or the run if it left a checkpoint), exit 128+signal."""
     from higbench.runner import checkpoint
 
@@ -283,6 +295,10 @@ def _interrupted(summary, multirun: bool) -> None:
         print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
     signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
     sys.stdout.flush()
+    if parent is not None and os.getppid() != parent:  # an orphaned worker: nobody takes its result
+        sys.stderr.flush()
+        logging.shutdown()
+        os._exit(128 + int(signum))
     sys.exit(128 + int(signum))
 
 
@@ -342,27 +358,24 @@ def _report_kept_run(run_path: Path, why: str) -> float:
     return loss if math.isfinite(loss) else math.inf
 
 
-_JOB_STARTED = False  # set once a job runs: errors after that are the job's, not the command line's
-_SWEEP = {"jobs": 0, "failed": 0}  # this process's sweep jobs (the basic launcher runs them all here)
-
-
 @hydra.main(version_base="1.3", config_path=config_dir(), config_name="config")
 def _hydra_main(cfg: DictConfig) -> float:
-    global _JOB_STARTED
-    _JOB_STARTED = True
+    shared = invocation()
+    shared.job_started = True
     hydra_cfg = HydraConfig.get()
     output_dir = Path(hydra_cfg.runtime.output_dir)
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     overrides = list(hydra_cfg.overrides.task)
-    _SWEEP["jobs"] += 1
+    shared.jobs += 1
     made: list[Path] = []
     try:
         guard_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
         if plan.kept:
-            return _report_kept_run(plan.run_path, plan.kept)
-        made = _prepare(plan, output_dir, hydra_cfg, cfg)
-        return _run_job(plan, overrides, multirun)
+            return _report_kept_run(plan.run_path, plan.why)
+        with claimed_dir(output_dir, _dir_key(plan, cfg)):
+            made = _prepare(plan, output_dir, hydra_cfg, cfg)
+            return _run_job(plan, multirun)
     except ConfigError as exc:  # refused before its run file: nothing of it stays
         remove_job_files(made)
         remove_hydra_outputs(output_dir, None)
@@ -370,7 +383,7 @@ def _hydra_main(cfg: DictConfig) -> float:
             refuse(exc)
         # One job of a sweep refused: it fails alone (one line), the others run; the sweep says how many failed.
         print(f"higbench: error: {' '.join(str(exc).split())}", file=sys.stderr, flush=True)
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise JobFailed(str(exc), written=False) from None
     except JobFailed as exc:
         if not exc.written:
@@ -379,16 +392,14 @@ def _hydra_main(cfg: DictConfig) -> float:
         if not multirun:
             refuse(exc, code=1)
         print(f"higbench: error: {exc}", file=sys.stderr, flush=True)
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise
     except Exception:
         if not multirun:
             raise
         traceback.print_exc()  # this job's traceback now; the sweep goes on and says how many failed
-        _SWEEP["failed"] += 1
+        shared.failed += 1
         raise
-    finally:
-        release_dirs()
     raise AssertionError("unreachable: refuse() exits")
 
 
@@ -403,10 +414,19 @@ def main(argv: list[str] | None = None) -> None:
         return _print_sweep_configs(argv)
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
 
-    register()  # hydra/sweeper=joblist, also where Hydra's plugin scan cannot see it (an editable install)
+    # Hydra's plugin scan misses hydra_plugins/ of an editable install: register the job-list
+    # sweeper ourselves (tests/figures/test_figures_units.py::test_joblist_sweeper_runs_a_job_list).
+    register()
+    # Hydra's documented switch: with it Hydra raises its composition errors instead of printing
+    # a traceback hint and exiting 1, so they become one line, exit 2 (tests/reliability/test_bad_config.py)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
-    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors instead of printing them
-    _SWEEP.update(jobs=0, failed=0)
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    with new_invocation():
+        _run(argv, full_error)
+
+
+def _run(argv: list[str], full_error: str | None) -> None:
+    """Hydra's app until done (run again where a problem's own key needs ``++``); its ends as lines."""
     try:
         with output_never_fails():  # `higbench ... | head -3`: the output stops, the training goes on
             while argv is not None:
@@ -429,28 +449,30 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run_app(argv: list[str]) -> list[str] | None:
     """Hydra's app on ``argv``; None when done, or the command line to run it again with."""
-    global _JOB_STARTED
-    _JOB_STARTED = False
+    invocation().job_started = False
     sys.argv = [sys.argv[0], *argv]
     overrides = [a for a in argv if not a.startswith("-") and ("=" in a or a.startswith("~"))]
     try:
         with quiet_broken_pipe():
             _hydra_main()
     except (HydraException, OmegaConfBaseException, ValueError) as exc:
-        if _JOB_STARTED:
+        if invocation().job_started:
             _sweep_failed(exc)
             raise
         error = composition_error(exc, overrides)
         if not getattr(error, "addable", False):
             refuse(error)
-        GlobalHydra.instance().clear()  # a problem's own key its YAML does not list: add it
+        # Hydra refuses a key its struct config lacks; a key of the problem's own Config that its
+        # YAML does not list is the user's to set, so the app runs again with ++key
+        # (tests/test_custom_problem.py::test_a_base_config_key_its_yaml_does_not_list_can_be_set).
+        GlobalHydra.instance().clear()
         return [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
     return None
 
 
 def _sweep_failed(exc: BaseException) -> None:
     """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
-    failed, jobs = _SWEEP["failed"], _SWEEP["jobs"]
+    failed, jobs = invocation().failed, invocation().jobs
     count = f"{failed} of {jobs} sweep jobs failed" if failed else "a sweep job failed"
     first = " ".join(str(exc).split())
     again = "resume=true with the same hydra.sweep.dir runs them again"
@@ -458,6 +480,8 @@ def _sweep_failed(exc: BaseException) -> None:
     sys.exit(1)
 
 
+# Hydra's wart: with -m, --cfg prints the sweep's primary config, not its jobs'
+# (tests/test_cli.py::test_multirun_cfg_job_prints_each_jobs_config).
 def _print_sweep_configs(argv: list[str]) -> None:
     """``higbench -m ... --cfg job``: print every job's config (Hydra allows one mode flag)."""
     from higbench.preflight import sweep_configs
@@ -484,6 +508,9 @@ _PLAIN_FLAGS += ("--shell-completion", "-i", "--info")
 _INFO_CHOICES = ("all", "config", "defaults", "defaults-tree", "plugins", "searchpath")
 
 
+# Hydra's wart: its argparse takes the overrides as one positional group, so a flag after an
+# override is a usage error (tests/test_cli.py::test_an_unknown_flag_is_one_line_not_argparse_usage
+# also runs flags placed anywhere: the `higbench` fixture puts the tiny budget first).
 def _flags_first(argv: list[str]) -> list[str]:
     """Hydra's flags (with their values) before the overrides: argparse takes the overrides
     as one group, so ``higbench seed=0 -m lr=1`` would otherwise be its usage text."""
@@ -496,6 +523,9 @@ def _flags_first(argv: list[str]) -> list[str]:
     return [*flags, *overrides]
 
 
+# Hydra's warts: argparse answers a bad flag with a multi-line usage text, and --experimental-rerun
+# unpickles the file it names (tests/test_cli.py::test_an_unknown_flag_is_one_line_not_argparse_usage,
+# tests/reliability/test_own_files_only.py::test_hydra_experimental_rerun_is_refused_before_the_pickle_is_read).
 def _refuse_early(argv: list[str]) -> ConfigError | None:
     """Command lines Hydra's argparse would answer with its usage text: one line instead."""
     for i, arg in enumerate(argv):

@@ -8,8 +8,9 @@
 * ``optimizer``: the optimizer's own constructor, called on a dummy parameter: torch's
   checks for torch.optim classes, ``JacobianPower``'s for GN/HIG.
 * Across keys: one of the budgets set, the batch size against the data set, ``device``,
-  ``threads``, ``init_from`` (a readable run file of the same problem with weights) and
-  ``${hydra:...}`` references that this job's Hydra config cannot resolve.
+  ``threads`` and ``${hydra:...}`` references that this job's Hydra config cannot resolve.
+  Files are not read here: ``init_from``'s run file is read once, by the plan
+  (``higbench.runner.plan``).
 
 ``validate(cfg)`` raises ``ConfigError`` for the first problem; the CLI turns it into
 ``higbench: error: key=value: why`` and exit code 2 before anything is written.
@@ -66,6 +67,7 @@ class RunConfig:
     resume: Any = value(None, **_COSMETIC)  # null | true | false | a run dir or run file
     memory_limit_mb: Optional[float] = value(None, gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
     tensorboard: bool = value(False, **_COSMETIC)  # also write TensorBoard event files (higbench.runner.tensorboard)
+    sink: Any = value(None, **_COSMETIC)  # side sinks, NAME -> {_target_, ...}: the conf/sink/ group (higbench.runner.sinks)
 
 
 # The lists each rule is read from (derived from the metadata above, never written twice):
@@ -82,9 +84,6 @@ def optimizer_kwargs(opt_cfg: Any) -> dict:
     for key in OPTIMIZER_META:
         kwargs.pop(key, None)
     return {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
-
-
-ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
 
 
 DIRNAME_BYTES = 200  # a job directory's name at most (file systems: 255, with the job number before it)
@@ -105,13 +104,21 @@ def flat_dirname(name: str) -> str:
     return flat[: DIRNAME_BYTES - 17].decode(errors="ignore") + "~" + hashlib.sha256(flat).hexdigest()[:16]
 
 
-# Registered on import, as the schema: the CLI imports this module before Hydra composes, and
-# Hydra hands its resolvers to the launchers' workers with its other global state.
-OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
+def register_with_hydra() -> None:
+    """What conf/config.yaml needs from Python: the schema (``higbench_schema``, first in its
+    defaults) and the ``higbench.flat_dirname`` resolver of its sweep subdir. Idempotent.
+    Hydra hands both to its launchers' workers with its other global state."""
+    ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
+    OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
 
 
 def config_dir() -> str:
-    """conf/ of a checkout (or editable install), else the copy shipped in the wheel."""
+    """conf/ of a checkout (or editable install), else the copy shipped in the wheel.
+
+    Everything that composes higbench's config asks for it here, so the schema and resolver
+    it needs are registered here (``register_with_hydra``), not as a side effect of an import.
+    """
+    register_with_hydra()
     checkout = Path(__file__).resolve().parent.parent / "conf"
     if (checkout / "config.yaml").is_file():
         return str(checkout)
@@ -175,8 +182,7 @@ def validate(cfg: DictConfig | dict) -> None:
 
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
-    if top["init_from"]:
-        check_init_from_file(top["init_from"], problem["name"])
+    # init_from's file is read (and checked) once, by the plan: higbench.runner.plan.load_initial_weights
 
 
 def max_threads() -> int:
@@ -335,35 +341,6 @@ def _dummy_loss(optimizer, param):
         loss = (param**2).sum()
         loss.backward()
     return loss
-
-
-def check_init_from_file(path: str, problem_name: str) -> None:
-    """``init_from``: an existing, readable run file of the same problem with final weights.
-
-    The shapes of the weights against this config's network are checked later, once the
-    network is built (``higbench.runner.train.preflight``), still before anything is written.
-    """
-    from higbench.runfile.reader import UnreadableRunFile, read_head, run_file_path
-
-    p = run_file_path(path)
-    if not p.is_file():
-        raise ConfigError("init_from", path, "no such run file")
-    try:
-        head = read_head(p)
-    except UnreadableRunFile as exc:
-        raise ConfigError("init_from", path, str(exc).split(": ", 1)[-1]) from None
-    if not head.has_weights:
-        raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
-    if head.problem and head.problem != problem_name:
-        raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
-    if head.status == "diverged":  # its weights, finite or not, are where it failed
-        raise ConfigError("init_from", path, "run diverged; a diverged run cannot start another")
-
-
-def init_from_path(path: str) -> Path:
-    from higbench.runfile.reader import run_file_path
-
-    return run_file_path(path)
 
 
 _HYDRA_REFERENCE = re.compile(r"\$\{hydra:([^}]+)\}")

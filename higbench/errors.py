@@ -57,6 +57,15 @@ def show(value: Any) -> str:
     return text if len(text) <= MAX_SHOWN else f"{text[: MAX_SHOWN - 20]}...({len(text)} chars)"
 
 
+def given_value(overrides, key: str) -> str | None:
+    """The value ``key`` is given on the command line (the last one: it wins), or None."""
+    for o in reversed(list(overrides)):
+        k, sep, v = o.partition("=")
+        if k.lstrip("+~") == key:
+            return v if sep else "<missing>"
+    return None
+
+
 def dotted_get(data: Any, dotted: str, default: Any = ABSENT) -> Any:
     """``data["a"]["b"]`` for ``"a.b"`` in plain nested dicts; ``default`` where a part is missing."""
     node = data

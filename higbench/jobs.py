@@ -51,7 +51,7 @@ from higbench.runfile.reader import RUN_FILE
 from higbench.runner.checkpoint import RESUMABLE_STATUSES, checkpoint_path
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
-LAUNCH_OVERRIDES = ["progress=false", "threads=1"]
+LAUNCH_OVERRIDES = ("progress=false", "threads=1")
 PARALLEL_SECONDS = 30  # a round with less training than this runs on Hydra's basic launcher (no worker start-up)
 PACKAGE_PARENT = Path(__file__).resolve().parents[2]  # the checkout (or site-packages) holding higbench
 
@@ -286,3 +286,34 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
     log(f"[figures] {len(new)}/{len(jobs)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
     return new
+
+
+def composed_value(key: str, *overrides: str) -> Any:
+    """One value of the config the CLI composes for ``overrides``: ``composed_value("optimizer.lr",
+    "problem=poisson", "optimizer=adam")`` is the pair's default (conf/problem_optimizer/: the
+    paper's rate), read where the CLI reads it instead of typed again."""
+    with hydra_conf():
+        return dotted_get(compose(tuple(overrides)), key)
+
+
+def parse_overrides(overrides: Sequence[str]) -> dict[str, Any]:
+    """``["seed=7", "problem.hidden=[64,128,64]"]`` -> ``{"seed": 7, "problem.hidden": [64, 128, 64]}``:
+    values as Hydra's override grammar reads them (what ``Job.overrides`` holds)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    return {o.key_or_group: o.value() for o in OverridesParser.create().parse_overrides(list(overrides))}
+
+
+def run_missing(
+    jobs: Sequence[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print
+) -> list[Job]:
+    """The one reuse rule for a set of jobs (the figures' rounds, the league, the bench scripts):
+    resolve them against the runs root's index, launch those not done (a stopped run with a
+    checkpoint resumes in place) and resolve them again. Returns the jobs still not done."""
+    resolve(jobs, run_index(runs_root))
+    todo = [j for j in jobs if not j.done and j.status != "waiting"]
+    log(f"[jobs] {len(jobs) - len(todo)} of {len(jobs)} run(s) already done under {runs_root}")
+    if todo:
+        launch(todo, Path(runs_root), n_jobs=n_jobs, launcher=launcher, log=log)
+        resolve(jobs, run_index(runs_root))
+    return [j for j in jobs if not j.done]

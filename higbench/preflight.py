@@ -1,26 +1,26 @@
-"""The pre-run checks of the front door: a Hydra callback, ``Preflight``, and the run plan.
+"""The pre-run checks of the front door: a Hydra callback, ``Preflight``, and the one-line errors.
 
 Hydra calls ``on_run_start`` / ``on_multirun_start`` of the callbacks listed under
 ``hydra.callbacks`` (conf/config.yaml) after composing the config and before it creates
-any directory. One pass decides everything a run needs, before anything is written:
+any directory. For a single run, one pass decides it, before anything is written:
 
 1. validate the config (``higbench.config``: keys, types, ranges);
-2. decide the output/resume policy (``plan_run``: a new run, a run to continue, a dead run
-   to start again, a sweep job to keep), refusing links higbench would write through and
-   stored configs naming callables higbench does not register;
-3. build the problem and network once on the CPU (``train.preflight``: ``init_from``
-   weights that fit, the GN/HIG memory guard).
+2. make its plan (``higbench.runner.plan.make_plan``: the output policy, the stored config of a run
+   to continue, its checkpoint, the ``init_from`` weights, each read once).
 
-The plan of a single run is handed to the job (``take_plan``), which only claims its
-directory and runs. Sweep jobs are planned in the job (each in its own directory); a job
-the callback already validated is not validated again. Any problem is one line on
-stderr, ``higbench: error: <key>=<value>: <why>``, and exit code 2, with nothing written.
+The plan goes to the job through this command line's ``Invocation``; the job builds the
+network and the optimizer once and checks the inputs against them before its run file
+exists (``runner.train``). A sweep's jobs are all validated here, and each distinct network
+built once (``train.check_build``), so that a bad job refuses the sweep before any runs;
+each job then plans itself in its own directory. Any problem is one line on stderr,
+``higbench: error: <key>=<value>: <why>``, and exit code 2, with nothing written.
 ``composition_error`` makes such a line of Hydra's own composition errors.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import dataclasses
 import itertools
 import os
@@ -28,6 +28,7 @@ import sys
 import time
 import traceback
 from pathlib import Path
+from types import MappingProxyType
 
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
@@ -46,13 +47,11 @@ from higbench.config import (
     to_plain,
     validate,
 )
-from higbench.errors import ConfigError, dotted_get, fail
+from higbench.errors import ConfigError, dotted_get, fail, given_value
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner.plan import Plan, load_initial_weights, make_plan
 
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
-# Everything higbench (and Hydra for it) writes in a run directory: none may be a link.
-WRITTEN_NAMES = (".hydra", *(f".hydra/{n}.yaml" for n in ("config", "hydra", "overrides")), "higbench.log")
-WRITTEN_NAMES += (RUN_FILE, f"{RUN_FILE}.ckpt")
 
 
 CLUSTER_LAUNCHERS = ("joblib", "submitit_local", "submitit_slurm", "slurm")  # pyproject's `cluster` extra
@@ -146,15 +145,6 @@ def _compose_plain(overrides: list[str]) -> dict:
         return OmegaConf.to_container(compose("config", overrides=overrides), resolve=False)
 
 
-def given_value(overrides: list[str], key: str) -> str | None:
-    """The value ``key`` is given on the command line (the last one: it wins), or None."""
-    for o in reversed(overrides):
-        k, sep, v = o.partition("=")
-        if k.lstrip("+~") == key:
-            return v if sep else "<missing>"
-    return None
-
-
 def sweep_jobs(config: DictConfig) -> list[list[str]]:
     """Override lists of the jobs a multirun launches: all of them for Hydra's basic sweeper
     (its ``params`` and the command line's comma lists, crossed), the first one for others
@@ -179,227 +169,68 @@ def sweep_jobs(config: DictConfig) -> list[list[str]]:
     return jobs if basic else jobs[:1]
 
 
-# -- what a stored config may build ----------------------------------------------------------
-
-
-def registered_targets() -> set[str]:
-    """``_target_`` of every problem and optimizer config in Hydra's search path (conf/, and
-    ``hydra.searchpath`` given on the command line) and of every registered Problem class."""
-    from hydra.core.object_type import ObjectType
-
-    from higbench.problems.base import registry
-
-    targets = {f"{c.__module__}.{c.__qualname__}" for c in registry().values()}
-    if not GlobalHydra.instance().is_initialized():
-        from hydra import initialize_config_dir
-
-        with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-            return targets | registered_targets()
-    for source in GlobalHydra.instance().config_loader().get_sources():
-        for group in ("problem", "optimizer"):
-            if not source.is_group(group):
-                continue
-            for name in source.list(group, ObjectType.CONFIG):
-                with contextlib.suppress(Exception):  # a YAML that does not load names nothing
-                    target = source.load_config(f"{group}/{name}").config.get("_target_")
-                    targets.add(str(target)) if target else None
-    return targets
-
-
-def check_stored_targets(stored: dict, composed: dict, resume_value) -> None:
-    """Refuse a stored config (a run file's, or .hydra/config.yaml) naming a ``_target_`` that
-    no higbench config registers: it would be built (called) before anything else is checked."""
-    allowed = registered_targets() | {str(dotted_get(composed, f"{g}._target_", "")) for g in ("problem", "optimizer")}
-    for key, target in _targets(stored):
-        if str(target) not in allowed:
-            why = f"its stored config names {key}={target}, which no problem or optimizer config registers; refusing to build it"
-            raise ConfigError("resume", resume_value, why)
-
-
-PATH_KEYS = ("init_from",)  # config keys naming a file higbench opens
-
-
-def check_stored_paths(stored: dict, overrides: list[str], resume_value) -> None:
-    """A stored config (someone else's file) never makes higbench open a file: a path it
-    names must be given again on this command line, where the user names what is opened."""
-    for key in PATH_KEYS:
-        path = stored.get(key)
-        if path and given_value(overrides, key) != str(path):
-            why = (
-                f"its stored config names {key}={path}; a stored config never makes higbench open a file: "
-                f"give {key}={path} on the command line to start it again from that file"
-            )
-            raise ConfigError("resume", resume_value, why)
-
-
-def _targets(node, prefix: str = ""):
-    if isinstance(node, dict):
-        for k, v in node.items():
-            if k == "_target_":
-                yield f"{prefix}{k}", v
-            yield from _targets(v, f"{prefix}{k}.")
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from _targets(v, f"{prefix}{i}.")
-
-
-# -- the run plan: what the job does, decided once --------------------------------------------
+# -- one command line: what Hydra's callback hands its jobs ----------------------------------
 
 
 @dataclasses.dataclass
-class RunPlan:
-    """What a job does with its directory, decided before anything is written."""
+class Invocation:
+    """What one ``higbench`` command line shares between Hydra's callback and its jobs.
 
-    task: dict  # the config it trains with (a resumed run's stored config, with allowed changes)
-    run_path: Path
-    resume: bool = False  # continue ``run_path`` from its checkpoint
-    restart: str | None = None  # ``run_path`` recorded nothing (why): moved aside, started again
-    kept: str | None = None  # a sweep job whose run stays as it is (why)
-
-    def start_config(self) -> DictConfig:
-        """The config the start line and the run show: the stored run's when it resumes."""
-        return OmegaConf.create({**self.task, "resume": True if self.resume else None})
-
-
-def check_no_links(out: Path, key: str) -> None:
-    """Refuse a run directory where something higbench writes is a symbolic link."""
-    for name in WRITTEN_NAMES:
-        path = Path(out) / name
-        if path.is_symlink():
-            why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
-            raise ConfigError(key, str(out), why)
-
-
-def check_tensorboard_dir(task: dict, out: Path, key: str) -> None:
-    """``tensorboard=true``: its directory in the run dir is absent or a real directory (a link
-    would take the event files elsewhere; a file or a dangling link would fail mid-run)."""
-    from higbench.runner.tensorboard import TENSORBOARD_DIR
-
-    path = Path(out) / TENSORBOARD_DIR
-    if not task.get("tensorboard") or not os.path.lexists(path):
-        return
-    if path.is_symlink():
-        why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
-        raise ConfigError(key, str(out), why)
-    if not path.is_dir():
-        raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
-
-
-def plan_run(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool) -> RunPlan:
-    """The one decision about a job's directory (ConfigError when it must not run)."""
-    from higbench.runner import checkpoint
-    from higbench.runner.output_location import check_output_dir
-
-    output_dir = Path(output_dir)
-    if task.get("resume"):
-        run_path = checkpoint.run_file_of(task["resume"], output_dir)
-        check_output_dir(run_path.parent, "resume")
-        check_no_links(run_path.parent, "resume")
-        merged, continues, empty = resume_plan(task, run_path, overrides, multirun=multirun)
-        check_tensorboard_dir(merged, run_path.parent, "resume")
-        return RunPlan(merged, run_path, resume=continues, restart=empty)
-    run_path = output_dir / RUN_FILE
-    check_output_dir(output_dir, "hydra.run.dir", RUN_FILE)
-    check_no_links(output_dir, "hydra.run.dir")
-    check_tensorboard_dir(task, output_dir, "hydra.run.dir")
-    if not os.path.lexists(run_path):
-        return RunPlan(task, run_path)
-    empty = checkpoint.recorded_nothing(run_path)
-    if empty:
-        return RunPlan(task, run_path, restart=empty)
-    if multirun:  # a sweep run again into its directory: its runs stay as they are
-        return RunPlan(task, run_path, kept="already holds a run (resume=true completes interrupted and failed jobs)")
-    raise ConfigError(
-        "hydra.run.dir",
-        str(output_dir),
-        f"already holds a run file ({RUN_FILE}); refusing to overwrite it "
-        f"(resume={output_dir} continues it, or pick a new hydra.run.dir)",
-    )
-
-
-def resume_plan(task: dict, run_path: Path, overrides: list[str], *, multirun: bool) -> tuple[dict, bool, str | None]:
-    """The config a ``resume=`` job runs, whether it continues ``run_path``'s checkpoint, and
-    why it starts again instead (the run recorded nothing), if it does.
-
-    A sweep job that never started starts now; a run that recorded nothing starts again
-    from the beginning with its own config; anything else continues from its checkpoint
-    (ConfigError when it cannot: finished, no checkpoint, another run's, a changed key).
+    Hydra calls the callback and the task function separately, with the config only; this is
+    the one channel between them (``cli.main`` opens a fresh one per command line, so nothing
+    leaks from one in-process call to the next). A joblib worker, a process of its own,
+    starts with an empty one and plans its jobs itself.
     """
-    from higbench.runner import checkpoint
 
-    if multirun and not run_path.exists():
-        return {**task, "resume": None}, False, None
-    if multirun:  # a job stopped before its first checkpoint (killed with its sweep): run it again
-        lost = checkpoint.stopped_without_checkpoint(run_path)
-        if lost:
-            return {**task, "resume": None}, False, lost
-    empty = checkpoint.recorded_nothing(run_path)
-    if empty:
-        stored = task if multirun else _parse_stored(_stored_config(run_path, task["resume"]), task["resume"])
-    else:
-        _status, stored_yaml = checkpoint.inspect_run(run_path, task["resume"])
-        stored = _parse_stored(stored_yaml, task["resume"])
-    check_stored_targets(stored, task, task["resume"])  # before anything of it is built
-    merged = checkpoint.resume_config(stored, task, overrides)
-    if empty:  # started again from its stored config: it would read the file its init_from names
-        check_stored_paths(stored, overrides, task["resume"])
-        validate(merged)
-    else:  # continued: the weights are the checkpoint's; the stored init_from is a record, never opened
-        validate({**merged, "init_from": None})
-    if not empty:
-        checkpoint.check_owner(checkpoint.load(run_path), run_path, task["resume"])  # readable, of this run
-    return merged, not empty, empty
+    plan: Plan | None = None  # a single run's plan, made by the callback, taken by its job
+    jobs: int = 0  # sweep jobs this process ran, and how many failed (the sweep's last line)
+    failed: int = 0
+    job_started: bool = False  # errors after a job started are the job's, not the command line's
+    main: bool = False  # opened by ``cli.main`` (False: a launcher's worker process, or code calling the job)
 
 
-def _parse_stored(yaml_text: str, resume_value) -> dict:
-    """A stored config, parsed with the run-file reader's bounds (size, aliases expanded)."""
-    from higbench.runfile.reader import UnreadableRunFile, parse_config
+_INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higbench_invocation")
 
+
+@contextlib.contextmanager
+def new_invocation():
+    token = _INVOCATION.set(Invocation(main=True))
     try:
-        return parse_config(yaml_text)
-    except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"its stored config is refused: {exc}") from None
+        yield _INVOCATION.get()
+    finally:
+        _INVOCATION.reset(token)
 
 
-def _stored_config(run_file: Path, resume_value) -> str:
-    """Config YAML of a run: from its run file, else (a file killed at creation) Hydra's copy."""
-    from higbench.runfile.reader import UnreadableRunFile, read_head
-
-    with contextlib.suppress(UnreadableRunFile):
-        stored = read_head(run_file).config_yaml
-        if stored:
-            return stored
-    saved = run_file.parent / ".hydra" / "config.yaml"
-    if saved.is_file() and not saved.is_symlink():
-        return saved.read_text()
-    raise ConfigError("resume", resume_value, f"{run_file} recorded nothing and its config is unknown (no .hydra/config.yaml)")
+def invocation() -> Invocation:
+    """This command line's shared state (a fresh one where no command line opened it)."""
+    current = _INVOCATION.get(None)
+    if current is None:
+        current = Invocation()
+        _INVOCATION.set(current)
+    return current
 
 
-# -- the callback ----------------------------------------------------------------------------
-
-_PLANNED: list[RunPlan] = []  # a single run's plan, made by the callback, taken by the job
-_VALIDATED: set[frozenset[str]] = set()  # override sets of sweep jobs the callback validated
-
-
-def take_plan(cfg: DictConfig, output_dir: Path, overrides: list[str], *, multirun: bool) -> RunPlan:
-    """The job's plan: the callback's (a single run), else made now (sweep jobs, no callback)."""
-    if _PLANNED and not multirun:
-        return _PLANNED.pop()
+def take_plan(cfg: DictConfig, output_dir: Path, overrides: list[str], *, multirun: bool) -> Plan:
+    """The job's plan: the callback's (a single run), else made now (sweep jobs)."""
+    current = invocation()
+    planned, current.plan = current.plan, None
+    if planned is not None and not multirun:
+        return planned
     task = to_plain(cfg)
-    if not task.get("resume") and frozenset(overrides) not in _VALIDATED:
+    if not task.get("resume"):
         validate(task)
     try:
-        return plan_run(task, output_dir, overrides, multirun=multirun)
+        return make_plan(task, output_dir, overrides, multirun=multirun)
     except ConfigError as exc:
         run_path = Path(output_dir) / RUN_FILE
         if multirun and task.get("resume") and run_path.exists():  # this job's run cannot continue
-            return RunPlan(task, run_path, kept=str(exc).split(": ", 1)[-1])
+            return Plan(MappingProxyType(task), run_path, "keep", str(exc).split(": ", 1)[-1])
         raise
 
 
 def _checked_task(config: DictConfig) -> dict:
     """The task part of a composed config (with its hydra node), validated (a resumed run's
-    config is validated once merged with the stored one, in ``resume_plan``)."""
+    config is validated once merged with the stored one, in ``plan.make_plan``)."""
     with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
         HydraConfig.instance().set_config(config)
     check_hydra_references(config)
@@ -410,11 +241,12 @@ def _checked_task(config: DictConfig) -> dict:
     return task
 
 
-def check_run(config: DictConfig) -> RunPlan:
-    """Everything a single run needs, before Hydra makes its directory (ConfigError otherwise).
+def check_run(config: DictConfig) -> Plan:
+    """The plan of a single run, before Hydra makes its directory (ConfigError otherwise).
 
     For ``resume=<run>`` Hydra's run directory becomes the run's own directory (unless
-    ``hydra.run.dir`` is given).
+    ``hydra.run.dir`` is given). The checks that need the network (``init_from`` weights
+    that fit it, the memory guard) run in the job, before its run file exists.
     """
     from higbench.runner.progress import announce, start_text
 
@@ -427,20 +259,20 @@ def check_run(config: DictConfig) -> RunPlan:
         with read_write(config.hydra), open_dict(config.hydra):
             config.hydra.run.dir = str(checkpoint.run_file_of(task["resume"], None).parent)
     output_dir = Path(os.path.abspath(str(config.hydra.run.dir)))  # as Hydra's runtime.output_dir
-    plan = plan_run(task, output_dir, list(config.hydra.overrides.task), multirun=False)
-    # on a terminal, a line at once: torch and the pre-flight take seconds
+    plan = make_plan(task, output_dir, list(config.hydra.overrides.task), multirun=False)
+    # on a terminal, a line at once: torch, the build and the checks take seconds
     announce(task.get("progress", True), start_text(plan.start_config()) + " - checking", transient=True)
-    from higbench.runner.train import preflight  # imports torch: only once the cheap checks pass
-
-    task = {**plan.task, "init_from": None} if plan.resume else plan.task  # weights: the checkpoint's
-    preflight(OmegaConf.create(task), resume_from=plan.run_path if plan.resume else None)
     return plan
 
 
-def check_sweep(config: DictConfig) -> None:
-    """Every job of a multirun (see ``sweep_jobs``), before Hydra makes the sweep directory."""
+def check_sweep(config: DictConfig) -> int | None:
+    """Every job of a multirun (see ``sweep_jobs``), before Hydra makes the sweep directory.
+
+    A bad job refuses the whole sweep before any job runs. Returns how many jobs the sweeper
+    launches together (``launched_together``), where known.
+    """
     from higbench.runner.output_location import check_output_dir
-    from higbench.runner.train import preflight
+    from higbench.runner.train import check_build
 
     loader = GlobalHydra.instance().config_loader()
     tasks = []
@@ -450,21 +282,19 @@ def check_sweep(config: DictConfig) -> None:
         except (HydraException, OmegaConfBaseException) as exc:
             raise composition_error(exc, job) from None
         tasks.append(_checked_task(job_config))
-        _VALIDATED.add(frozenset(job_config.hydra.overrides.task))
     together = launched_together(config, len(tasks))
     if together is None:  # not known here: the launcher's workers are the bound (``cli.parallel_jobs``)
         os.environ.pop("HIGBENCH_SWEEP_JOBS", None)
-    else:
-        os.environ["HIGBENCH_SWEEP_JOBS"] = str(together)  # the jobs (and joblib's workers, spawned after) read it
+    else:  # an environment variable: joblib's workers, spawned after this, are other processes
+        os.environ["HIGBENCH_SWEEP_JOBS"] = str(together)
     sweep_dir = Path(str(config.hydra.sweep.dir))
     check_output_dir(sweep_dir, "hydra.sweep.dir")
     if (sweep_dir / "multirun.yaml").is_symlink():
         raise ConfigError(
             "hydra.sweep.dir", str(sweep_dir), "its multirun.yaml is a symbolic link; higbench never writes through links"
         )
-    _remember_multirun_yaml(sweep_dir)
     if any(task.get("resume") for task in tasks):
-        return  # which jobs resume is known only in their directories: checked in-job
+        return together  # which jobs resume is known only in their directories: checked in-job
     seen = set()
     for task in tasks:  # the network-sized checks once per distinct network and batch
         sizing = {k: task.get(k) for k in SIZING_KEYS}
@@ -472,7 +302,8 @@ def check_sweep(config: DictConfig) -> None:
         key = OmegaConf.to_yaml(sizing)
         if key not in seen:
             seen.add(key)
-            preflight(OmegaConf.create(task))
+            check_build(OmegaConf.create(task), load_initial_weights(task))
+    return together
 
 
 def launched_together(config: DictConfig, listed: int) -> int | None:
@@ -516,14 +347,29 @@ def _checked(check, config: DictConfig):
 class Preflight(Callback):
     """Hydra calls these after composing and before creating any directory (conf/config.yaml)."""
 
+    def __init__(self) -> None:
+        self._multirun_yaml: tuple[Path, bytes] | None = None  # a sweep run again: its first multirun.yaml
+
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
-        _PLANNED[:] = [_checked(check_run, config)]
+        invocation().plan = _checked(check_run, config)
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
         _checked(check_sweep, config)
+        existing = Path(str(config.hydra.sweep.dir)) / "multirun.yaml"
+        self._multirun_yaml = (existing, existing.read_bytes()) if existing.is_file() else None
 
+    # Hydra's wart: a sweep run again into its directory overwrites the sweep's multirun.yaml
+    # (tests/sweeps/test_sweep_launchers.py, the sweep completed with resume=true).
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
-        _restore_multirun_yaml()
+        """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-rerun-<time>.yaml."""
+        if self._multirun_yaml is None:
+            return
+        path, original = self._multirun_yaml
+        with contextlib.suppress(OSError):
+            if path.is_file() and path.read_bytes() != original:
+                os.replace(path, path.with_name(f"multirun-rerun-{time.strftime('%Y%m%d-%H%M%S')}.yaml"))
+            if not path.exists():
+                path.write_bytes(original)
 
 
 def sweep_configs(overrides: list[str], part: str = "job") -> list[tuple[list[str], str]]:
@@ -561,25 +407,3 @@ def precheck(overrides: list[str]) -> DictConfig:
             raise composition_error(exc, list(overrides)) from None
         check_run(config)
     return config
-
-
-_MULTIRUN_YAML: tuple[Path, bytes] | None = None
-
-
-def _remember_multirun_yaml(sweep_dir: Path) -> None:
-    """A sweep run again into its directory: keep the sweep's own multirun.yaml."""
-    global _MULTIRUN_YAML
-    existing = sweep_dir / "multirun.yaml"
-    _MULTIRUN_YAML = (existing, existing.read_bytes()) if existing.is_file() else None
-
-
-def _restore_multirun_yaml() -> None:
-    """Put the sweep's first multirun.yaml back; Hydra's new one goes to multirun-rerun-<time>.yaml."""
-    if _MULTIRUN_YAML is None:
-        return
-    path, original = _MULTIRUN_YAML
-    with contextlib.suppress(OSError):
-        if path.is_file() and path.read_bytes() != original:
-            os.replace(path, path.with_name(f"multirun-rerun-{time.strftime('%Y%m%d-%H%M%S')}.yaml"))
-        if not path.exists():
-            path.write_bytes(original)

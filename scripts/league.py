@@ -38,7 +38,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from higbench.jobs import Job, launch, resolve, run_index  # noqa: E402
+from higbench.jobs import Job, resolve, run_index, run_missing  # noqa: E402
 from higbench.results import league  # noqa: E402
 
 EVALUATIONS = 25  # per run: the time-to-target resolution is budget / 25
@@ -123,13 +123,12 @@ def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds,
 
 
 def run_jobs(jobs: list[Job], root: Path, n_jobs: int) -> None:
-    """Launch the jobs not done under ``root`` (reusing every done one), then resolve them again."""
-    resolve(jobs, run_index(root))
-    todo = [j for j in jobs if not j.done]
-    print(f"[league] {len(jobs) - len(todo)} of {len(jobs)} run(s) already done under {root}", file=sys.stderr)
-    if todo:
-        launch(todo, root, n_jobs=n_jobs, launcher="basic" if n_jobs == 1 else "joblib")
-        resolve(jobs, run_index(root))
+    """Launch the jobs not done under ``root`` (reusing every done one: ``jobs.run_missing``)."""
+    run_missing(jobs, root, n_jobs=n_jobs, launcher="basic" if n_jobs == 1 else "joblib", log=_log)
+
+
+def _log(text: str) -> None:
+    print(text.replace("[jobs]", "[league]", 1), file=sys.stderr)
 
 
 def calibration() -> dict:

@@ -54,7 +54,7 @@ def main(argv=None) -> None:
         probe_runs.parser("tau and the inversion's precision (see docstring).", "precision"), "probe_precision.py", argv
     )
     if not args.report_only:
-        probe_runs.launch(jobs(), args.root, args.jobs)
+        probe_runs.launch([probe_runs.as_job([*j, *args.set], "precision") for j in jobs()], args.root, args.jobs)
     runs, curves = probe_runs.runs_under(args.root)
     table = summarise(runs, curves)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -1,12 +1,11 @@
-"""What the probe scripts that train through the CLI share: their command-line options, one
-job-list multirun of their runs, and the runs read back (``scripts/probe_poisson_data.py``,
-``scripts/probe_precision.py``)."""
+"""What the probe scripts that train through the CLI share: their command-line options, their
+runs launched through the one launcher and reuse rule (``higbench.jobs.run_missing``: a run
+already under ``--root`` with the same identity is reused, a stopped one resumed), and the runs
+read back (``scripts/probe_poisson_data.py``, ``scripts/probe_precision.py``)."""
 
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -14,6 +13,9 @@ from pathlib import Path
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from higbench.jobs import Job, parse_overrides, run_missing  # noqa: E402
 
 
 def parser(description: str, name: str) -> argparse.ArgumentParser:
@@ -35,23 +37,22 @@ def parse(p: argparse.ArgumentParser, script: str, argv=None) -> argparse.Namesp
     return args
 
 
-def launch(jobs: list[list[str]], sweep_dir: Path, n_jobs: int, extra: list[str] = ()) -> None:
-    """One multirun of ``jobs``, each with the ``extra`` overrides, through the job-list sweeper
-    (never into an existing folder)."""
-    if sweep_dir.exists():
-        raise SystemExit(f"{sweep_dir} exists: its runs are kept; use --report-only or another --root")
-    sweep_dir.parent.mkdir(parents=True, exist_ok=True)
-    jobs_file = sweep_dir.with_suffix(".jobs.json")
-    jobs_file.write_text(json.dumps([[*job, *extra] for job in jobs], indent=1))
-    from higbench.jobs import multirun_command  # the figures' job-list multirun, one thread per run
+def as_job(overrides: list[str], name: str, parent: Job | None = None) -> Job:
+    """A probe run as a ``higbench.jobs.Job`` (``parent``: it starts from that run's final weights)."""
+    values = parse_overrides(overrides)
+    return Job("probe", f"{name}: {' '.join(overrides)}", values, int(values.get("seed", 0)), parent=parent)
 
-    cmd = multirun_command(jobs_file, sweep_dir, ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={n_jobs}"])
-    print(f"{time.strftime('%H:%M:%S')} {len(jobs)} runs -> {sweep_dir}", file=sys.stderr, flush=True)
-    subprocess.run(cmd, cwd=ROOT, check=True)
+
+def launch(jobs: list[Job], root: Path, n_jobs: int) -> None:
+    """Run the jobs not done under ``root`` (``jobs.run_missing``); exit with the ones that still are not."""
+    print(f"{time.strftime('%H:%M:%S')} {len(jobs)} runs under {root}", file=sys.stderr, flush=True)
+    missing = run_missing(jobs, root, n_jobs=n_jobs, log=lambda text: print(text, file=sys.stderr, flush=True))
+    if missing:
+        raise SystemExit(f"{len(missing)} run(s) not done under {root}: {', '.join(j.sweep for j in missing)}")
 
 
 def runs_under(root: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The index of the run files under ``root`` and their curves."""
+    """The index of the run files under ``root`` (the launcher's figures-runs/ included) and their curves."""
     from higbench.results.index import load_runs
 
-    return load_runs(root, curves=True)
+    return load_runs(root, curves=True, figure_runs=True)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import jacobian_power
 from higbench.optim.sip import newton_step_in_y
 
@@ -84,19 +85,15 @@ def measure(method: str, alpha: float) -> dict[str, float]:
 
 
 def table() -> str:
-    lines = [
-        "| method | alpha | dy2 / r2 (first step) | dx2 / (-dL/dx2) "
-        f"| abs(y2 - y2*) after {STEPS} steps | max abs(y(alpha) - y(1)) |",
-        "| --- | --- | --- | --- | --- | --- |",
-    ]
+    header = ["method", "alpha", "dy2 / r2 (first step)", "dx2 / (-dL/dx2)", f"abs(y2 - y2*) after {STEPS} steps",
+              "max abs(y(alpha) - y(1))"]  # fmt: skip
+    rows = []
     for method in METHODS:
         for alpha in ALPHAS:
             m = measure(method, alpha)
-            lines.append(
-                f"| {method.upper()} | {alpha:g} | {m['dy2_per_r2']:.4g} | {m['dx2_per_grad']:.4g} | "
-                f"{m['final_r2']:.3g} | {m['deviation']:.3g} |"
-            )
-    return "\n".join(lines)
+            rows.append([method.upper(), f"{alpha:g}", f"{m['dy2_per_r2']:.4g}", f"{m['dx2_per_grad']:.4g}",
+                         f"{m['final_r2']:.3g}", f"{m['deviation']:.3g}"])  # fmt: skip
+    return "\n".join(md_table(header, rows))
 
 
 PAGE = """# Scale invariance on the chapter's 2-D toy

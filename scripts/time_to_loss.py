@@ -1,11 +1,14 @@
-"""Training-clock seconds to reach test losses 1e-3 .. 1e-7 (the number optimizers are compared by).
+"""Training-clock seconds to reach each of the problem's test-loss targets (the number optimizers are compared by).
 
 Runs ``higbench problem=P optimizer=O`` at the paper's settings (the pair's defaults in
 conf/problem_optimizer/) for a training-clock budget, one run after another by default
-(``--jobs 2``: two at once, each on one thread, for a 2-core machine), then reads each run
-file's curves and reports, per threshold, the training clock (``wall_time``: evaluations excluded, as in the paper) of the first
-evaluation whose test loss is at or below it. The resolution is the evaluation interval
-(``--eval-every``, seconds of training clock).
+(``--jobs 2``: two at once, each on one thread, for a 2-core machine), through
+``higbench.jobs.run_missing`` (a run already under ``--out`` with the same identity is reused),
+then reads each run file's curves and reports, per target of its problem (``problem.targets``,
+``higbench.results.targets``, and each decade below them that one of the problem's runs
+reached), the training clock (``wall_time``: evaluations excluded, as in
+the paper) of the first evaluation whose test loss is at or below it. The resolution is the
+evaluation interval (``--eval-every``, seconds of training clock).
 
     python scripts/time_to_loss.py                         # 900 s per run (make bench-time-to-loss)
     python scripts/time_to_loss.py --budget 120 --runs oscillator:hig oscillator:gn:seed=7
@@ -20,26 +23,36 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-THRESHOLDS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+sys.path.insert(0, str(ROOT))
+
+from higbench.display import fmt, md_table  # noqa: E402
+from higbench.results.targets import for_problem, time_to  # noqa: E402
+
 # GN at the paper's settings diverges for most seeds; seed 7 is its stable one (figure 2b's seed search).
 # Ordered so that two jobs finish together: L-BFGS diverges within seconds at these settings.
 DEFAULT_RUNS = ("oscillator:lbfgs", "oscillator:hig", "oscillator:adam", "oscillator:gn:seed=7", "oscillator:lm")
 
 
-def time_to(curves, threshold: float) -> float | None:
-    """Training clock of the first evaluation with test loss <= threshold (None: not reached)."""
-    hit = curves[curves["test_loss"] <= threshold]
-    return None if hit.empty else float(hit["wall_time"].iloc[0])
+def levels(targets: tuple[float, ...], lowest: float | None = None) -> list[float]:
+    """The problem's targets, then each decade below the lowest of them down to ``lowest`` (the
+    lowest loss some run of the problem reached): a long run goes further than the levels the
+    problem is judged at, and the table follows it there."""
+    out = list(targets)
+    if targets and lowest is not None and 0 < lowest < min(targets):
+        k = math.ceil(math.log10(min(targets))) - 1
+        while 10.0**k >= lowest * (1 - 1e-12):
+            out.append(10.0**k)
+            k -= 1
+    return out
 
 
-def summarise(run_file: Path) -> dict:
+def summarise(run_file: Path, lowest: float | None = None) -> dict:
+    """One run's row: its config, status and the training clock at each ``levels`` (None: not reached)."""
     from higbench.runfile.reader import load_run
 
     meta, curves = load_run(run_file)
@@ -59,9 +72,14 @@ def summarise(run_file: Path) -> dict:
         "best_test_loss": float(curves["test_loss"].min()) if len(curves) else math.nan,
         "run_file": str(run_file),
     }
-    for thr in THRESHOLDS:
-        out[f"t_{thr:.0e}"] = time_to(curves, thr)
+    for target in levels(for_problem(cfg), lowest):  # the run's problem's targets (its stored config's), and below
+        seconds = time_to(curves["test_loss"], curves["wall_time"], target)
+        out[column(target)] = seconds if math.isfinite(seconds) else None
     return out
+
+
+def column(target: float) -> str:
+    return f"t_{target:.0e}"
 
 
 def parse_spec(spec: str) -> tuple[str, str, list[str]]:
@@ -73,38 +91,17 @@ def parse_spec(spec: str) -> tuple[str, str, list[str]]:
     return problem, optimizer, [kv for kv in extra.split(",") if kv]
 
 
-def launch(spec: str, budget: float, eval_every: float, out_dir: Path, extra: list[str]) -> Path:
-    problem, optimizer, own = parse_spec(spec)
-    run_dir = out_dir / "_".join([problem, optimizer, *(kv.replace("=", "") for kv in own)])
-    if run_dir.exists():
-        run_dir = out_dir / f"{problem}_{optimizer}_{time.strftime('%Y%m%d-%H%M%S')}"  # never overwrite a run
-    cmd = [
-        sys.executable,
-        "-m",
-        "higbench.cli",
-        f"problem={problem}",
-        f"optimizer={optimizer}",
-        f"budget.seconds={budget}",
-        f"eval_every={eval_every}",
-        "progress=false",
-        f"hydra.run.dir={run_dir}",
-        *extra,
-        *own,
-    ]
-    print("running:", " ".join(cmd[3:]), file=sys.stderr, flush=True)
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-    for line in proc.stdout.splitlines():
-        if line.startswith("run file: "):
-            return Path(line[len("run file: ") :].strip())
-    raise RuntimeError(f"{problem}/{optimizer} failed (exit {proc.returncode}): {proc.stderr.strip()[-500:]}")
+def jobs_of(specs: list[str], budget: float, eval_every: float, extra: list[str]) -> list:
+    """One ``higbench.jobs.Job`` per ``PROBLEM:OPTIMIZER[:KEY=VALUE,...]``."""
+    from higbench.jobs import Job, parse_overrides
 
-
-def fmt(x) -> str:
-    if x is None:
-        return "-"
-    if isinstance(x, float):
-        return f"{x:.3g}"
-    return str(x)
+    out = []
+    for spec in specs:
+        problem, optimizer, own = parse_spec(spec)
+        overrides = {"problem": problem, "optimizer": optimizer, "budget.seconds": budget, "eval_every": eval_every}
+        overrides |= parse_overrides([*extra, *own])
+        out.append(Job("time_to_loss", spec, overrides, int(overrides.get("seed", 0))))
+    return out
 
 
 def write(rows: list[dict], out_dir: Path, note: str) -> None:
@@ -112,14 +109,15 @@ def write(rows: list[dict], out_dir: Path, note: str) -> None:
 
     out_dir.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(out_dir / "time_to_loss.csv", index=False)
+    levels = sorted({float(k[2:]) for r in rows for k in r if k.startswith("t_")}, reverse=True)
     head = ["problem", "optimizer", "b", "budget (s)", "status", "updates"]
-    head += [f"to {t:.0e} (s)" for t in THRESHOLDS] + ["final loss"]
-    lines = [note, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in rows:
+    head += [f"to {t:.0e} (s)" for t in levels] + ["final loss"]
+    table = []
+    for r in rows:  # '-': a target of the run's problem not reached; '': not a target of its problem
         cells = [r["problem"], r["optimizer"], r["batch_size"], r["budget_s"], r["status"], r["updates"]]
-        cells += [r[f"t_{t:.0e}"] for t in THRESHOLDS] + [r["final_test_loss"]]
-        lines.append("| " + " | ".join(fmt(c) for c in cells) + " |")
-    (out_dir / "time_to_loss.md").write_text("\n".join(lines) + "\n")
+        cells += [r[column(t)] if column(t) in r else "" for t in levels] + [r["final_test_loss"]]
+        table.append(map(fmt, cells))
+    (out_dir / "time_to_loss.md").write_text("\n".join([note, "", *md_table(head, table)]) + "\n")
 
 
 def plot(files: list[Path], path: Path) -> None:
@@ -140,7 +138,7 @@ def plot(files: list[Path], path: Path) -> None:
         label += f" ({row['status']})" if row["status"] != "completed" else ""
         ax.plot(curves["wall_time"], curves["test_loss"], color=f"C{i}", label=label)
         ax.plot(curves["wall_time"], curves["train_loss"], color=f"C{i}", ls="--", lw=0.8)
-    for t in THRESHOLDS:
+    for t in sorted({t for f in files for t in for_problem(load_run(f)[0]["config"])}):
         ax.axhline(t, color="grey", lw=0.4)
     ax.set_xlim(left=1.0)  # the first evaluations (< 1 s) say nothing on a log axis
     ax.set(xscale="log", yscale="log", xlabel="training clock (s)", ylabel="loss (solid: test, dashed: training batch)")
@@ -152,7 +150,7 @@ def plot(files: list[Path], path: Path) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description="Training-clock seconds to reach test losses 1e-3..1e-7 (see docstring).")
+    parser = argparse.ArgumentParser(description="Seconds to reach the problems' test-loss targets (see docstring).")
     parser.add_argument("--budget", type=float, default=900.0, help="training-clock seconds per run (default 900: 15 minutes)")
     parser.add_argument("--eval-every", type=float, default=5.0, help="seconds of training clock between evaluations")
     parser.add_argument("--runs", nargs="+", default=list(DEFAULT_RUNS), metavar="PROBLEM:OPTIMIZER[:KEY=VALUE,...]")
@@ -172,14 +170,22 @@ def main(argv=None) -> None:
                 parse_spec(spec)
             except ValueError as err:
                 parser.error(str(err))
-        extra = [*args.set, *(["threads=1"] if args.jobs > 1 else [])]
-        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:  # each job is its own process
-            files = list(pool.map(lambda spec: launch(spec, args.budget, args.eval_every, args.out, extra), args.runs))
+        from higbench.jobs import run_missing
+
+        # one run at a time: each takes the machine's threads (threads is cosmetic: not part of a run's identity)
+        extra = [*(["threads=auto"] if args.jobs == 1 else []), *args.set]
+        jobs = jobs_of(args.runs, args.budget, args.eval_every, extra)
+        for job in run_missing(jobs, args.out, n_jobs=args.jobs, launcher="basic" if args.jobs == 1 else "joblib"):
+            print(f"{job.sweep}: not done ({job.status}); left out of the table", file=sys.stderr)
+        files = [job.path for job in jobs if job.path is not None]
+    first = [summarise(f) for f in files]
+    lowest = {}  # per problem: the lowest loss any of its runs reached (how far below its targets the table goes)
+    for row in first:
+        lowest[row["problem"]] = min(lowest.get(row["problem"], math.inf), row["best_test_loss"])
     rows = []
-    for f in files:
-        row = summarise(f)
-        rows.append(row)
-        print(json.dumps(row), flush=True)
+    for f, row in zip(files, first):
+        rows.append(summarise(f, lowest[row["problem"]]))
+        print(json.dumps(rows[-1]), flush=True)
     load = os.getloadavg()[0]
     jobs = f"{args.jobs} runs at once, 1 thread each" if args.jobs > 1 else "one run at a time"
     if args.from_runs is not None:

@@ -83,11 +83,12 @@ def train_here(cfg, path, **kwargs):
     """``train`` in this process, restoring torch's thread count (a run sets its own)."""
     import torch
 
+    from higbench.runner.plan import Plan
     from higbench.runner.train import train
 
     threads = torch.get_num_threads()
     try:
-        return train(cfg, path, **kwargs)
+        return train(Plan.for_run(cfg, path, **kwargs))
     finally:
         torch.set_num_threads(threads)
 

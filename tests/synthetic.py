@@ -9,6 +9,7 @@ import numpy as np
 import yaml
 
 from higbench.runfile.writer import RunFileWriter
+from higbench.runner.plan import Plan
 
 
 def write_run(
@@ -88,7 +89,7 @@ def short_run(tmp_path: Path, optimizer: str, *overrides: str, updates: int = 9,
         )  # fmt: skip
     threads = torch.get_num_threads()
     try:
-        train_mod.train(cfg, tmp_path / "run.h5")
+        train_mod.train(Plan.for_run(cfg, tmp_path / "run.h5"))
     finally:
         torch.set_num_threads(threads)
     return tmp_path / "run.h5"

@@ -196,8 +196,9 @@ def _fake_train(status: str, fail_for: str | None = None):
     from higbench.runfile.writer import DiskFull
     from higbench.runner.train import RunSummary
 
-    def train(cfg, run_path, overrides=None, *, resume=False):
-        if cfg.optimizer.name == fail_for:
+    def train(plan):
+        run_path = plan.run_path
+        if plan.config["optimizer"]["name"] == fail_for:
             raise DiskFull(f"no space left on the device writing {run_path}")
         return RunSummary(status, 1, 0.1, 0.5, run_path, "SIGINT" if status == "interrupted" else "")
 

@@ -1,6 +1,7 @@
-"""The import contracts of pyproject.toml ([tool.importlinter]: the layers from errors and
-runfile up to cli, and no cycles between sibling modules) hold. `make lint` runs the same
-check; this test makes CI run it too."""
+"""The import contracts of pyproject.toml ([tool.importlinter]: the design's layers from
+errors up to cli, the run file knowing no science, reading runs never training, and no
+cycles between sibling modules) hold. `make lint` runs the same check; this test makes CI
+run it too."""
 
 from pathlib import Path
 

@@ -3,7 +3,7 @@
 For each problem it starts the same run twice at once, side by side on the same machine:
 ``device=cuda`` and ``device=cpu`` (each with its own threads), for the same training-clock
 budget, then reads both run files and prints the training clock at which each reached each
-decade of the test loss, and its updates and final loss. One row per (problem, device):
+of the problem's test-loss targets (``problem.targets``), and its updates and final loss. One row per (problem, device):
 
     python -m higbench.bench.devices --problems oscillator dipole poisson --seconds 30 --out outputs/bench/devices
 
@@ -24,11 +24,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from higbench.results.index import DEFAULT_THRESHOLDS, read_run_summary, threshold_column
+from higbench.results.index import TIME_TO_PREFIX, read_run_summary
 from higbench.runfile.reader import RUN_FILE
 
-# Every decade a problem's test loss passes through (Poisson's starts near 1e3, the oscillator's ends near 1e-7).
-THRESHOLDS = tuple(sorted({1e3, 1e2, 1e1, 1e0, *DEFAULT_THRESHOLDS, 1e-7}, reverse=True))
 DEVICES = ("cuda", "cpu")
 # The test loss is evaluated on a schedule of training-clock seconds (eval_every, 1 s or more):
 # two runs that reach a loss at the same scheduled evaluation differ by the clock's jitter (ms).
@@ -50,7 +48,10 @@ def thread_share(threads: int) -> dict:
 
 
 def run_side_by_side(problem: str, optimizer: str, seconds: float, out: Path, threads: dict, extra=()) -> dict[str, Path]:
-    """Both devices' runs of one problem at once; their run files by device."""
+    """Both devices' runs of one problem at once; their run files by device. Not through
+    ``higbench.jobs.launch``: the measurement is two processes started together, each with its
+    own thread share (an environment per process), and always run anew (no reuse: a run from
+    another moment of the machine would not be side by side)."""
     dirs = {d: out / f"{problem}_{optimizer}" / d for d in DEVICES}
     procs = {
         d: subprocess.Popen(run_command(problem, optimizer, d, seconds, dirs[d], extra), env=thread_share(threads[d]),
@@ -65,23 +66,25 @@ def run_side_by_side(problem: str, optimizer: str, seconds: float, out: Path, th
 
 
 def summary(problem: str, optimizer: str, device: str, path: Path) -> dict:
-    row, _ = read_run_summary(path, thresholds=THRESHOLDS)
+    row, _ = read_run_summary(path)  # time_to_<t> at the problem's targets (its stored config's)
     out = {"problem": problem, "optimizer": optimizer, "device": device, "status": row.get("status", row.get("error"))}
     for key in ("steps", "final_test_loss", "best_test_loss", "wall_time", "mean_update_s"):
         out[key] = row.get(key)
-    out.update({threshold_column(t): row.get(threshold_column(t)) for t in THRESHOLDS})
+    out.update({k: v for k, v in row.items() if k.startswith(TIME_TO_PREFIX)})
     return out
 
 
 def verdicts(rows: list[dict]) -> list[str]:
-    """Per problem: every decade either device reached, and whether cuda got there no later."""
+    """Per problem: every target (the rows' ``time_to_<t>`` columns) either device reached, and
+    whether cuda got there no later."""
     lines = []
     for problem in dict.fromkeys(r["problem"] for r in rows):
         by = {r["device"]: r for r in rows if r["problem"] == problem}
         if set(by) != set(DEVICES):
             continue
-        for t in THRESHOLDS:
-            col = threshold_column(t)
+        columns = dict.fromkeys(c for r in by.values() for c in r if c.startswith(TIME_TO_PREFIX))
+        for col in sorted(columns, key=lambda c: -float(c[len(TIME_TO_PREFIX) :])):
+            t = float(col[len(TIME_TO_PREFIX) :])
             cuda, cpu = _finite(by["cuda"].get(col)), _finite(by["cpu"].get(col))
             if cuda is None and cpu is None:
                 continue

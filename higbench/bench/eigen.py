@@ -24,6 +24,7 @@ import time
 import numpy as np
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import gram_eigen
 from higbench.optim.tridiagonal import blas_threads
 
@@ -78,10 +79,10 @@ def main(argv: list[str] | None = None) -> None:
     for _ in range(args.repeats):  # round robin: every candidate once per round
         for (name, t), out in times.items():
             out.append(time_once(CANDIDATES[name], K.clone(), t))
-    head = " | ".join(f"{t} thread{'s' if t > 1 else ''} (s)" for t in args.threads)
-    print(f"n = {args.rows}, median of {args.repeats}\n\n| candidate | {head} |\n|---|" + "---|" * len(args.threads))
-    for name in CANDIDATES:
-        print(f"| {name} | " + " | ".join(f"{statistics.median(times[name, t]):.2f}" for t in args.threads) + " |")
+    head = ["candidate", *(f"{t} thread{'s' if t > 1 else ''} (s)" for t in args.threads)]
+    rows = [[name, *(f"{statistics.median(times[name, t]):.2f}" for t in args.threads)] for name in CANDIDATES]
+    print(f"n = {args.rows}, median of {args.repeats}\n")
+    print("\n".join(md_table(head, rows)))
 
 
 if __name__ == "__main__":

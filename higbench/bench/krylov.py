@@ -41,7 +41,7 @@ def derivatives(runner: Runner, batch):
     opt = runner.update.optimizer
     with torch.no_grad():
         u = closure.model(closure.net_inputs)
-    y, A = solver_jacobian(closure.physics, closure.inputs, u)
+    y, A = solver_jacobian(closure.physics, closure.inputs, u, physics_jacobian=closure.physics_jacobian)
     with torch.enable_grad():
         per_sample = closure.loss(y.requires_grad_(True))
         (grad_y,) = torch.autograd.grad(reduce_loss(per_sample, closure.reduction), y)

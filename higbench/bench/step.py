@@ -57,6 +57,7 @@ from pathlib import Path
 import torch
 
 from higbench.bench.paper import PAPER_COSTS, PROBLEM_TABLES
+from higbench.display import fmt, md_table
 from higbench.dtypes import DTYPES
 from higbench.runner.updates import synchronize
 
@@ -114,10 +115,10 @@ def compose(cfg: Config):
 def is_jacobian_power(optimizer: str) -> bool:
     from hydra.utils import get_class
 
-    from higbench.optim.hig import JacobianPower
+    from higbench.optim.contract import uses_jacobian
 
     c = compose(Config("toy", optimizer, 1))
-    return issubclass(get_class(c.optimizer._target_), JacobianPower)
+    return uses_jacobian(get_class(c.optimizer._target_))
 
 
 class Runner:
@@ -277,19 +278,11 @@ def paper_configs(naive_all: bool) -> list[list[Config]]:
     return groups
 
 
-def fmt(x, digits=3) -> str:
-    if x is None or (isinstance(x, float) and x != x):
-        return "-"
-    if isinstance(x, float):
-        return f"{x:.{digits}g}" if abs(x) < 1000 else f"{x:,.0f}"
-    return str(x)
-
-
-def markdown_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
-    lines = ["| " + " | ".join(title for _, title in columns) + " |", "|" + "---|" * len(columns)]
-    for r in rows:
-        lines.append("| " + " | ".join(fmt(r.get(key)) for key, _ in columns) + " |")
-    return "\n".join(lines)
+def dict_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
+    """``rows`` (dicts) as a Markdown table of ``columns`` ((key, title) pairs), numbers by ``fmt``."""
+    return "\n".join(
+        md_table([title for _, title in columns], [[fmt(r.get(key), grouped=True) for key, _ in columns] for r in rows])
+    )
 
 
 def targets(rows: list[dict]) -> list[dict]:
@@ -414,7 +407,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
     for problem, table in PROBLEM_TABLES.items():
         sub = [r for r in rows if r["problem"] == problem]
         if sub:
-            parts += [f"## Table {table}: {problem}", "", markdown_table(sub, columns), ""]
+            parts += [f"## Table {table}: {problem}", "", dict_table(sub, columns), ""]
     speedups = []
     for r in rows:
         if r["jacobian"] == "naive":
@@ -440,7 +433,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         parts += [
             "## Naive path (torch.func J + SVD) against the structured path",
             "",
-            markdown_table(
+            dict_table(
                 speedups,
                 [
                     ("problem", "problem"),
@@ -459,7 +452,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         parts += [
             "## Targets",
             "",
-            markdown_table(
+            dict_table(
                 goal,
                 [
                     ("target", "figure"),

@@ -15,6 +15,7 @@ import time
 
 import torch
 
+from higbench.display import md_table
 from higbench.optim.inversion import gram_eigen
 
 
@@ -37,10 +38,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rows", type=int, nargs="+", default=[256, 512, 1024, 1536, 2048, 3072, 4096])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
-    print("| Gram rows | 1 thread (s) | 2 threads (s) | 2 / 1 |\n| --- | --- | --- | --- |")
-    for n in args.rows:
+    head = ["Gram rows", "1 thread (s)", "2 threads (s)", "2 / 1"]
+    print("\n".join(md_table(head, [])))
+    for n in args.rows:  # each row as soon as it is measured
         one, two = time_eigen(n, 1, args.repeats), time_eigen(n, 2, args.repeats)
-        print(f"| {n} | {one:.4f} | {two:.4f} | {two / one:.2f} |", flush=True)
+        print(md_table(head, [[n, f"{one:.4f}", f"{two:.4f}", f"{two / one:.2f}"]])[-1], flush=True)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ from higbench.claims.reference import UPDATE_SECONDS
 from higbench.claims.rules import (
     CLAIMS,
     DIPOLE_HIG_RUN,
-    OPTIMIZER_NAMES,
     OSC_ADAM_RUN,
     OSC_HIG_RUN,
     PAPER,
@@ -44,15 +43,14 @@ from higbench.claims.rules import (
     last_half_trend,
     loss_at,
     median,
-    num,
     oscillation,
     precision_probe,
     probe_values,
     require,
-    sci,
     stable,
     updates_of,
 )
+from higbench.display import OPTIMIZER_NAMES, num, sci
 
 # -- toy (figure 1) -------------------------------------------------------------------------
 # Paper 2.1, appendix B.1. fig1's sweeps: "toy" (γ x Adam, GN, HIG) and "adam_tuned".

@@ -9,7 +9,6 @@ is always the rules of this revision on the measured values committed beside it.
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter
 from pathlib import Path
@@ -21,12 +20,13 @@ from higbench.claims.rules import (
     end_time,
     finish,
     loss_at,
-    md_table,
     median,
+    read_sidecars,
     rule_why,
     seed_spread,
     sidecar_seeds,
 )
+from higbench.display import fmt, md_table
 
 HEADER = """# Reproduction report
 
@@ -57,16 +57,8 @@ def _cell(text: str) -> str:
 
 
 def sidecars(out_dir: Path) -> dict[str, dict]:
-    """Every figure sidecar (<id>.json with an "id") in out_dir, unreadable ones skipped."""
-    figs = {}
-    for path in sorted(Path(out_dir).glob("*.json")):
-        try:
-            info = json.loads(path.read_text())
-        except ValueError:
-            continue
-        if isinstance(info, dict) and "id" in info:
-            figs[info["id"]] = info
-    return figs
+    """Every figure sidecar (<id>.json with an "id") in out_dir (``rules.read_sidecars``)."""
+    return read_sidecars(out_dir)
 
 
 def collect(out_dir: Path) -> list[dict]:
@@ -87,10 +79,6 @@ def collect(out_dir: Path) -> list[dict]:
             blank = {"measured": "-", "budget": "-", "verdict": "n/a", "preset": "-", "why": f"{c.figures[0]} not drawn yet"}
             out.append({"id": cid, "figures": list(c.figures), "statement": c.statement, "paper": c.paper, **blank})
     return out
-
-
-def _num(v) -> str:
-    return "-" if v is None else f"{v:.2g}"
 
 
 def reference_entry(runs_of) -> dict:
@@ -127,7 +115,7 @@ def reference_section(infos: dict[str, dict]) -> list[str]:
         "higbench's value is its test loss at the same training time (median over seeds; `-`: past the budget).\n",
         *md_table(
             ["optimizer", "training time [s]", "authors' code", "higbench"],
-            [[r["optimizer"], f"{r['t']:g}", _num(r["reference"]), _num(r["higbench"])] for r in info["loss_points"]],
+            [[r["optimizer"], f"{r['t']:g}", fmt(r["reference"], 2), fmt(r["higbench"], 2)] for r in info["loss_points"]],
         ),
         "",
         *md_table(
@@ -138,8 +126,8 @@ def reference_section(infos: dict[str, dict]) -> list[str]:
                     r["optimizer"],
                     r["batch_size"],
                     f"{r['update_s']:g}",
-                    _num(r.get("higbench_update_s")),
-                    _num(r.get("memory_gb")),
+                    fmt(r.get("higbench_update_s"), 2),
+                    fmt(r.get("memory_gb"), 2),
                 ]
                 for r in info["update_seconds"]
             ],

@@ -8,8 +8,11 @@ budgets sized by them. Runs are read duck-typed: a figure's data answers ``runs(
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import os
+import stat
 import string
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -21,23 +24,8 @@ import pandas as pd
 
 from higbench.bench.paper import PAPER_COSTS
 from higbench.claims.reference import TRACE_SECONDS
+from higbench.display import sci
 
-OPTIMIZER_NAMES = {
-    "adam": "Adam",
-    "sgd": "SGD",
-    "adagrad": "Adagrad",
-    "adadelta": "Adadelta",
-    "rmsprop": "RMSprop",
-    "gn": "GN",
-    "hig": "HIG",
-    "lbfgs": "L-BFGS",
-    "lm": "Levenberg-Marquardt",
-    "adamw": "AdamW",
-    "muon": "Muon",
-    "soap": "SOAP",
-    "shampoo": "Shampoo",
-    "sip": "SIP",
-}
 REPRODUCED, PARTLY, NOT, NA = "reproduced", "partly", "not", "n/a"
 CAUSES = {
     "budget": "too short a budget (the trend points the paper's way)",
@@ -225,32 +213,6 @@ def below(a: str, b: str) -> Callable[[dict], bool]:
 def require(*groups, what: str) -> None:
     if any(not g for g in groups):
         raise Missing(what)
-
-
-def sci(v: float) -> str:
-    """1.234e-05 -> '1.2e-5'."""
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
-        return str(v)
-    m, x = f"{v:.1e}".split("e")
-    return f"{m}e{int(x)}"
-
-
-def num(v: Any) -> str:
-    """Compact number for labels: 0.0003 -> 3e-4, 1.0 -> 1, 128 -> 128."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return str(v)
-    if isinstance(v, int) or (float(v).is_integer() and abs(v) < 1e5):
-        return str(int(v))
-    if 1e-2 <= abs(v) < 1e3:
-        return f"{v:g}"
-    m, e = f"{v:.0e}".split("e")
-    return f"{m}e{int(e)}"
-
-
-def md_table(header: list[str], rows: list) -> list[str]:
-    """The lines of a GitHub table (without the tabulate package)."""
-    lines = ["| " + " | ".join(map(str, r)) + " |" for r in [header, *rows]]
-    return [lines[0], "|" + "---|" * len(header), *lines[1:]]
 
 
 def median(values: Iterable[float]) -> float:
@@ -539,10 +501,10 @@ def seed_spread(out_dir: Path) -> dict:
     found = []
     for info in sidecars_with_runs(out_dir):
         path = Path(out_dir) / f"{info['id']}.csv"
-        if not path.is_file():
+        if not os.path.lexists(path):
             continue
         status = {r["path"]: r["status"] for r in info["runs"]}
-        table = pd.read_csv(path)
+        table = read_results_csv(path)
         if not {"panel", "series", "run", "x", "y", "y_name"} <= set(table.columns):
             continue  # a table, not a figure's plotted data
         table = table[table["y_name"] == "test_loss"]
@@ -560,15 +522,58 @@ def seed_spread(out_dir: Path) -> dict:
 
 def sidecars_with_runs(out_dir: Path) -> list[dict]:
     """The figures' data files (<id>.json) in ``out_dir`` that list runs."""
-    out = []
+    return [info for info in read_sidecars(out_dir).values() if info.get("runs")]
+
+
+# -- reading a results directory -------------------------------------------------------------
+
+
+class ResultsFileError(ValueError):
+    """A file of a results directory that cannot be what it should be (one line naming it)."""
+
+
+def read_results_text(path: Path) -> str:
+    """The text of a file of a results directory. Opened without blocking and checked on the
+    open file, so a FIFO (or a device, a directory) among the results is refused, never waited on."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise ResultsFileError(f"{path}: cannot be read ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise ResultsFileError(f"{path}: not a regular file")
+        data = f.read()
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ResultsFileError(f"{path}: not UTF-8 text") from None
+
+
+def read_results_json(path: Path) -> Any:
+    text = read_results_text(path)
+    try:
+        return json.loads(text)
+    except ValueError as exc:
+        raise ResultsFileError(f"{path}: malformed JSON ({exc})") from None
+
+
+def read_results_csv(path: Path) -> pd.DataFrame:
+    text = read_results_text(path)
+    try:
+        return pd.read_csv(io.StringIO(text))
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise ResultsFileError(f"{path}: malformed CSV ({str(exc).strip()})") from None
+
+
+def read_sidecars(out_dir: Path) -> dict[str, dict]:
+    """Every figure's data file (<id>.json with an "id") in ``out_dir``, by id; other JSON
+    there is passed over, an unreadable or malformed file refused (``ResultsFileError``)."""
+    figs = {}
     for path in sorted(Path(out_dir).glob("*.json")):
-        try:
-            info = json.loads(path.read_text())
-        except ValueError:
-            continue
-        if isinstance(info, dict) and info.get("runs"):
-            out.append(info)
-    return out
+        info = read_results_json(path)
+        if isinstance(info, dict) and "id" in info:
+            figs[info["id"]] = info
+    return figs
 
 
 def seed_gate(row: dict) -> tuple[bool, str] | None:

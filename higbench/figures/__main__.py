@@ -84,11 +84,16 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.report_only:
         from higbench.claims.report import write_report
+        from higbench.claims.rules import ResultsFileError
 
         if not Path(args.out).is_dir():
             print(f"higbench-figures: error: --out={args.out}: no such directory (nothing to report from)", file=sys.stderr)
             return 2
-        print(f"[figures] {write_report(Path(args.out), list(registry.figures()))}")
+        try:
+            print(f"[figures] {write_report(Path(args.out), list(registry.figures()))}")
+        except ResultsFileError as exc:  # a FIFO, or malformed JSON, among the results files
+            print(f"higbench-figures: error: {exc}", file=sys.stderr)
+            return 2
         return 0
     if args.list:
         for fid, f in registry.figures().items():
@@ -113,19 +118,24 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run_build(args: argparse.Namespace, launcher) -> int:
+    from higbench.claims.rules import ResultsFileError
     from higbench.figures.build import build
 
-    result = build(
-        args.ids,
-        args.preset,
-        args.runs_root,
-        args.out,
-        jobs=args.jobs,
-        launcher=launcher,
-        run=not args.no_run,
-        report=not args.no_report,
-        bench=not args.no_bench,
-    )
+    try:
+        result = build(
+            args.ids,
+            args.preset,
+            args.runs_root,
+            args.out,
+            jobs=args.jobs,
+            launcher=launcher,
+            run=not args.no_run,
+            report=not args.no_report,
+            bench=not args.no_bench,
+        )
+    except ResultsFileError as exc:  # REPORT.md's inputs: a FIFO, or malformed JSON, among them
+        print(f"higbench-figures: error: {exc}", file=sys.stderr)
+        return 2
     print(
         f"[figures] preset {args.preset}: {len(result.drawn)} drawn, {result.launched} run(s) launched, "
         f"{result.seconds:.1f} s; outputs in {args.out}/"

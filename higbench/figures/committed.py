@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +26,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from higbench.claims.rules import budget_of, finish, judge, rule_why
+from higbench.claims.rules import budget_of, finish, judge, read_results_csv, read_results_json, rule_why
 from higbench.errors import dotted_get
 from higbench.figures.data import LabelledRun
 
@@ -142,9 +143,10 @@ class CommittedFigure:
 
     @classmethod
     def load(cls, out_dir: Path, fid: str, updates: dict[str, int] | None = None) -> CommittedFigure:
-        info = json.loads((Path(out_dir) / f"{fid}.json").read_text())
+        info = read_results_json(Path(out_dir) / f"{fid}.json")
         path = Path(out_dir) / f"{fid}.csv"
-        return cls(info, pd.read_csv(path) if path.is_file() else pd.DataFrame(columns=["run"]), updates or {})
+        table = read_results_csv(path) if os.path.lexists(path) else pd.DataFrame(columns=["run"])
+        return cls(info, table, updates or {})
 
     @property
     def frame(self) -> pd.DataFrame:
@@ -223,7 +225,7 @@ def extend(out_dir: Path, claim, more, note: str) -> dict:
     added (the same function the claim's measurement calls): where the rest of its measurement
     needs what the plotted data lack."""
     datas = {f: CommittedFigure.load(out_dir, f) for f in claim.figures}
-    info = json.loads((Path(out_dir) / f"{claim.figures[0]}.json").read_text())
+    info = read_results_json(Path(out_dir) / f"{claim.figures[0]}.json")
     row = next(c for c in info["claims"] if c["id"] == claim.id)
     row = {**row, "values": {**row.get("values", {}), **more(datas)}}
     row["remeasured"] = f"values added {time.strftime('%Y-%m-%d')} from the committed plotted data: {note}"
@@ -233,7 +235,7 @@ def extend(out_dir: Path, claim, more, note: str) -> dict:
 def store(out_dir: Path, row: dict) -> Path:
     """Put a claim's row into the data file of its first figure, in place of the one there."""
     path = Path(out_dir) / f"{row['figures'][0]}.json"
-    info = json.loads(path.read_text())
+    info = read_results_json(path)
     claims = info.get("claims", [])
     info["claims"] = [row if c["id"] == row["id"] else c for c in claims]
     if row["id"] not in {c["id"] for c in claims}:

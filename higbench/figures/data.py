@@ -20,27 +20,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from higbench.claims.rules import OPTIMIZER_NAMES, md_table, num
+from higbench.display import OPTIMIZER_NAMES, fmt, md_table, num
 from higbench.figures.spec import Figure, Preset
 from higbench.jobs import Job
 from higbench.runfile.reader import load_logs, load_run, load_updates, load_weights
 
-COLORS = {
-    "adam": "tab:blue",
-    "gn": "tab:red",
-    "hig": "tab:green",
-    "sgd": "tab:gray",
-    "adagrad": "tab:purple",
-    "adadelta": "tab:brown",
-    "rmsprop": "tab:orange",
-    "lbfgs": "tab:pink",
-    "lm": "tab:olive",
-    "adamw": "tab:cyan",
-    "muon": "navy",
-    "soap": "darkgoldenrod",
-    "shampoo": "teal",
-    "sip": "crimson",
-}
 COLUMNS = ("panel", "series", "seed", "run", "x_name", "x", "y_name", "y")  # of a figure's data table
 SYMBOLS = {
     "optimizer.lr": "η",
@@ -263,5 +247,4 @@ def _match(value: Any, want: Any) -> bool:
 
 def _markdown(df: pd.DataFrame, index: bool) -> str:
     frame = df.reset_index() if index else df
-    cell = lambda v: ("-" if math.isnan(v) else f"{v:.3g}") if isinstance(v, float) else str(v)  # noqa: E731
-    return "\n".join(md_table(list(frame.columns), [map(cell, row) for row in frame.itertuples(index=False)]))
+    return "\n".join(md_table(list(frame.columns), [map(fmt, row) for row in frame.itertuples(index=False)]))

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import HE, LE
-from higbench.claims.rules import OPTIMIZER_NAMES, PAPER, float32_loss
+from higbench.claims.rules import PAPER, float32_loss
+from higbench.display import OPTIMIZER_NAMES
 from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import UPDATES_ONLY, Budget, Figure, PerPreset, Preset, Sweep, paper_grid

@@ -12,8 +12,8 @@ import numpy as np
 from higbench.claims.paper import FIG2B_OPTIMIZERS, FIG2C_BATCHES, GD_GRIDS
 from higbench.claims.reference import OSCILLATOR_CURVES
 from higbench.claims.report import reference_entry
-from higbench.claims.rules import OPTIMIZER_NAMES, sci
-from higbench.figures.data import COLORS, FigureData
+from higbench.display import COLORS, OPTIMIZER_NAMES, sci
+from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Custom, Facets, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, SeedSearch, Sweep, paper_grid
 

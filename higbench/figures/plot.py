@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from higbench.claims.rules import OPTIMIZER_NAMES
-from higbench.figures.data import COLORS, FigureData, RunData, kv
+from higbench.display import COLORS, OPTIMIZER_NAMES
+from higbench.figures.data import FigureData, RunData, kv
 
 TIME = "training time [s] (training clock, evaluations excluded)"
 FACET_TIME = "training time [s]"  # under each column of a grid: the long label overlaps its neighbours

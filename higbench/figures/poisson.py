@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import POISSON_ADAM_LR as ADAM_LR
-from higbench.claims.rules import sci
-from higbench.figures.data import COLORS, FigureData
+from higbench.display import COLORS, sci
+from higbench.figures.data import FigureData
 from higbench.figures.plot import Curves, Series, legend, new_figure
 from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import pandas as pd
 
 from higbench.bench.tables import PAPER_TIMINGS, PROBLEMS, bench_file, timing_frame
-from higbench.claims.rules import OPTIMIZER_NAMES, num
+from higbench.display import OPTIMIZER_NAMES, num
 from higbench.figures.data import FigureData
 from higbench.figures.oscillator import FIG2B, FIG2B_OPTIMIZERS
 from higbench.figures.spec import Budget, Figure, PerPreset, Preset, Sweep, paper_setting

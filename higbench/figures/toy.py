@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from higbench.claims.paper import TOY_OPTIMIZERS, TOY_TUNED_LRS
-from higbench.claims.rules import OPTIMIZER_NAMES
-from higbench.figures.data import COLORS, FigureData
+from higbench.display import COLORS, OPTIMIZER_NAMES
+from higbench.figures.data import FigureData
 from higbench.figures.plot import TIME, Curves, Custom, Series, legend
 from higbench.figures.spec import Budget, Figure, PerPreset, Sweep
 

@@ -17,21 +17,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
-# How the per-sample losses of a batch become the scalar every optimizer differentiates.
-LOSS_REDUCTIONS = ("mean", "sum")
-
-
-def reduce_loss(per_sample: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
-    """The objective: the batch mean (default) or the batch sum of the per-sample losses.
-
-    The sum scales the gradient by b (the convention of the reference's Poisson script).
-    A scalar ``per_sample`` is returned as it is.
-    """
-    if reduction not in LOSS_REDUCTIONS:
-        raise ValueError(f"loss_reduction={reduction!r}: expected one of {LOSS_REDUCTIONS}")
-    if per_sample.ndim == 0:
-        return per_sample
-    return per_sample.sum() if reduction == "sum" else per_sample.mean()
+from higbench.losses import reduce_loss  # the one reduction rule, shared with the problems
 
 
 class NonFiniteStep(ArithmeticError):
@@ -49,6 +35,9 @@ class LossClosure:
     moves (the runner sets it, so a diverging step is recorded and never applied).
     outputs_fn: y computed some other way (a problem with its own ``outputs``); the
     Jacobian-power optimizers then differentiate through it generically.
+    physics_jacobian: the problem's own solver Jacobian, ``physics_jacobian(inputs, u)`` ->
+    (y, A) or None (``Problem.physics_jacobian``: a hand-derived adjoint); None, or a None
+    answer, means autograd through ``physics``. The Jacobian-power optimizers use it.
     inverse: the problem's inverse simulator with this batch's inputs bound,
     ``inverse(y_target, u0) -> u`` (``Problem.inverse_simulator``); None where the problem has
     none. The SIP optimizer (``higbench.optim.sip``) needs it; the others ignore it.
@@ -68,6 +57,7 @@ class LossClosure:
     guard: bool = False
     outputs_fn: Callable[[], torch.Tensor] | None = None
     inverse: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | None = None
+    physics_jacobian: Callable[..., tuple[torch.Tensor, torch.Tensor] | None] | None = None
     derivative_s: float = field(default=0.0, init=False)
     calls: int = field(default=0, init=False)
     first_mean: torch.Tensor | None = field(default=None, init=False)

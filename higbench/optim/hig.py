@@ -32,6 +32,7 @@ from torch import nn
 
 from higbench.dtypes import DTYPES
 from higbench.optim.closure import LossClosure, reduce_loss
+from higbench.optim.contract import StepReport, StepReporter
 from higbench.optim.inversion import TRUNCATION_MODES, gram_coefficients, jacobian_power
 from higbench.optim.jacobians import per_sample_jacobian
 from higbench.optim.krylov import krylov_direction
@@ -49,8 +50,13 @@ SOLVERS = ("auto", "gram", "svd", "krylov")
 JACOBIANS = ("structured", "naive")
 
 
-class JacobianPower(torch.optim.Optimizer):
+class JacobianPower(torch.optim.Optimizer, StepReporter):
     """Update theta -= lr * J^<beta,kappa> g (HIG for kappa=-1/2, GN for kappa=-1).
+
+    Each step sets ``last_report`` (``higbench.optim.contract.StepReport``: phase timings,
+    whether it was finite and why not, the spectrum); ``last_timings``, ``last_finite`` and
+    ``last_reason`` read it. ``last_spectrum`` is what the last inversion saw (also one run
+    through ``direction`` alone).
 
     Args:
         params: parameters to optimise (one group).
@@ -78,6 +84,8 @@ class JacobianPower(torch.optim.Optimizer):
             torch's default thread count on a shared one (22x on a loaded 2-core machine);
             an integer; or None for torch's count as it is. Restored after each update.
     """
+
+    uses_jacobian = True  # the step contract (optim.contract): J is built; memory guard, spectrum, warm-up
 
     def __init__(
         self,
@@ -132,14 +140,12 @@ class JacobianPower(torch.optim.Optimizer):
         super().__init__(params, defaults)
         if len(self.param_groups) != 1:
             raise ValueError("JacobianPower supports a single parameter group")
-        # What the last update did, for callers that record it (the runner): phase timings
-        # (jacobian_s: all derivatives incl. K or J itself; inversion_s: eigh/SVD and the
-        # product back to parameters; apply_s), whether it was finite (a non-finite loss,
-        # Jacobian or direction, or a failed inversion, leaves the parameters untouched)
-        # and why not.
-        self.last_timings: dict[str, float] = {}
-        self.last_finite: bool = True
-        self.last_reason: str = ""
+        # What the last update did (the step contract, ``higbench.optim.contract``): phase
+        # timings (jacobian_s: all derivatives incl. K or J itself; inversion_s: eigh/SVD and
+        # the product back to parameters; apply_s), whether it was finite (a non-finite loss,
+        # Jacobian or direction, or a failed inversion, leaves the parameters untouched), why
+        # not, and the spectrum. None before the first step.
+        self.last_report: StepReport | None = None
         # The spectrum of the last inversion: sv_max, sv_min_kept, sv_dropped, singular_values;
         # on the Krylov route also step_error (estimated relative error of the direction).
         self.last_spectrum: dict = {}
@@ -149,6 +155,19 @@ class JacobianPower(torch.optim.Optimizer):
         # sets the threads (the runner), it passes None.
         self.threads = threads
         self._gram_rows: int | None = None  # b·|y| of the last update: what "auto" threads go by
+
+    @property
+    def last_timings(self) -> dict[str, float]:
+        """Seconds per phase of the last step (empty: refused, or no step yet)."""
+        return dict(self.last_report.timings) if self.last_report else {}
+
+    @property
+    def last_finite(self) -> bool:
+        return self.last_report.finite if self.last_report else True
+
+    @property
+    def last_reason(self) -> str:
+        return self.last_report.reason if self.last_report else ""
 
     # -- the pieces, so callers with their own Jacobians (the runner) can time each phase --
 
@@ -239,9 +258,13 @@ class JacobianPower(torch.optim.Optimizer):
     def _refuse(self, reason: str, inverted: bool = False) -> None:
         """Leave the parameters as they are; say why. ``inverted``: the inversion ran, so
         ``last_spectrum`` is this update's own (kept: it may say why the direction blew up)."""
-        self.last_timings, self.last_finite, self.last_reason = {}, False, reason
         if not inverted:
             self.last_spectrum = {}
+        self.last_report = StepReport.refused(reason, self.last_spectrum)
+
+    def _report(self, timings: dict[str, float]) -> None:
+        """A step taken: its phase times and the spectrum its inversion recorded."""
+        self.last_report = StepReport(timings=timings, spectrum=dict(self.last_spectrum))
 
     def _record_spectrum(self, s: torch.Tensor, keep: torch.Tensor) -> None:
         """What the last inversion saw: largest and smallest kept singular value, how many tau dropped.
@@ -280,8 +303,7 @@ class JacobianPower(torch.optim.Optimizer):
             return self._refuse("non-finite update direction", inverted=True)
         self.apply(d)
         self._sync()
-        self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
-        self.last_finite, self.last_reason = True, ""
+        self._report({"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2})
 
     # -- torch.optim-style entry points for user code --
 
@@ -308,7 +330,13 @@ class JacobianPower(torch.optim.Optimizer):
         """
         if isinstance(closure, LossClosure) and closure.outputs_fn is None:
             return self.step_structured(
-                closure.model, closure.net_inputs, closure.physics, closure.loss, closure.inputs, closure.reduction
+                closure.model,
+                closure.net_inputs,
+                closure.physics,
+                closure.loss,
+                closure.inputs,
+                closure.reduction,
+                physics_jacobian=closure.physics_jacobian,
             )
         with update_threads(self.threads, self._gram_rows):
             return self._step(closure)
@@ -346,6 +374,7 @@ class JacobianPower(torch.optim.Optimizer):
         loss: Callable[[torch.Tensor], torch.Tensor],
         inputs: torch.Tensor | None = None,
         reduction: str = "mean",
+        physics_jacobian: Callable[..., tuple[torch.Tensor, torch.Tensor] | None] | None = None,
     ) -> torch.Tensor:
         """One update for y = physics(inputs, model(net_inputs)) and per-sample loss(y).
 
@@ -356,15 +385,18 @@ class JacobianPower(torch.optim.Optimizer):
             differentiable, batched, samples independent; returns y (b, ...).
         loss: ``loss(y)`` -> per-sample losses (b,) (or a scalar); g is the gradient of
             their mean, or of their sum with ``reduction="sum"`` (``closure.reduce_loss``).
+        physics_jacobian: optional ``physics_jacobian(inputs, u)`` -> (y, A_i = dy_i/du_i) or
+            None, e.g. a problem's hand-derived adjoint (``Problem.physics_jacobian``); without
+            it (or when it answers None) the solver is differentiated by autograd.
         With ``jacobian="naive"`` J comes from torch.func through network and solver per
         sample (the reference). Returns the batch-mean loss before the update (detached),
         whatever the reduction; ``last_timings``, ``last_finite``, ``last_reason`` and
         ``last_spectrum`` say how the update went.
         """
         with update_threads(self.threads, self._gram_rows):
-            return self._step_structured(model, net_inputs, physics, loss, inputs, reduction)
+            return self._step_structured(model, net_inputs, physics, loss, inputs, reduction, physics_jacobian)
 
-    def _step_structured(self, model, net_inputs, physics, loss, inputs, reduction) -> torch.Tensor:
+    def _step_structured(self, model, net_inputs, physics, loss, inputs, reduction, physics_jacobian) -> torch.Tensor:
         t0 = time.perf_counter()
         naive = self.group["jacobian"] == "naive"
         closure = LossClosure(model, net_inputs, physics, loss, inputs, reduction)
@@ -374,7 +406,7 @@ class JacobianPower(torch.optim.Optimizer):
             if naive:
                 y = physics(u) if inputs is None else physics(inputs, u)
         if not naive:
-            y, A = solver_jacobian(physics, inputs, u)
+            y, A = solver_jacobian(physics, inputs, u, physics_jacobian=physics_jacobian)
         with torch.enable_grad():
             per_sample = loss(y.requires_grad_(True))
             (grad_y,) = torch.autograd.grad(reduce_loss(per_sample, reduction), y)

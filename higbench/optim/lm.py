@@ -91,9 +91,9 @@ class LevenbergMarquardt(JacobianPower):
         accepted = self._trials(ev, p, direction, lambda: scale * evaluate())
         if accepted is None:
             return self._refuse("non-finite update direction")
-        self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
-        self.last_finite, self.last_reason = True, ""
+        timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
         self.last_spectrum["lm_lambda"], self.last_spectrum["lm_accepted"] = self.group["lam"], accepted
+        self._report(timings)
 
     @torch.no_grad()
     def _trials(self, ev: torch.Tensor, p: torch.Tensor, direction, evaluate) -> bool | None:

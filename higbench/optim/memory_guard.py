@@ -4,10 +4,10 @@ The Jacobian-power step materialises J (rows = batch_size * |y|, columns = |thet
 inverts it, either through the Gram matrix K = J J^T (rows x rows) or the thin SVD of J.
 ``estimate_bytes`` gives the peak of that step (the dominant arrays; model, data and
 first-order optimizers are small next to it). ``check`` compares it with the memory
-available now (psutil's available memory, free CUDA memory on a GPU) or a
-configured cap (``memory_limit_mb``) and raises ``ConfigError`` with the estimate and the
-largest batch size that fits, so a run fails in a second instead of being killed by the
-OS an hour in.
+available now (psutil's available memory, or less where the process's address space is
+capped, ``ulimit -v``; free CUDA memory on a GPU) or a configured cap (``memory_limit_mb``)
+and raises ``ConfigError`` with the estimate and the largest batch size that fits, so a run
+fails in a second instead of being killed by the OS an hour in.
 
 The model is deliberately simple and errs on the large side; a faster Jacobian path
 (structured, never materialising J) can refine ``estimate_bytes`` without changing callers.
@@ -111,7 +111,24 @@ def available_bytes(device: str = "cpu") -> tuple[int, str]:
         return int(free), "free CUDA memory"
     import psutil
 
-    return int(psutil.virtual_memory().available), "available memory"
+    available = int(psutil.virtual_memory().available)
+    headroom = address_space_headroom()
+    if headroom is not None and headroom < available:
+        return headroom, "address space left under RLIMIT_AS (ulimit -v)"
+    return available, "available memory"
+
+
+def address_space_headroom() -> int | None:
+    """Bytes this process may still map under its RLIMIT_AS soft limit (``ulimit -v``), or None
+    where there is no such limit: the machine's available memory is no use to a capped process."""
+    import resource
+
+    import psutil
+
+    soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    return max(0, soft - int(psutil.Process().memory_info().vms))
 
 
 def largest_batch(

@@ -11,8 +11,9 @@ NeurIPS 2022), for network training. One update on a batch (z, x, y*):
 2. u* = P^-1(x, y0 + dy; u0): the problem's inverse simulator (``Problem.inverse_simulator``).
 3. ``inner_steps`` steps of a first-order optimizer (``inner``, Adam by default) on the proxy
    loss mean_i 1/2 |f(z_i; theta) - u*_i|^2: the network is fitted to the inverted target.
-4. ``step`` returns the problem's loss before the update (batch mean of l); ``last_metrics``
-   holds the proxy loss before the inner steps, which the runner records per update.
+4. ``step`` returns the problem's loss before the update (batch mean of l); its report
+   (``last_report.metrics``) holds the proxy loss before the inner steps, which the runner
+   records per update.
 
 The runner hands the inverse simulator over through ``LossClosure.inverse``; a problem
 without one is refused before any work (``needs_inverse_simulator``).
@@ -26,6 +27,7 @@ import time
 import torch
 
 from higbench.optim.closure import LossClosure, NonFiniteStep
+from higbench.optim.contract import StepReport, StepReporter
 from higbench.optim.split import build_optimizer
 
 DEFAULT_INNER = {"_target_": "torch.optim.Adam"}
@@ -49,7 +51,7 @@ def newton_step_in_y(loss, y: torch.Tensor, eta_y: float) -> torch.Tensor:
     return -eta_y * g / curvature
 
 
-class ScaleInvariantPhysics(torch.optim.Optimizer):
+class ScaleInvariantPhysics(torch.optim.Optimizer, StepReporter):
     """SIP training: invert a Newton step in y through ``P^-1``, fit the network to it.
 
     Args:
@@ -62,7 +64,7 @@ class ScaleInvariantPhysics(torch.optim.Optimizer):
         inner_steps: its steps per update, on the same inverted target.
     """
 
-    needs_inverse_simulator = True  # the config check refuses a problem without one
+    needs_inverse_simulator = True  # the step contract: the config check refuses a problem without one
 
     def __init__(self, params, lr: float = 1e-3, eta_y: float = 1.0, inner: dict | None = None, inner_steps: int = 1):
         params = list(params)
@@ -77,8 +79,7 @@ class ScaleInvariantPhysics(torch.optim.Optimizer):
         self.inner = build_optimizer("inner", {**spec, "lr": lr}, params)
         super().__init__(params, {})
         self.param_groups = self.inner.param_groups  # the inner optimizer's groups (its lr)
-        self.last_timings: dict[str, float] | None = None
-        self.last_metrics: dict[str, float] = {}
+        self.last_report: StepReport | None = None
         self._newton_done = 0.0  # when target() finished the Newton step (the phase times)
 
     @torch.no_grad()
@@ -116,8 +117,8 @@ class ScaleInvariantPhysics(torch.optim.Optimizer):
             if k == 0:
                 proxy_before = float(proxy)
             self.inner.step()
-        self.last_timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
-        self.last_metrics = {"proxy_loss": proxy_before}
+        timings = {"jacobian_s": t1 - t0, "inversion_s": t2 - t1, "apply_s": time.perf_counter() - t2}
+        self.last_report = StepReport(timings=timings, metrics={"proxy_loss": proxy_before})
         return loss
 
     def state_dict(self) -> dict:

@@ -52,6 +52,7 @@ def solver_jacobian(
     inputs: torch.Tensor | None,
     u: torch.Tensor,
     method: str = "batched",
+    physics_jacobian: Callable[..., tuple[torch.Tensor, torch.Tensor] | None] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Outputs y (b, m) and solver Jacobians A (b, m, |u|) of y = physics(inputs, u).
 
@@ -66,15 +67,14 @@ def solver_jacobian(
     * ``replicate``: the batch replicated m times (b*m samples) in one forward and one
       backward pass, copy k seeded with component k.
 
-    With ``batched``, a problem whose bound method ``physics`` is passed may answer directly:
-    its ``physics_jacobian(inputs, u)`` returns (y, A) (e.g. from a hand-written adjoint
-    sweep with m seeds per sample) or None to use autograd.
+    With ``batched``, ``physics_jacobian(inputs, u)`` (the problem's, ``Problem.physics_jacobian``)
+    may answer directly: (y, A) (e.g. from a hand-written adjoint sweep with m seeds per
+    sample), or None to use autograd.
     """
     if method not in SOLVER_JACOBIAN_METHODS:
         raise ValueError(f"method={method!r}: expected one of {SOLVER_JACOBIAN_METHODS}")
-    direct = getattr(getattr(physics, "__self__", None), "physics_jacobian", None)
-    if method == "batched" and direct is not None:
-        found = direct(inputs, u.detach())
+    if method == "batched" and physics_jacobian is not None:
+        found = physics_jacobian(inputs, u.detach())
         if found is not None:
             y, A = found
             return y.reshape(u.shape[0], -1).detach(), A.reshape(u.shape[0], y[0].numel(), -1)

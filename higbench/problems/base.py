@@ -1,8 +1,38 @@
-"""What a learning problem is: data, a network, physics y = P(x, u), a per-sample loss.
+"""What a learning problem is: the contract between a problem and the rest of higbench.
 
-The runner and the optimizers only use this interface, so adding a problem is one module
-(a ``Problem`` subclass with its ``Config`` schema) plus one YAML file in a ``problem``
-config group whose ``_target_`` names the class (see docs/configuration.md).
+The runner, the optimizers and the results only use this surface, so adding a problem is one
+module (a ``Problem`` subclass with its ``Config`` schema) plus one YAML file in a ``problem``
+config group whose ``_target_`` names the class (docs/recipe.md; a shipped one also registers
+its name with ``@register``, and the shared tests pick it up from ``registry()``).
+
+Required (abstract on ``Problem``; ``FixedDataProblem`` supplies the data methods from
+``_sample``):
+
+* ``make_model()``: the network, before initialisation (``build_model`` initialises it).
+* ``physics(inputs, u) -> y``: the differentiable simulator y = P(x, u), batched (b, |y|),
+  samples independent. Every optimizer differentiates through it.
+* ``loss(y, targets) -> (b,)``: one value per sample (``objective`` reduces them by
+  ``problem.loss_reduction``).
+* ``train_size()``, ``epoch(batch_size, generator)``, ``test_set()``: the data as ``Batch``es
+  (z into the network, x into the physics, targets into the loss).
+
+Optional, each with a default that means "not declared":
+
+* ``physics_jacobian(inputs, u) -> (y, A) | None``: y and the per-sample solver Jacobians
+  A_i = dy_i/du_i (b, |y|, |u|) by the problem's own means (a hand-derived adjoint sweep);
+  None (the default) lets autograd differentiate ``physics``. Only the Jacobian-power
+  optimizers ask (through ``LossClosure.physics_jacobian``).
+* ``inverse_simulator(inputs, y_target, u0) -> u``: P^-1 near ``u0``; a class that overrides
+  it has ``has_inverse_simulator()`` True, and only then may ``optimizer=sip`` run on it.
+* ``outputs(model, batch)``: y computed another way than ``physics(x, model(z))`` (the
+  Jacobian-power optimizers then differentiate through it generically).
+* ``metrics(y, batch)``, ``eval_logs(model)``, ``val_set()``: extra curves and arrays.
+
+What the problem is judged by lives in its YAML file and is read through the problem (or,
+from a recorded config, through ``targets_of`` and ``league_seconds_of``):
+
+* ``targets``: the test-loss targets of the time-to-target tables, the profile and the league;
+* ``league_seconds``: the league's training-clock budget per run.
 """
 
 from __future__ import annotations
@@ -16,7 +46,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from higbench.optim.closure import LOSS_REDUCTIONS, reduce_loss
+from higbench.losses import LOSS_REDUCTIONS, reduce_loss
 from higbench.problems.networks import INIT_SCHEMES, initialise
 from higbench.schema import value
 
@@ -110,6 +140,16 @@ class Problem(abc.ABC):
     def outputs(self, model: nn.Module, batch: Batch) -> torch.Tensor:
         return self.physics(batch.inputs, model(batch.net_inputs))
 
+    # -- optional: the solver's Jacobian by the problem's own means (GN/HIG/LM ask for it) --
+    def physics_jacobian(self, inputs: torch.Tensor, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """y (b, |y|) and A_i = dy_i/du_i (b, |y|, |u|) of ``physics(inputs, u)``, or None: use autograd.
+
+        Optional. Override it where the problem has a faster route than autograd's batched
+        reverse passes (the compiled oscillator and dipole solvers' adjoint sweeps); it may
+        answer None case by case (e.g. on a device its compiled solver cannot run on).
+        """
+        return None
+
     # -- optional: an inverse simulator (the SIP optimizer needs one) --
     def inverse_simulator(self, inputs: torch.Tensor, y_target: torch.Tensor, u0: torch.Tensor) -> torch.Tensor:
         """u with physics(inputs, u) = y_target, or as close as the problem's inverse gets: P^-1(x, y*; u0).
@@ -146,6 +186,28 @@ class Problem(abc.ABC):
     def eval_logs(self, model: nn.Module) -> dict[str, np.ndarray]:
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
         return {}
+
+    # -- what it is judged by (its YAML file's ``targets`` and ``league_seconds``) --
+    @property
+    def targets(self) -> tuple[float, ...]:
+        """Test-loss targets, largest first as written (empty: the YAML names none)."""
+        return targets_of(self.cfg)
+
+    @property
+    def league_seconds(self) -> float | None:
+        """The league's training-clock budget per run (None: the YAML names none)."""
+        return league_seconds_of(self.cfg)
+
+
+def targets_of(problem_cfg) -> tuple[float, ...]:
+    """``problem.targets`` of a problem config node (composed or recorded in a run file)."""
+    return tuple(float(t) for t in (problem_cfg.get("targets") or ()))
+
+
+def league_seconds_of(problem_cfg) -> float | None:
+    """``problem.league_seconds`` of a problem config node (None where it has none)."""
+    seconds = problem_cfg.get("league_seconds")
+    return None if seconds is None else float(seconds)
 
 
 class FixedDataProblem(Problem):

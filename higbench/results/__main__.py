@@ -20,8 +20,8 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.errors import quiet_broken_pipe
+from higbench.results import targets as problem_targets
 from higbench.results.index import (
-    DEFAULT_THRESHOLDS,
     DONE_STATUSES,
     best_runs,
     find_run_files,
@@ -34,8 +34,6 @@ from higbench.results.profile import (
     BEST_OVER,
     all_targets,
     budget_labels,
-    configured_targets,
-    default_targets,
     format_table,
     parse_targets,
     performance_profile,
@@ -121,8 +119,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--targets",
         nargs="+",
         metavar="PROBLEM=LOSS,...",
-        help="target test losses per problem for --plot/--profile (default: the problem config's problem.targets,"
-        " else decades that separate the settings)",
+        help="target test losses per problem for --plot/--profile (default: the problem config's problem.targets)",
     )
     p.add_argument(
         "--setting",
@@ -159,7 +156,7 @@ def _time_columns(df: pd.DataFrame, most: int = 3) -> list[str]:
     return sorted(sorted(reached, key=lambda c: float(c[len("time_to_") :]))[:most], key=lambda c: -float(c[len("time_to_") :]))
 
 
-def _load(args: argparse.Namespace, roots: list[Path], thresholds: tuple[float, ...], curves: bool = False):
+def _load(args: argparse.Namespace, roots: list[Path], thresholds: tuple[float, ...] | None, curves: bool = False):
     return load_runs(
         roots, curves=curves, thresholds=thresholds, pattern=args.pattern, jobs=args.jobs, figure_runs=args.figure_runs
     )
@@ -239,8 +236,8 @@ def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
-    # --targets, else the problem configs' (problem.targets), else the decades that separate the settings
-    targets = parse_targets(args.targets) if args.targets else {**default_targets(df), **configured_targets(df)}
+    # --targets, else the problem configs' (problem.targets: the runs' stored ones, else the shipped ones)
+    targets = parse_targets(args.targets) if args.targets else problem_targets.of_runs(df)
     unknown = sorted(set(targets) - set(df["problem.name"].dropna())) if len(df) else []
     if unknown and args.targets:
         print(f"note: --targets: no runs of {', '.join(unknown)} here", file=sys.stderr)
@@ -263,7 +260,7 @@ def _comparable(runs: pd.DataFrame, targets: dict[str, list[float]], args: argpa
             f"{len(done) - len(unique)} duplicate run(s) left out: same configuration and seed as another run"
             " (the newest counts once; a sweep directory inside another?)"
         )
-    why = "no --targets {}=..." if args.targets else "no finite test loss to choose targets from (give --targets {}=...)"
+    why = "no --targets {}=..." if args.targets else "its config has no problem.targets (give --targets {}=...)"
     for problem, n in unique["problem.name"].value_counts().sort_index().items():
         if problem not in targets:
             notes.append(f"{problem}: {n} run(s) in the plot but not in the table: {why.format(problem)}")
@@ -277,10 +274,10 @@ def _plots(args: argparse.Namespace, roots: list[Path], df: pd.DataFrame) -> int
     from higbench.results.plot import plot_curves, plot_profile, profile_taus
 
     targets = _targets(args, df)
-    runs, curves = _load(args, roots, all_targets(targets) or DEFAULT_THRESHOLDS, curves=True)
+    runs, curves = _load(args, roots, all_targets(targets), curves=True)
     runs = _comparable(_filter(_with_names(runs, args), args), targets, args)
     if not targets:
-        print("note: no targets: no problem here has a finite test loss (give --targets)", file=sys.stderr)
+        print("note: no targets: no problem here has problem.targets in its config (give --targets)", file=sys.stderr)
     times = time_to_target(runs, targets)
     horizons = times.drop_duplicates("problem").set_index("problem")["horizon_s"] if len(times) else {}
     print(
@@ -308,7 +305,7 @@ def _league(args: argparse.Namespace, roots: list[Path]) -> int:
     from higbench.results.league import all_spaces, format_league
 
     args.figure_runs = True  # the league's runs are launched as the figures' are (higbench.jobs.launch)
-    runs, curves = _load(args, roots, DEFAULT_THRESHOLDS, curves=True)
+    runs, curves = _load(args, roots, None, curves=True)
     runs = _filter(_with_names(runs, args), args)
     print(format_league(runs, curves, all_spaces()))
     return 0
@@ -350,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     roots = [Path(r) for r in args.roots]
-    thresholds = tuple(args.threshold) if args.threshold else DEFAULT_THRESHOLDS
+    thresholds = tuple(args.threshold) if args.threshold else None  # None: each run's problem's targets
     try:
         df = _with_names(_load(args, roots, thresholds), args)
         total = len(df)

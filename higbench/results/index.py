@@ -7,8 +7,9 @@
 ``runs`` has the flattened config (``problem.name``, ``optimizer.lr``, ``batch_size``, ...),
 ``path``, ``source``, ``status``, ``overrides``, ``steps``, ``train_time_s`` (the training
 clock at the end: evaluations excluded), ``final_test_loss``,
-``best_test_loss``, ``time_to_<threshold>`` (training clock at the first evaluation whose
-test loss is at or below the threshold), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
+``best_test_loss``, ``time_to_<target>`` (training clock at the first evaluation whose
+test loss is at or below the target: ``targets.reach_index``; by default each run's own
+problem's targets, ``targets.for_problem``), ``mean_update_s``, ``peak_rss_mb``, ``env.*``,
 ``cond_kept_median``, ``cond_kept_max``, ``sv_dropped_mean`` (GN/HIG/LM: the steps'
 conditioning, ``higbench.results.spectrum``; NaN for other runs),
 ``config_id`` (the run's identity: resolved config without ``COSMETIC_KEYS``),
@@ -38,6 +39,7 @@ import pandas as pd
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
 from higbench.problems.base import ProblemConfig
 from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLUMNS, conditioning
+from higbench.results.targets import for_problem, reach_index
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
     RunFileLocked,
@@ -50,7 +52,6 @@ from higbench.runfile.reader import (
 from higbench.schema import keys_where
 
 PROBLEM_COSMETIC_KEYS = keys_where(ProblemConfig, "identity", False)  # problem.* keys outside config_id
-DEFAULT_THRESHOLDS: tuple[float, ...] = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
 # The one status rule. A done run ended by its own rule and is a result: never run again
 # (a diverged run is a result too). Only completed runs compete in ``best_runs`` (a diverged
 # run's last finite loss is not what it reached). Anything else (running, interrupted,
@@ -105,11 +106,14 @@ def setting_config(config: dict, device: str | None = None) -> str:
     return json.dumps(_flatten(kept), sort_keys=True, default=str)
 
 
+TIME_TO_PREFIX = "time_to_"  # the time-to-target columns: TIME_TO_PREFIX + the target
+
+
 def threshold_column(threshold: float) -> str:
     """Column name of a threshold: 1e-2 -> 'time_to_1e-2', 3e-4 -> 'time_to_3e-4'."""
     mantissa, exponent = f"{threshold:e}".split("e")
     mantissa = mantissa.rstrip("0").rstrip(".")
-    return f"time_to_{mantissa}e{int(exponent)}"
+    return f"{TIME_TO_PREFIX}{mantissa}e{int(exponent)}"
 
 
 def find_run_files(root: str | Path | Iterable[str | Path], pattern: str = RUN_FILE_GLOB) -> list[Path]:
@@ -183,13 +187,26 @@ _CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  #
 _UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
-def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -> tuple[dict, dict[str, np.ndarray] | None]:
+def final_test_spread(per_sample: np.ndarray | None) -> dict[str, float]:
+    """The final evaluation's test losses sample by sample (/final/test_losses) as a median
+    and a 95th percentile: a mean carried by a few samples (the oscillator's heavy tail) is
+    then seen for what it is. NaN for runs that recorded none (interrupted, older files)."""
+    if per_sample is None or not len(per_sample):
+        return {"final_test_median": math.nan, "final_test_p95": math.nan}
+    return {"final_test_median": float(np.median(per_sample)), "final_test_p95": float(np.percentile(per_sample, 95))}
+
+
+def _summarise(
+    run: RunTables, thresholds: Sequence[float] | None, want_curves: bool
+) -> tuple[dict, dict[str, np.ndarray] | None]:
     attrs = dict(run.attrs)
     if "format_version" not in attrs or "config" not in attrs:
         raise ValueError("not a higbench run file (no format_version/config attributes)")
     row: dict = {}
     attrs.pop("config")
     config = run.config  # parsed by the reader, with bounds (an alias bomb is refused there)
+    if thresholds is None:  # the run's own problem's targets (stored, else shipped)
+        thresholds = for_problem(config if isinstance(config, dict) else attrs.get("problem", ""))
     row["config_id"] = config_id(config) if isinstance(config, dict) else None
     if isinstance(config, dict) and config.get("init_from"):
         row["_config"] = config  # config_id is set again once its parent is known (load_runs)
@@ -252,11 +269,13 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
         if "steps" not in row and steps is not None:
             row["steps"] = int(steps[-1])
         for t in thresholds:
-            hit = np.flatnonzero(test <= t)
-            row[threshold_column(t)] = float(wall[hit[0]]) if (len(hit) and wall is not None) else math.nan
+            i = reach_index(test, t)
+            row[threshold_column(t)] = float(wall[i]) if (i is not None and wall is not None) else math.nan
     else:
         for t in thresholds:
             row[threshold_column(t)] = math.nan
+
+    row.update(final_test_spread(run.tables.get("final", {}).get("test_losses")))
 
     raw = run.tables.get("updates", {})
     # Spectrum columns cut apart: they may be shorter than the timings (a file from before they
@@ -280,12 +299,13 @@ def _summarise(run: RunTables, thresholds: Sequence[float], want_curves: bool) -
 
 
 def read_run_summary(
-    path: str | Path, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, curves: bool = False
+    path: str | Path, thresholds: Sequence[float] | None = None, curves: bool = False
 ) -> tuple[dict, dict | None]:
-    """(row, curve columns or None) of one run file; never raises for an unreadable file."""
+    """(row, curve columns or None) of one run file; never raises for an unreadable file.
+    thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets)."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
-    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS}
+    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": ("test_losses",)}
     try:
         summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
         note = summary.pop("curves_note", "")
@@ -413,14 +433,14 @@ def _curves_frame(parts: list[tuple[str, dict[str, np.ndarray]]]) -> pd.DataFram
     return df
 
 
-def _read_chunk(paths: list[Path], thresholds: Sequence[float], curves: bool) -> list[tuple[dict, dict | None]]:
+def _read_chunk(paths: list[Path], thresholds: Sequence[float] | None, curves: bool) -> list[tuple[dict, dict | None]]:
     return [read_run_summary(p, thresholds, curves) for p in paths]
 
 
 def load_runs(
     root: str | Path | Iterable[str | Path],
     curves: bool = False,
-    thresholds: Sequence[float] = DEFAULT_THRESHOLDS,
+    thresholds: Sequence[float] | None = None,
     pattern: str = RUN_FILE_GLOB,
     jobs: int = 1,
     figure_runs: bool = False,
@@ -428,7 +448,8 @@ def load_runs(
     """One row per run file under ``root``; with ``curves=True`` also the long curves table.
 
     thresholds: test-loss levels for the ``time_to_<t>`` columns (training-clock seconds at
-    the first evaluation at or below ``t``; NaN if never reached).
+    the first evaluation at or below ``t``; NaN if never reached); None (default): each run's
+    own problem's targets (``targets.for_problem``), so a row has its problem's columns.
     jobs: processes reading files (reading is HDF5-bound, a few ms per file; worth it for
     thousands of files on several cores).
     figure_runs: also index the runs `make figures` made (under a ``figures-runs`` folder

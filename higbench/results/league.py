@@ -30,6 +30,8 @@ import pandas as pd
 import yaml
 from scipy import stats
 
+from higbench.results.targets import of_runs, reach_index
+
 CONFIDENCE = 0.95
 BOOTSTRAP_REPS = 2000
 TAU_MAX = 4.0  # AlgoPerf's: a setting more than 4x slower than the fastest scores nothing on that pair
@@ -215,12 +217,10 @@ def integrated_score(ratios: Sequence[float], tau_max: float = TAU_MAX) -> float
 
 def reach(curves: pd.DataFrame, target: float, loss: str = "test_loss") -> tuple[float, float]:
     """(training clock, updates) at the first evaluation of one run's ``curves`` whose ``loss`` is
-    at or below ``target``; (inf, inf) when none is."""
-    values = curves[loss].to_numpy(dtype=float)
-    hit = np.flatnonzero(values <= target)
-    if not len(hit):
+    at or below ``target`` (``targets.reach_index``, the one rule); (inf, inf) when none is."""
+    i = reach_index(curves[loss].to_numpy(dtype=float), target)
+    if i is None:
         return math.inf, math.inf
-    i = hit[0]
     return float(curves["wall_time"].iloc[i]), float(curves["step"].iloc[i])
 
 
@@ -264,13 +264,8 @@ def league_runs(runs: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds:
 
 
 def task_targets(runs: pd.DataFrame) -> dict[str, list[float]]:
-    """Each task's targets, from its runs' ``problem.targets`` (the problem config owns them)."""
-    out: dict[str, list[float]] = {}
-    for task, group in runs.groupby("task"):
-        values = group["problem.targets"].dropna() if "problem.targets" in group else []
-        if len(values):
-            out[str(task)] = [float(t) for t in values.iloc[0]]
-    return out
+    """Each task's targets: its problem config's (``targets.of_runs``: stored, else shipped)."""
+    return of_runs(runs, by="task")
 
 
 def reach_table(runs: pd.DataFrame, curves: pd.DataFrame, targets: Mapping[str, Sequence[float]]) -> pd.DataFrame:

@@ -1,6 +1,7 @@
 """Time to target and performance profiles (AlgoPerf-style) from the results index.
 
-    runs = load_runs("outputs", thresholds=all_targets(targets))
+    runs = load_runs("outputs")                    # time_to_<t> at each run's problem.targets
+    targets = targets.of_runs(runs)                # per problem: its config's targets
     runs = runs.assign(setting=setting_labels(runs))
     times = time_to_target(runs, targets)          # one row per (problem, target, setting)
     rho = performance_profile(times, taus)         # one column per setting
@@ -138,37 +139,6 @@ def parse_targets(items: Sequence[str]) -> dict[str, list[float]]:
     return targets
 
 
-def default_targets(runs: pd.DataFrame, setting: str = "setting", most: int = 3) -> dict[str, list[float]]:
-    """Per problem, up to ``most`` decades that some setting reaches and not every one.
-
-    From the median over seeds of each setting's best and final test loss: the decades
-    between the highest final loss (every setting gets there) and the lowest best loss (the
-    best setting gets there), the lowest ``most`` of them, so each target separates settings.
-    """
-    targets: dict[str, list[float]] = {}
-    done = runs[runs["status"].isin(DONE_STATUSES)]
-    for problem, group in done.groupby("problem.name"):
-        medians = group.groupby(setting)[["best_test_loss", "final_test_loss"]].median()
-        low, high = medians["best_test_loss"].min(), medians["final_test_loss"].max()
-        if not (np.isfinite(low) and low > 0):
-            continue
-        top = math.floor(math.log10(high)) if np.isfinite(high) and high > 0 else math.ceil(math.log10(low))
-        exps = list(range(math.ceil(math.log10(low)), max(top, math.ceil(math.log10(low))) + 1))
-        targets[str(problem)] = [10.0**e for e in exps[:most]]
-    return targets
-
-
-def configured_targets(runs: pd.DataFrame) -> dict[str, list[float]]:
-    """Per problem, the targets its config owns (``problem.targets``, recorded in every run's
-    config): those of its newest run that has them. Problems whose runs predate the key are absent."""
-    if "problem.targets" not in runs or runs.empty:
-        return {}
-    have = runs[runs["problem.targets"].notna()]
-    if "started" in have:
-        have = have.sort_values("started", na_position="first")
-    return {str(p): [float(t) for t in g["problem.targets"].iloc[-1]] for p, g in have.groupby("problem.name")}
-
-
 def all_targets(targets: Mapping[str, Sequence[float]]) -> tuple[float, ...]:
     """Every target level once: the thresholds ``load_runs`` computes columns for."""
     return tuple(sorted({t for levels in targets.values() for t in levels}, reverse=True))
@@ -232,6 +202,8 @@ def time_to_target(runs: pd.DataFrame, targets: Mapping[str, Sequence[float]], s
                     }
                 )
     df = pd.DataFrame(rows, columns=["problem", "target", "setting", "seeds", "reached", "time_s", "horizon_s"])
+    if df.empty:  # no problem with targets among the runs
+        return df.assign(ratio=pd.Series(dtype=float))
     best = df.groupby(["problem", "target"])["time_s"].transform("min")
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(np.isfinite(best), df["time_s"] / best.where(best > 0, np.nan), np.nan)

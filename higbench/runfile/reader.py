@@ -252,6 +252,7 @@ class RunHead:
     attrs: dict = field(default_factory=dict, repr=False)
     rows: dict = field(default_factory=dict, repr=False)  # {table: {column: rows}} (what checkpoints record)
     config: dict = field(default_factory=dict, repr=False)  # config_yaml parsed (``parse_config``)
+    weights: dict | None = field(default=None, repr=False)  # final weights, read only when asked (``with_weights``)
 
     @property
     def n_updates(self) -> int:
@@ -259,9 +260,11 @@ class RunHead:
         return int(self.rows.get("updates", {}).get("step", 0))
 
 
-def read_head(path: str | Path, locking: bool = False) -> RunHead:
+def read_head(path: str | Path, locking: bool = False, with_weights: bool = False) -> RunHead:
     """The root attributes of a run file; raises ``UnreadableRunFile`` (with the reason),
-    ``RunFileLocked`` with ``locking=True`` when a live writer holds the file."""
+    ``RunFileLocked`` with ``locking=True`` when a live writer holds the file.
+
+    with_weights: also its final weights (``init_from``: the file is opened once)."""
     p = run_file_path(path)
     if not p.is_file():  # a FIFO or device named *.h5 would block the open forever
         raise UnreadableRunFile(f"{p}: no such run file")
@@ -271,6 +274,7 @@ def read_head(path: str | Path, locking: bool = False) -> RunHead:
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
             has_weights = _check_weights(f)
             rows = _row_counts(f)
+            weights = _weights(f) if with_weights and has_weights else None
         config = parse_config(str(attrs.get("config", "")))
     except Exception as exc:  # noqa: BLE001 - not HDF5, truncated, refused, ...
         raise _unreadable(p, exc) from None
@@ -290,6 +294,7 @@ def read_head(path: str | Path, locking: bool = False) -> RunHead:
         attrs=attrs,
         rows=rows,
         config=config,
+        weights=weights,
     )
 
 
@@ -355,10 +360,9 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
 
 
 def _columns(f: h5py.File, group: str, names: Sequence[str] | None, budget: ReadBudget) -> dict[str, np.ndarray]:
-    try:
-        gid = h5py.h5g.open(f.id, group.encode())
-    except KeyError:
+    if group not in f:  # an optional group (``final``: completed runs only)
         return {}
+    gid = h5py.h5g.open(f.id, group.encode())
     if names is None:
         names = [gid.get_objname_by_idx(i).decode() for i in range(gid.get_num_objs())]
     size = f.id.get_filesize()
@@ -458,13 +462,24 @@ def load_logs(path: str | Path) -> dict[str, np.ndarray]:
         return {name: ds[()] for name, ds in f["logs"].items()} if "logs" in f else {}
 
 
+def load_final(path: str | Path) -> dict[str, np.ndarray]:
+    """Arrays of the final evaluation, e.g. ``test_losses`` (one per test sample); {} when the
+    run recorded none (it was interrupted, failed, or is older than this record)."""
+    with _open(path) as f:
+        return {name: _native(ds[()]) for name, ds in f["final"].items()} if "final" in f else {}
+
+
 def load_weights(path: str | Path) -> dict[str, np.ndarray]:
     """Final weights as {state_dict name: array}; ``RefusedRunFile`` if they are not arrays of
     real numbers (complex ones would lose their imaginary part in a real network)."""
     with _open(path) as f:
         if not _check_weights(f):
             raise KeyError(f"{path}: no final weights stored (status {_attr(f.attrs.get('status', '?'))})")
-        return {name: _native(ds[()]) for name, ds in f["weights"].items()}
+        return _weights(f)
+
+
+def _weights(f: h5py.File) -> dict[str, np.ndarray]:
+    return {name: _native(ds[()]) for name, ds in f["weights"].items()}
 
 
 def _native(values: np.ndarray) -> np.ndarray:

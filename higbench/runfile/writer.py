@@ -405,6 +405,16 @@ class RunFileWriter:
         for name, value in state.items():
             g.create_dataset(name, data=np.asarray(value))
 
+    def write_final(self, arrays: Mapping[str, np.ndarray], step: int) -> None:
+        """``/final``: arrays of the final evaluation (the per-sample test losses), at ``step``."""
+        self.check_space(sum(np.asarray(v).nbytes + 4096 for v in arrays.values()))
+        if "final" in self.f:
+            del self.f["final"]
+        g = self.f.create_group("final")
+        g.attrs["step"] = step
+        for name, value in arrays.items():
+            g.create_dataset(name, data=np.asarray(value))
+
     def flush(self) -> None:
         self.check_file()
         self.check_space()

@@ -25,7 +25,8 @@ unlinked by the next save (which removes a link, never its target).
 Checkpoints may come from somebody else (a shared run dir), so loading one runs no code:
 it holds only tensors and plain containers, and is read with torch's restricted unpickler
 (``weights_only=True``) after refusing links, non-zip files and compressed records; its
-``run_id`` is compared with the run file's before anything in it is used (``load``).
+``run_id`` is compared with the run file's before anything in it is used (``check_owner``,
+right after ``load``).
 
 The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
 and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
@@ -51,7 +52,7 @@ from typing import Any
 
 from higbench.config import RESUMABLE_KEYS  # the schema marks them (resumable=True)
 from higbench.errors import ABSENT, ConfigError, dotted_get, dotted_set, show
-from higbench.runfile.reader import RUN_FILE, RunFileLocked, UnreadableRunFile, read_head, run_file_path
+from higbench.runfile.reader import RUN_FILE, RunFileLocked, RunHead, UnreadableRunFile, read_head, run_file_path
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
 RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
@@ -129,8 +130,7 @@ def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
     torch zip archive of uncompressed records (a plain pickle is never unpickled), an archive
     holding any object but tensors and plain containers (``weights_only=True``: torch's
     restricted unpickler constructs nothing else and calls no function), another format, a
-    checkpoint of another run (its ``run_id`` is compared before anything in it is used).
-    The file is read once per process: an unchanged checkpoint is deserialised only once.
+    checkpoint of another run (``check_owner``, next, compares its ``run_id``).
     """
     path = checkpoint_path(run_path)
     value = str(run_path) if resume_value is None else resume_value
@@ -155,27 +155,13 @@ def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
         st = os.fstat(f.fileno())
         if not stat.S_ISREG(st.st_mode):
             raise refuse("is not a regular file")
-        key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-        if _LOADED is not None and _LOADED[0] == key:
-            state = copy.deepcopy(_LOADED[1])
-        else:
-            state = _deserialise(f, st.st_size, refuse)
-            _remember(key, state)
+        state = _deserialise(f, st.st_size, refuse)
     if not isinstance(state, dict):
         raise refuse(f"holds a {type(state).__name__}, not a checkpoint")
     if state.get("format") not in READABLE_FORMATS:
         raise refuse(f"has format {show(state.get('format'))}; this version reads {', '.join(map(str, READABLE_FORMATS))}")
     check_fields(state, refuse)
-    _check_run_id(state, Path(run_path), value)
     return state
-
-
-_LOADED: tuple[tuple, dict] | None = None  # (file identity, state) of the last checkpoint read
-
-
-def _remember(key: tuple, state: dict) -> None:
-    global _LOADED
-    _LOADED = (key, copy.deepcopy(state))  # the caller's copy is loaded into models and mutated
 
 
 def _deserialise(f, size: int, refuse) -> Any:
@@ -349,7 +335,9 @@ def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, res
 def _standard_layout(optimizer) -> bool:
     """torch.optim's classes and higbench's Jacobian-power family: torch's state_dict layout,
     per-parameter state shaped as the parameter (or scalars, or L-BFGS's flat histories)."""
-    return type(optimizer).__module__.startswith("torch.optim") or hasattr(optimizer, "last_spectrum")
+    from higbench.optim.contract import uses_jacobian
+
+    return type(optimizer).__module__.startswith("torch.optim") or uses_jacobian(optimizer)
 
 
 def _check_plain_tree(node, max_numel: int, refuse, depth: int = 0, key: str = "optimizer") -> None:
@@ -452,11 +440,8 @@ def _state_value_fits(v, param, flat: int) -> bool:
     return v.numel() == 1 or v.shape == param.shape or (v.dim() == 1 and v.numel() == flat)
 
 
-def _check_run_id(state: dict, run_file: Path, resume_value: Any) -> None:
-    try:
-        file_id = str(read_head(run_file).run_id or "")
-    except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
+def _check_run_id(state: dict, head: RunHead, resume_value: Any) -> None:
+    run_file, file_id = head.path, str(head.run_id or "")
     ckpt_id = str(state.get("run_id") or "")
     if ckpt_id != file_id:
         raise ConfigError(
@@ -482,11 +467,10 @@ def remove_stale_temporaries(run_path: str | Path) -> None:
                 p.unlink()
 
 
-def check_owner(state: dict[str, Any], run_file: Path, resume_value: Any) -> None:
-    """Refuse a checkpoint that is not of ``run_file`` (its run_id differs) or records more
-    rows than the file holds."""
-    _check_run_id(state, run_file, resume_value)
-    head = read_head(run_file)
+def check_owner(state: dict[str, Any], head: RunHead, resume_value: Any) -> None:
+    """Refuse a checkpoint that is not of the run file ``head`` describes (its run_id differs)
+    or records more rows than the file holds. Called before anything in the state is used."""
+    _check_run_id(state, head, resume_value)
     short = [
         f"{group}/{name} has {head.rows.get(group, {}).get(name, 0)}, the checkpoint {n}"
         for group, names in (state.get("rows") or {}).items()
@@ -522,8 +506,8 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
     return run_file_path(p)
 
 
-def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
-    """(status, stored config YAML) of a run to resume; ConfigError if it cannot be resumed."""
+def inspect_run(run_file: Path, resume_value: Any) -> RunHead:
+    """The head of a run to resume (status, stored config, rows); ConfigError if it cannot be resumed."""
     if run_file.is_symlink():  # the run would go on elsewhere while its checkpoint and logs stay here
         why = f"{run_file} is a symbolic link (to {os.readlink(run_file)}); resume runs in their own directory"
         raise ConfigError("resume", resume_value, why)
@@ -554,7 +538,7 @@ def inspect_run(run_file: Path, resume_value: Any) -> tuple[str, str]:
         raise ConfigError("resume", resume_value, f"no checkpoint next to {run_file} ({why})")
     if not config:
         raise ConfigError("resume", resume_value, f"{run_file} holds no config")
-    return status, config
+    return head
 
 
 def _checkpoint_every(config_yaml: str):

@@ -25,7 +25,7 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-def environment(device: torch.device) -> dict:
+def environment(device: torch.device, parallel_jobs: int = 1) -> dict:
     env = {
         "higbench_version": higbench.__version__,
         "torch_version": str(torch.__version__),
@@ -42,7 +42,7 @@ def environment(device: torch.device) -> dict:
         if device.type == "cuda"
         else platform.processor() or platform.machine(),
         "slurm_job_id": os.environ.get("SLURM_JOB_ID", ""),
-        "parallel_jobs": int(os.environ.get("HIGBENCH_PARALLEL_JOBS", "1")),  # set by higbench.cli
+        "parallel_jobs": int(parallel_jobs),  # jobs of its sweep sharing the machine (the plan's)
     }
     return env
 

@@ -17,6 +17,8 @@ import math
 import sys
 import time
 
+from higbench.display import fmt
+
 REDRAW_S = 0.5  # a bar redraw at most this often: per-update redraws would cost time on tiny updates
 MIN_BAR = 10  # characters of bar kept at any terminal width
 PIPE_LINES = 10  # piped output: about this many lines per run (one per tenth of the budget)
@@ -44,20 +46,15 @@ def start_text(cfg) -> str:
     return f"{cfg.problem.name}/{cfg.optimizer.name}: {verb}, batch size {cfg.batch_size}, budget {budget_text} (training clock)"
 
 
-STANDARD_THRESHOLDS = (1e-3, 1e-4, 1e-5)  # the paper's levels (toy, oscillator, dipole: losses start near 1)
-
-
 def summary_thresholds(initial_test_loss: float) -> tuple[float, ...]:
-    """Test-loss levels the end-of-run summary times: the paper's 1e-3..1e-5 for a problem whose
-    loss starts below 10 (a decade or more above 1e-3), else the three decades below its
-    initial test loss's decade (Poisson, starting at ~440: 10, 1, 0.1)."""
-    if not math.isfinite(initial_test_loss) or initial_test_loss < 10:
-        return STANDARD_THRESHOLDS
+    """For a caller that knows only the initial test loss (not a target: no problem owns these):
+    the three decades below that loss's decade (Poisson, starting at ~440: 10, 1, 0.1; a loss
+    starting near 0.5: 1e-2, 1e-3, 1e-4). A caller with the run's config times its problem's
+    targets instead (``higbench.results.targets.for_problem(cfg)``: the problem config owns them)."""
+    if not math.isfinite(initial_test_loss) or initial_test_loss <= 0:
+        return ()
     top = math.floor(math.log10(initial_test_loss))
     return tuple(10.0**e for e in (top - 1, top - 2, top - 3))
-
-
-_transient = False  # a start line without newline on the terminal, to be replaced
 
 
 def announce(enabled: bool, text: str, transient: bool = False) -> None:
@@ -66,34 +63,28 @@ def announce(enabled: bool, text: str, transient: bool = False) -> None:
     transient: only on a terminal, and replaced by whatever comes next (the real start line,
     or the one-line error of a refused config), so refused input still shows one line.
     """
-    global _transient
     if not enabled:
         return
     if transient:
         if sys.stderr.isatty():
             sys.stderr.write(f"{job_label()}{text}")
             sys.stderr.flush()
-            _transient = True
         return
     clear_transient()
     _line(f"{job_label()}{text}")
 
 
 def clear_transient() -> None:
-    global _transient
-    if _transient:
+    """Erase a transient line (nothing to remember: on a terminal, erasing the current line
+    is harmless where the cursor already stands at the start of an empty one)."""
+    if sys.stderr.isatty():
         sys.stderr.write("\r\033[K")  # back to the line's start, erase it
         sys.stderr.flush()
-        _transient = False
 
 
 def _line(text: str) -> None:
     sys.stderr.write(text + "\n")  # one write: parallel jobs never share a line
     sys.stderr.flush()
-
-
-def _fmt(value: float | None, digits: int = 3) -> str:
-    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{digits}e}"
 
 
 def _clock(seconds: float) -> str:
@@ -158,9 +149,9 @@ class Progress:
         fixed = len(self.bar.desc) + len(" 100%||  [00:00, ]") + len(f"{self.bar.total:.0f}") * 2 + 7 + MIN_BAR
         left = self._remaining(wall)
         for text in (
-            f"left {left}, step {self.step}, train {_fmt(self.train)}, test {_fmt(self.test)}",
-            f"left {left}, train {_fmt(self.train, 2)}, test {_fmt(self.test, 2)}",
-            f"left {left}, test {_fmt(self.test, 2)}",
+            f"left {left}, step {self.step}, train {fmt(self.train, exponent=True)}, test {fmt(self.test, exponent=True)}",
+            f"left {left}, train {fmt(self.train, 2, exponent=True)}, test {fmt(self.test, 2, exponent=True)}",
+            f"left {left}, test {fmt(self.test, 2, exponent=True)}",
             f"left {left}",
         ):
             if fixed + len(text) <= width:
@@ -195,7 +186,8 @@ class Progress:
             self._drawn = time.monotonic()
         elif test_loss is not None:
             self.step = step
-            text = f"{self.label}{self.name} step {step:7d}  t {wall:8.2f}s  train {_fmt(train_loss)}  test {_fmt(test_loss)}"
+            losses = f"train {fmt(train_loss, exponent=True)}  test {fmt(test_loss, exponent=True)}"
+            text = f"{self.label}{self.name} step {step:7d}  t {wall:8.2f}s  {losses}"
             done = self._fraction(step, wall)
             if done is None or done >= self._next_line:
                 _line(text)

@@ -1,4 +1,4 @@
-"""A TensorBoard sink (``tensorboard=true``): curves and per-update phase times as event files.
+"""A TensorBoard sink (``sink=tensorboard``, or ``tensorboard=true``): curves and per-update phase times as event files.
 
 Writes to ``<run dir>/tensorboard`` (``tensorboard --logdir outputs/`` shows every run):
 the evaluation curves under ``eval/`` against the update count, and each update's batch
@@ -73,11 +73,12 @@ class TensorBoardSink(Sink):
     name = "tensorboard"
 
     def __init__(self, run_dir: Path):
+        writer_class = summary_writer_class()  # without the extra: refused before anything is made
         self.dir_fd = open_log_dir(run_dir)
         via_fd = f"/proc/self/fd/{self.dir_fd}"
         log_dir = via_fd if os.path.isdir(via_fd) else str(Path(run_dir) / TENSORBOARD_DIR)
         suffix = f".{secrets.token_hex(8)}"  # an unpredictable name: nothing can be planted under it
-        self.writer = summary_writer_class()(log_dir=log_dir, filename_suffix=suffix)
+        self.writer = writer_class(log_dir=log_dir, filename_suffix=suffix)
         _hold_event_file(self.writer, self.dir_fd)
         self.pending: list[dict[str, float]] = []
 

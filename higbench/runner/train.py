@@ -1,17 +1,17 @@
 """The training loop: mini-batch updates under a budget, evaluations, the run file.
 
 Clock semantics (as in the paper, appendix B): ``wall_time`` is the training clock. It
-starts once the data set exists and the solvers are compiled (``warmup.py``: numba's compile
-or cache load, recorded apart as ``/env`` ``warmup_s``), before the network and optimizer are
-built, so framework warm-up and the first (slow) updates count; evaluations of the test
-loss, checkpoints and the creation of the run file are excluded. A resumed run continues the clock of its
-checkpoint. (Through the CLI, the pre-flight check has already built the problem and an
-optimizer on the CPU, so one-off Python imports are paid before the clock starts.)
+starts at the first update, once the data set exists, the solvers are compiled
+(``warmup.py``: numba's compile or cache load, recorded apart as ``/env`` ``warmup_s``) and
+the network and optimizer are built and checked; the first (slow) updates count, and so
+does any framework warm-up inside them. Evaluations of the test loss, checkpoints and the
+creation of the run file are excluded. A resumed run continues the clock of its checkpoint.
 
 Reliability (see also ``checkpoint.py`` and ``runfile/writer.py``):
 
 * Before the run file exists: the checks that need the network (``init_from`` weights
-  that fit it, the GN/HIG memory guard) raise ``ConfigError``; nothing is written.
+  that fit it, a checkpoint that fits it and its optimizer, the GN/HIG memory guard) raise
+  ``ConfigError``; nothing is written.
 * Divergence: a non-finite loss, gradient, Jacobian or update direction, a failed
   inversion (``UpdateResult.finite`` is False), a linear-algebra error, or a non-finite
   test loss ends the run as ``diverged`` with the step and reason; everything logged so
@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -47,17 +47,17 @@ import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first o
 from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import init_from_path
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
+from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import Batch, Problem, build_problem
-from higbench.runfile.reader import load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
-from higbench.runner.progress import Progress
+from higbench.runner.plan import Plan
+from higbench.runner.progress import Progress, announce, start_text
 from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
 from higbench.runner.threads import fit_to_work, resolve_threads
 from higbench.runner.updates import Update, build_update
@@ -104,10 +104,15 @@ class TrainingClock:
 
 
 class StopSignals:
-    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now."""
+    """SIGINT/SIGTERM handlers: the first asks the loop to stop, the second stops it now.
 
-    def __init__(self):
+    ``parent``: a sweep worker's launcher; once it is gone (killed alone, its workers
+    re-parented), the run stops as if sent SIGTERM: interrupted, checkpointed, resumable.
+    """
+
+    def __init__(self, parent: int | None = None):
         self.signum: int | None = None
+        self.parent = parent
         self._previous: dict[int, object] = {}
 
     def _handler(self, signum, frame):
@@ -134,8 +139,20 @@ class StopSignals:
         self._previous.clear()
 
     def check(self) -> None:
+        if self.signum is None and self.parent is not None and os.getppid() != self.parent:
+            self.signum = signal.SIGTERM  # the sweep that launched this job is gone
         if self.signum is not None:
             raise Interrupted(signal.Signals(self.signum).name)
+
+
+@torch.no_grad()
+def per_sample_losses(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> np.ndarray:
+    """The loss of each sample of ``batch`` (float64): the values whose mean ``evaluate`` reports."""
+    parts = []
+    for start in range(0, len(batch), chunk):
+        part = batch[start : start + chunk]
+        parts.append(problem.loss(problem.outputs(model, part), part.targets).double().cpu().numpy())
+    return np.concatenate(parts)
 
 
 @torch.no_grad()
@@ -152,37 +169,39 @@ def evaluate(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int 
     return {k: v / len(batch) for k, v in sums.items()}
 
 
-# -- checks that need the network; run before the run file exists ---------------------------
+# -- the build, and the checks that need the network; before the run file exists ------------
 
 
-def check_init_from(model: torch.nn.Module, path: str, problem_name: str) -> dict[str, np.ndarray]:
-    """The weights of run ``path`` if they fit ``model``; ConfigError otherwise."""
-    from higbench.config import check_init_from_file
-
-    check_init_from_file(path, problem_name)
-    weights = load_weights(init_from_path(path))
+def check_initial_weights(model: torch.nn.Module, weights, path: str) -> None:
+    """``init_from``: the run's weights (read by the plan) fit this network; ConfigError otherwise."""
     state = model.state_dict()
     if set(weights) != set(state) or any(tuple(weights[k].shape) != tuple(state[k].shape) for k in state):
         theirs = {k: tuple(v.shape) for k, v in weights.items()}
         ours = {k: tuple(v.shape) for k, v in state.items()}
         raise ConfigError("init_from", path, f"network does not match (run has {theirs}, this config builds {ours})")
-    bad = sorted(k for k, v in weights.items() if not np.isfinite(v).all())
-    if bad:
-        raise ConfigError(
-            "init_from", path, f"final weights hold NaN or inf ({', '.join(bad)}); a diverged run cannot start another"
-        )
-    return weights
 
 
-def load_initial_weights(model: torch.nn.Module, path: str, problem_name: str) -> None:
-    """Start from another run's final weights; refuse (ConfigError) if the networks differ."""
-    weights = check_init_from(model, path, problem_name)
-    model.load_state_dict({k: torch.as_tensor(v) for k, v in weights.items()})
+def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
+    """The network and its optimizer; a network or arguments they refuse become ConfigError."""
+    try:
+        model = problem.build_model()
+        return model, build_update(problem, model, cfg.optimizer)
+    except ConfigError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
+    except (MemoryError, RuntimeError) as exc:  # torch's allocator: a network far too large
+        if not isinstance(exc, MemoryError) and "allocat" not in str(exc):
+            raise
+        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
+        first = " ".join(str(exc).split())[:200]
+        hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
+        raise ConfigError(key, hidden, f"the network does not fit in memory ({first})") from None
 
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
     """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
-    if not hasattr(update.optimizer, "last_spectrum"):  # only the Jacobian-power family builds J
+    if not uses_jacobian(update.optimizer):  # only the Jacobian-power family builds J (optim.contract)
         return None
     with torch.no_grad():
         y = problem.outputs(model, problem.test_set()[:1])
@@ -225,9 +244,8 @@ def _update_cost(cfg: DictConfig, device: torch.device) -> float:
     with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
         try:
             _device, problem = _setup(cfg, device=device)
-            warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))
-            model = problem.build_model()
-            update = build_update(problem, model, cfg.optimizer)
+            model, update = build(cfg, problem)
+            warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))
             estimate = check_memory(cfg, problem, model, update)
         except ConfigError:  # too large for this device's memory
             return math.inf
@@ -262,45 +280,25 @@ def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, upda
     checkpoint.check_fits(state, model, update.optimizer, per_epoch, str(run_path), checkpoint.checkpoint_path(run_path))
 
 
-def preflight(cfg: DictConfig, resume_from: Path | None = None) -> None:
-    """Build the problem and network once and run the checks that need them (no file written).
-
-    Raises ConfigError for an ``init_from`` run whose weights do not fit this network and
-    for a GN/HIG batch size that cannot fit in memory. Problems and optimizers refusing
-    their arguments (ValueError) are reported as ConfigError too.
-
-    Everything is built on the CPU, so no GPU context exists before the run's clock starts
-    (CUDA start-up stays part of the measured warm-up); for a CUDA run the memory guard
-    runs in ``train`` instead, on the device, before the run file is created. Python-level
-    imports triggered here (the first torch.optim optimizer imports torch._dynamo) are then
-    no longer inside the run's training clock.
-    """
-    target = resolve_device(cfg.device)
-    try:
-        _device, problem = _setup(cfg, device=torch.device("cpu"))
-        model = problem.build_model()
-        update = build_update(problem, model, cfg.optimizer)
-    except ConfigError:
-        raise
-    except (ValueError, TypeError) as exc:
-        raise ConfigError("config", "?", f"refused by the problem or optimizer: {exc}") from None
-    except (MemoryError, RuntimeError) as exc:  # torch's allocator: a network far too large
-        if not isinstance(exc, MemoryError) and "allocat" not in str(exc):
-            raise
-        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
-        first = " ".join(str(exc).split())[:200]
-        raise ConfigError(
-            key, show(OmegaConf.to_container(cfg.problem).get("hidden", "?")), f"the network does not fit in memory ({first})"
-        ) from None
-    if cfg.get("init_from"):
-        check_init_from(model, cfg.init_from, cfg.problem.name)
-    if resume_from is not None:  # read once per process: train() gets the same state back
-        check_checkpoint(checkpoint.load(resume_from), problem, model, update, cfg, Path(resume_from))
+def check_sinks(cfg: DictConfig) -> None:
+    """The optional sinks the config asks for can be made (their package is installed)."""
     if cfg.get("tensorboard"):
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
         summary_writer_class()
-    if target.type == "cpu":
+
+
+def check_build(cfg: DictConfig, initial_weights=None) -> None:
+    """A sweep's up-front check of one distinct network (``preflight.check_sweep``): build the
+    problem, network and optimizer on the CPU and run the checks that need them, writing
+    nothing, so that a bad job refuses the sweep before any job runs. (A single run does these
+    checks once, in ``train``, on its own objects.)"""
+    _device, problem = _setup(cfg, device=torch.device("cpu"))
+    model, update = build(cfg, problem)
+    if initial_weights is not None:
+        check_initial_weights(model, initial_weights, cfg.init_from)
+    check_sinks(cfg)
+    if resolve_device(cfg.device).type == "cpu":
         check_memory(cfg, problem, model, update)
 
 
@@ -332,21 +330,14 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dic
 
 
 def _is_jacobian_power(opt_cfg) -> bool:
-    return hasattr(get_class(opt_cfg._target_), "step_structured")
+    return uses_jacobian(get_class(opt_cfg._target_))
 
 
 def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
-    """Optional sinks named by the config (``tensorboard: true``: event files beside the run file)."""
-    if not cfg.get("tensorboard"):
-        return []
-    from higbench.runner.tensorboard import TensorBoardSink  # an optional extra: imported only when asked for
+    """The side sinks the config names (the ``sink`` group; ``tensorboard=true``), beside the run file."""
+    from higbench.runner.sinks import build_side_sinks, side_sink_specs
 
-    try:
-        return [TensorBoardSink(run_path.parent)]
-    except (OSError, AttributeError) as exc:  # its directory became a file or a link after the checks; a
-        # TensorBoard whose writer's internals moved (tensorboard._hold_event_file): a view, not the run
-        print(f"higbench: tensorboard turned off ({exc}); the run goes on, its run file is the record", file=sys.stderr)
-        return []
+    return build_side_sinks(side_sink_specs(cfg), run_path.parent)
 
 
 class TrainingRun:
@@ -363,7 +354,7 @@ class TrainingRun:
         self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
         self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
         self.by_updates = cfg.get("eval_unit", "seconds") == "updates"
-        self.records_spectrum = hasattr(update.optimizer, "last_spectrum")
+        self.records_spectrum = uses_jacobian(update.optimizer)
         self.spectrum: dict = {}
         self.step, self.epoch, self.position = 0, 0, 0
         self.batch_losses: list[float] = []
@@ -526,6 +517,12 @@ class TrainingRun:
         writer.write_weights({k: v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}, self.step)
         writer.f.attrs["steps"] = self.step
         writer.f.attrs["wall_time"] = self.clock()
+        # The final evaluation's test loss sample by sample (outside the clock: it stopped
+        # above): a few samples can carry most of a mean (the oscillator's heavy tail), and
+        # the median or a percentile are then read from the file without training again.
+        if status in ("completed", "diverged"):  # an interrupted run has no final evaluation yet
+            self.model.eval()
+            writer.write_final({"test_losses": per_sample_losses(self.problem, self.model, self.test)}, self.step)
         writer.check_file()
         self.sinks.close(status, reason, self.step)
 
@@ -568,34 +565,35 @@ def _fail(run: TrainingRun, exc: BaseException, signals: StopSignals, write_pend
     signals.restore()
 
 
-def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *, resume: bool = False) -> RunSummary:
-    """Run one experiment described by a validated config; write ``run_path``.
+def train(plan: Plan) -> RunSummary:
+    """Run one experiment as planned (``higbench.runner.plan``); write its run file.
 
-    resume: continue the run file ``run_path`` from its checkpoint (``cfg`` is then the
-    run's stored config, see ``checkpoint.resume_config``) instead of creating it.
+    The problem, the network and the optimizer are built once, here; the plan's inputs are
+    checked against them (``init_from`` weights, a checkpoint) and the memory guard runs, all
+    before the run file is created or reopened: a refusal (ConfigError) writes nothing.
+    ``Plan.for_run(cfg, run_path)`` makes the plan of a validated config in code.
     """
-    run_path = Path(run_path)
-    state = checkpoint.load(run_path) if resume else None
-    if state is not None:
-        checkpoint.check_owner(state, run_path, str(run_path))  # never continue from another run's state
+    cfg, run_path, state = OmegaConf.create(plan.task()), Path(plan.run_path), plan.checkpoint
     placed = choose_placement(cfg, state)
     device, problem = _setup(cfg, device=placed.device if placed else None)
-    warmup_s = warm_up(problem, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
-    clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
-    model = problem.build_model()
-    if cfg.get("init_from") and not resume:
-        load_initial_weights(model, cfg.init_from, cfg.problem.name)
-    update = build_update(problem, model, cfg.optimizer)
+    model, update = build(cfg, problem)
+    warmup_s = warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
+    if plan.initial_weights is not None:
+        check_initial_weights(model, plan.initial_weights, cfg.init_from)
+        model.load_state_dict({k: torch.as_tensor(v) for k, v in plan.initial_weights.items()})
     if state is not None:  # all of it fits this network and optimizer, before the run file is touched
         check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
+    check_sinks(cfg)
+    announce(cfg.get("progress", True), start_text(plan.start_config()))  # the checks passed: replaces "checking"
 
+    clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     clock.pause()  # creating/reopening the file is not training
     extra = _extra_sinks(cfg, run_path)
-    env = {**environment(device), "warmup_s": warmup_s, **(placed.record() if placed else {})}
-    file = RunFileSink(_open_run_file(cfg, run_path, state, env, overrides))
+    env = {**environment(device, plan.parallel_jobs), "warmup_s": warmup_s, **(placed.record() if placed else {})}
+    file = RunFileSink(_open_run_file(cfg, run_path, state, env, list(plan.overrides)))
     step = state["step"] if state else 0
     name = f"{cfg.problem.name}/{cfg.optimizer.name}"
     progress = Progress(
@@ -605,7 +603,7 @@ def train(cfg: DictConfig, run_path: Path, overrides: list[str] | None = None, *
         cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
     )
     clock.resume()
-    signals = StopSignals().install()
+    signals = StopSignals(parent=plan.stop_with_parent).install()
     status, reason, final_test = _run(run, signals)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume

@@ -9,7 +9,9 @@ Phases, as in the paper's tables: ``jacobian_s`` (derivatives: the closure's bac
 passes for first-order optimizers, the stacked Jacobian for GN/HIG/LM), ``inversion_s``
 (SVD / Gram eigen-decomposition; zero for first-order optimizers) and ``apply_s`` (the rest
 of the step: torch.optim's bookkeeping, L-BFGS's two-loop recursion, LM's trial steps).
-An optimizer that times its own phases says so in ``last_timings``.
+What the runner reads back after the step is the step contract (``higbench.optim.contract``):
+an optimizer of ours reports its phases, refusals, spectrum and own values in one
+``StepReport``; any other optimizer reports nothing and is timed by the closure.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from torch import nn
 
 from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
 from higbench.optim.closure import LossClosure, NonFiniteStep
+from higbench.optim.contract import PHASES, StepReporter, report_of
 from higbench.problems.base import Batch, Problem
 
 
@@ -74,10 +77,12 @@ class Update:
             guard=True,
             outputs_fn=None if self.composed else (lambda: problem.outputs(model, batch)),
             inverse=(lambda y, u0: problem.inverse_simulator(batch.inputs, y, u0)) if problem.has_inverse_simulator() else None,
+            physics_jacobian=problem.physics_jacobian,
         )
 
     def __call__(self, batch: Batch) -> UpdateResult:
         opt, closure = self.optimizer, self.closure(batch)
+        before = report_of(opt)
         t0 = time.perf_counter()
         try:
             value = opt.step(closure)
@@ -87,16 +92,16 @@ class Update:
         synchronize(self.problem.device)
         total = time.perf_counter() - t0
         loss = closure.first_mean if closure.first_mean is not None else value
-        timings = getattr(opt, "last_timings", None)
-        if timings is None:  # a torch.optim optimizer: the closure timed the derivatives
+        if not isinstance(opt, StepReporter):  # torch.optim or a package's optimizer: the closure timed the derivatives
             timings = {"jacobian_s": closure.derivative_s, "inversion_s": 0.0, "apply_s": total - closure.derivative_s}
+            return UpdateResult(loss.item(), timings)
+        report = report_of(opt)
+        if report is None or report is before:
+            raise TypeError(f"{type(opt).__name__}.step set no new StepReport (higbench.optim.contract)")
+        if report.finite and set(report.timings) != set(PHASES):
+            raise TypeError(f"{type(opt).__name__}.step reported timings {sorted(report.timings)}; expected {list(PHASES)}")
         return UpdateResult(
-            loss.item(),
-            dict(timings),
-            getattr(opt, "last_finite", True),
-            getattr(opt, "last_reason", ""),
-            getattr(opt, "last_spectrum", {}),
-            dict(getattr(opt, "last_metrics", {})),
+            loss.item(), dict(report.timings), report.finite, report.reason, dict(report.spectrum), dict(report.metrics)
         )
 
 

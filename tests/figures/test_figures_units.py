@@ -15,7 +15,7 @@ from higbench.figures.spec import PRESETS, Preset, expand
 from higbench.jobs import Job, Launcher, fmt, identity_of, job_seconds, multirun_command
 from higbench.results.index import COSMETIC_KEYS
 
-# The list in EXPERIMENTS.md, "Figures and tables to regenerate" (fig12's a/b panels are one figure).
+# The paper's figures and tables that higbench regenerates (docs/figures.md; fig12's a/b panels are one figure).
 EXPERIMENTS_IDS = [
     "fig1", "fig2a", "fig2b", "fig2c", "fig3a", "fig3b", "fig3c", "fig4a", "fig4b", "fig4c", "fig5", "fig6",
     "fig7", "fig8", "fig9", "fig10", "fig11", "fig12", "fig13", "table2", "table3", "table4", "table5",

@@ -20,15 +20,17 @@ from cases import OPTIMIZERS
 from omegaconf import OmegaConf
 from optim_helpers import CASES, compose_cfg, flat, setup
 
+from higbench.optim.contract import needs_inverse_simulator, uses_jacobian
 from higbench.optim.split import SplitOptimizer
 from higbench.runner.updates import build_update
 from higbench.schema import locate
 
 CONF = Path(__file__).resolve().parents[2] / "conf" / "optimizer"
-NEEDS_INVERSE = {n for n in OPTIMIZERS if OmegaConf.load(CONF / f"{n}.yaml")._target_.endswith("ScaleInvariantPhysics")}
+CLASSES = {n: locate(OmegaConf.load(CONF / f"{n}.yaml")._target_) for n in OPTIMIZERS}
+NEEDS_INVERSE = {n for n, cls in CLASSES.items() if needs_inverse_simulator(cls)}
 WITH_INVERSE = {"toy", "poisson"}
 # GN, HIG, LM: their own tests take them through every problem, against references (test_update_paths.py, test_lm.py).
-JACOBIAN_POWER = {n for n in OPTIMIZERS if hasattr(locate(OmegaConf.load(CONF / f"{n}.yaml")._target_), "step_structured")}
+JACOBIAN_POWER = {n for n, cls in CLASSES.items() if uses_jacobian(cls)}
 
 
 def test_the_new_optimizers_are_configs():

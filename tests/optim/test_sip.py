@@ -16,6 +16,7 @@ import pytest
 import torch
 from optim_helpers import flat, setup
 
+from higbench.config import config_dir
 from higbench.optim.sip import ScaleInvariantPhysics, newton_step_in_y
 from higbench.problems.base import Problem, registry
 from higbench.runner.updates import Update, build_update
@@ -131,7 +132,7 @@ def heat(monkeypatch):
 
     from higbench.problems.base import build_problem
 
-    with initialize_config_dir(config_dir=str(Path(__file__).resolve().parents[2] / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
         cfg = compose("config", overrides=[f"hydra.searchpath=[file://{HEAT / 'conf'}]", "problem=heat"])
     problem = build_problem(cfg.problem, dtype=torch.float64, device=torch.device("cpu"), seed=0)
     yield problem

@@ -128,7 +128,6 @@ BAD_VALUES = [
     ("toy", "hig", "progress", "maybe"),
     ("toy", "hig", "memory_limit_mb", -1),
     ("toy", "hig", "resume", ""),
-    ("toy", "hig", "init_from", 3),
     ("toy", "hig", "problem.gamma", -1),
     ("toy", "hig", "problem.hidden", 0),
     ("toy", "hig", "problem.train_size", 0),
@@ -216,10 +215,11 @@ def test_bad_input_is_refused_and_nothing_is_written(argv, key, value, inputs, t
     sweep_dir = work / "sweep"
     before = _snapshot(inputs)
 
-    def job_reached(cfg):
-        raise AssertionError(f"{argv}: passed the checks and reached the job")
+    def run_file_reached(*args, **kwargs):
+        raise AssertionError(f"{argv}: passed the checks and reached the run file")
 
-    monkeypatch.setattr(cli, "_run_job", job_reached)
+    # The checks that need the network run in the job, before its run file: none may pass.
+    monkeypatch.setattr("higbench.runner.train._open_run_file", run_file_reached)
     with pytest.raises(SystemExit) as exit_info:
         cli.main([*argv, f"hydra.run.dir={run_dir}", f"hydra.sweep.dir={sweep_dir}"])
     err = capsys.readouterr().err

@@ -95,7 +95,6 @@ CASES = [
 def _copy(stopped: Path, tmp_path: Path) -> Path:
     run_dir = tmp_path / "run"
     shutil.copytree(stopped, run_dir)
-    checkpoint._LOADED = None  # the copy is another file: read afresh
     return run_dir
 
 
@@ -188,7 +187,6 @@ def test_every_shipped_optimizers_checkpoint_passes_the_check(optimizer, tmp_pat
 
     run = tmp_path / "run.h5"
     stopped_run(run, monkeypatch, overrides=[f"optimizer={optimizer}"], after=9)
-    checkpoint._LOADED = None
     cfg = compose_here(
         ["problem=toy", f"optimizer={optimizer}", "budget.max_updates=12", "eval_unit=updates", "eval_every=5", *FAST]
     )

@@ -17,6 +17,7 @@ from rel_helpers import FAST, REPO, cli_env
 from higbench import cli
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
+from higbench.runner.plan import Plan
 from higbench.runner.train import train
 
 # A writer that appends and flushes as the runner does at each evaluation (a burst of
@@ -56,7 +57,7 @@ def _train_small(path, *overrides):
                     *overrides,
                 ],
             )
-        return train(cfg, path)
+        return train(Plan.for_run(cfg, path))
     finally:
         torch.set_num_threads(threads)
 

@@ -14,6 +14,7 @@ from higbench import cli
 from higbench.optim import hig as hig_mod  # the GN/HIG step the runner calls
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 from higbench.runner.updates import UpdateResult
 
 BASE = ["budget.seconds=20", "budget.max_updates=40", "eval_unit=updates", "eval_every=3", "checkpoint_every=null", *FAST]
@@ -90,7 +91,7 @@ def assert_diverged(path, step, reason_part):
 )
 def test_forced_failure_marks_run_diverged(optimizer, failure, reason, tmp_path, monkeypatch):
     monkeypatch.setattr(train_mod, "build_update", fail_after(7, failure))
-    summary = train_mod.train(config(f"optimizer={optimizer}"), tmp_path / "run.h5")
+    summary = train_mod.train(Plan.for_run(config(f"optimizer={optimizer}"), tmp_path / "run.h5"))
     assert summary.status == "diverged" and summary.steps == 8
     assert_diverged(tmp_path / "run.h5", 8, reason)
 
@@ -122,7 +123,7 @@ def test_nan_jacobian_is_caught(mode, tmp_path, monkeypatch):
             return (y, A) if calls["n"] <= 5 else (y, A * float("nan"))
 
         monkeypatch.setattr(hig_mod, "solver_jacobian", jacobian)
-    train_mod.train(cfg, tmp_path / "run.h5")
+    train_mod.train(Plan.for_run(cfg, tmp_path / "run.h5"))
     assert_diverged(tmp_path / "run.h5", 6, "non-finite Jacobian")
 
 
@@ -132,13 +133,13 @@ def test_nan_gradient_is_caught(tmp_path, monkeypatch):
     def build(problem, model, opt_cfg):
         calls = {"n": 0}
 
-        def poison(grad):  # the 4th backward pass yields a NaN gradient (finite loss)
-            calls["n"] += 1
-            return grad * float("nan") if calls["n"] == 4 else grad
+        def poison(grad):  # the 4th update's backward pass yields a NaN gradient (finite loss);
+            calls["n"] += 1  # the first pass is the warm-up's, through the run's own network
+            return grad * float("nan") if calls["n"] == 5 else grad
 
         next(model.parameters()).register_hook(poison)
         return real(problem, model, opt_cfg)
 
     monkeypatch.setattr(train_mod, "build_update", build)
-    train_mod.train(config("optimizer=adam"), tmp_path / "run.h5")
+    train_mod.train(Plan.for_run(config("optimizer=adam"), tmp_path / "run.h5"))
     assert_diverged(tmp_path / "run.h5", 4, "non-finite gradient")

@@ -148,3 +148,60 @@ def test_the_job_list_sweeper_is_found_without_the_figures_launcher(higbench, tm
     code, _, err = higbench(*args)
     assert code == 0, err
     assert len(list((tmp_path / "sweep").glob("*/run.h5"))) == 2
+
+
+def test_a_worker_whose_sweep_parent_is_gone_stops_cleanly(tmp_path):
+    """A launcher's worker trains for a parent pid; once that process is gone (the sweep's
+    parent killed alone), the run stops as after SIGTERM: interrupted, checkpointed."""
+    from rel_helpers import FAST, compose_here
+
+    from higbench.runner.checkpoint import checkpoint_path
+    from higbench.runner.plan import Plan
+    from higbench.runner.train import train
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a pid that is surely not this process's parent any more
+    cfg = compose_here(["problem=toy", "optimizer=adam", "budget.max_updates=50", *FAST])
+    plan = Plan.for_run(cfg, tmp_path / "run.h5").in_sweep(2, stop_with_parent=gone.pid)
+    summary = train(plan)
+    assert summary.status == "interrupted" and "SIGTERM" in summary.reason, summary
+    assert summary.steps == 0 and checkpoint_path(tmp_path / "run.h5").is_file()
+
+
+@pytest.mark.slow
+def test_sigterm_to_a_joblib_sweeps_parent_alone_leaves_no_worker_training(tmp_path):
+    """``kill <parent pid>`` (a scheduler's SIGTERM to the sweep's process only): its joblib
+    workers stop their runs cleanly instead of training on orphaned, and the sweep's resume
+    completes both jobs."""
+    import signal
+    import time
+
+    import psutil
+    from rel_helpers import table_rows
+
+    sweep = tmp_path / "sweep"
+    args = ["-m", "problem=toy", "optimizer=adam", "optimizer.lr=0.001,0.002", "budget.max_updates=100000", "budget.seconds=null"]
+    args += ["eval_unit=updates", "eval_every=20", "progress=false", "threads=1", "hydra.sweep.subdir=${hydra.job.num}"]
+    args += ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={sweep}"]
+    log = (tmp_path / "sweep.log").open("w")  # not a pipe: a lingering worker would hold it open
+    proc = subprocess.Popen([sys.executable, "-m", "higbench.cli", *args], cwd=tmp_path, env=cli_env(), stdout=log, stderr=log)
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and not all(table_rows(sweep / str(n) / "run.h5") >= 2 for n in (0, 1)):
+        assert proc.poll() is None, (tmp_path / "sweep.log").read_text()
+        time.sleep(0.1)
+    workers = [p for p in psutil.Process(proc.pid).children(recursive=True) if "loky" in " ".join(p.cmdline()).lower()]
+    proc.send_signal(signal.SIGTERM)  # the parent alone, not its process group
+    proc.wait(timeout=60)
+    _gone, alive = psutil.wait_procs(workers, timeout=60)
+    assert not alive, f"workers still running after their sweep's parent was killed: {alive}"
+    for n in (0, 1):
+        assert read_head(sweep / str(n) / "run.h5").status == "interrupted", n
+    done = subprocess.run(
+        [sys.executable, "-m", "higbench.cli", *args[:5], "budget.max_updates=200", *args[5:], "resume=true"],
+        cwd=tmp_path,
+        env=cli_env(),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]

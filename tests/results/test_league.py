@@ -177,13 +177,14 @@ def test_the_bootstraps_row_wise_iqm_matches_iqm():
 
 
 def test_profile_targets_come_from_the_problem_configs():
-    from higbench.results.profile import configured_targets
+    from higbench.results.targets import for_problem, of_runs
 
     runs = pd.DataFrame(
         {"problem.name": ["toy", "toy", "poisson"], "problem.targets": [(1e-2, 1e-3), None, None],
          "started": ["2026-01-01T00:00:00+0000"] * 3}
     )  # fmt: skip
-    assert configured_targets(runs) == {"toy": [1e-2, 1e-3]}  # poisson's runs predate the key: absent
+    # toy: its run's stored targets; poisson's runs predate the key: the shipped config's
+    assert of_runs(runs) == {"toy": [1e-2, 1e-3], "poisson": list(for_problem("poisson"))}
 
 
 def test_more_trials_keep_the_first_ones():

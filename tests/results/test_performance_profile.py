@@ -8,7 +8,6 @@ import pandas as pd
 import pytest
 
 from higbench.results.profile import (
-    default_targets,
     lower_median,
     parse_targets,
     performance_profile,
@@ -105,20 +104,6 @@ def test_parse_targets_and_its_errors():
     for bad in ("poisson", "poisson=", "poisson=abc", "poisson=-1", "=1"):
         with pytest.raises(ValueError, match="--targets"):
             parse_targets([bad])
-
-
-def test_default_targets_are_decades_that_separate_the_settings():
-    runs = pd.DataFrame(
-        {
-            "problem.name": ["p"] * 4,
-            "setting": ["A", "A", "B", "B"],
-            "status": ["completed"] * 4,
-            "best_test_loss": [2e-4, 3e-4, 0.05, 0.06],
-            "final_test_loss": [3e-4, 4e-4, 0.5, 0.7],
-        }
-    )
-    # lowest median best 2.5e-4 -> 1e-3 is the lowest decade reached; highest median final 0.6 -> 1e-1
-    assert default_targets(runs) == {"p": pytest.approx([1e-3, 1e-2, 1e-1])}
 
 
 def test_setting_labels_drop_seed_problem_and_budget():

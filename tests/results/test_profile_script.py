@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from higbench.results.targets import league_seconds
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
 import performance_profile as pp  # noqa: E402
@@ -30,7 +32,7 @@ def test_labels_keep_the_paper_rate_and_the_tuned_rate_and_drop_other_grid_point
                ("toy", "adam", 3.0, 0, "completed", 1e-1), ("toy", "lm", 1.0, 0, "completed", 1e-6)])  # fmt: skip
     labels = pp.label_settings(df, {"toy": 0.03})
     assert labels.isna().tolist() == [False, False, True, False]
-    assert labels.dropna().tolist() == ["Adam (paper η)", "Adam (re-tuned η)", "LM"]
+    assert labels.dropna().tolist() == ["Adam (paper η)", "Adam (re-tuned η)", "Levenberg-Marquardt"]
 
 
 def test_a_paper_rate_that_wins_the_tuning_stands_for_both_adam_settings():
@@ -42,7 +44,16 @@ def test_a_paper_rate_that_wins_the_tuning_stands_for_both_adam_settings():
 
 def test_the_first_stage_has_every_fixed_setting_and_the_grid_once():
     jobs = pp.first_stage(("toy",), (0, 1, 2))
-    assert len(jobs) == len(pp.OPTIMIZERS) * 3 + len(pp.adam_lrs("toy")) + 2
-    assert len({tuple(j) for j in jobs}) == len(jobs)
-    assert all(f"budget.seconds={pp.BUDGET_S['toy']}" in j for j in jobs)
-    assert math.isclose(pp.adam_lrs("toy")[0], pp.ADAM_PAPER_LR["toy"])
+    assert len(jobs) == len(pp.FIXED) * 3 + len(pp.adam_lrs("toy")) + 2
+    assert len({tuple(j.override_list()) for j in jobs}) == len(jobs)
+    assert all(j.overrides["budget.seconds"] == league_seconds("toy") for j in jobs)  # the problem's budget
+
+
+def test_the_paper_rates_are_the_shipped_pair_configs():
+    """Adam's paper rate is read from conf/problem_optimizer/<problem>_adam.yaml, not typed again."""
+    import yaml
+
+    for problem in pp.PROBLEMS:
+        pair = yaml.safe_load((ROOT / "conf" / "problem_optimizer" / f"{problem}_adam.yaml").read_text())
+        assert math.isclose(pp.paper_lr(problem), pair["optimizer"]["lr"]), problem
+        assert math.isclose(pp.adam_lrs(problem)[0], pair["optimizer"]["lr"])

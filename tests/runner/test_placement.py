@@ -12,6 +12,7 @@ from higbench import cli
 from higbench.runfile.reader import load_weights
 from higbench.runner import placement
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 
 CPU, CUDA = torch.device("cpu"), torch.device("cuda")
 
@@ -73,8 +74,8 @@ def test_auto_records_its_choice_and_the_run_equals_the_one_on_that_device(tmp_p
     monkeypatch.setattr(train_mod, "_update_cost", cost)
     threads = torch.get_num_threads()
     try:
-        train_mod.train(config("device=auto"), tmp_path / "auto.h5")
-        train_mod.train(config("device=cpu"), tmp_path / "cpu.h5")
+        train_mod.train(Plan.for_run(config("device=auto"), tmp_path / "auto.h5"))
+        train_mod.train(Plan.for_run(config("device=cpu"), tmp_path / "cpu.h5"))
     finally:
         torch.set_num_threads(threads)
     assert measured == ["cpu", "cuda"]

@@ -12,6 +12,7 @@ from hydra import compose, initialize_config_dir
 from higbench import cli
 from higbench.runfile.reader import load_run, load_weights
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 
 
 def config(optimizer):
@@ -27,7 +28,7 @@ def config(optimizer):
 def test_interrupted_and_resumed_equals_uninterrupted(optimizer, tmp_path, monkeypatch):
     threads = torch.get_num_threads()
     try:
-        train_mod.train(config(optimizer), tmp_path / "a.h5")
+        train_mod.train(Plan.for_run(config(optimizer), tmp_path / "a.h5"))
         real = train_mod.build_update
 
         def build(problem, model, opt_cfg):
@@ -45,10 +46,10 @@ def test_interrupted_and_resumed_equals_uninterrupted(optimizer, tmp_path, monke
             return Interrupting()
 
         monkeypatch.setattr(train_mod, "build_update", build)
-        stopped = train_mod.train(config(optimizer), tmp_path / "b.h5")
+        stopped = train_mod.train(Plan.for_run(config(optimizer), tmp_path / "b.h5"))
         monkeypatch.setattr(train_mod, "build_update", real)
         assert stopped.status == "interrupted" and stopped.steps == 3
-        resumed = train_mod.train(config(optimizer), tmp_path / "b.h5", resume=True)
+        resumed = train_mod.train(Plan.for_run(config(optimizer), tmp_path / "b.h5", resume=True))
     finally:
         torch.set_num_threads(threads)
     assert resumed.status == "completed" and resumed.steps == 8

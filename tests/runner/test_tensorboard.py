@@ -10,6 +10,7 @@ from hydra import compose, initialize_config_dir
 from higbench import cli
 from higbench.errors import ConfigError
 from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
 
 
 def config(*overrides):
@@ -28,7 +29,7 @@ def test_event_files_hold_curves_and_phase_times(optimizer, tmp_path):
 
     threads = torch.get_num_threads()
     try:
-        train_mod.train(config(f"optimizer={optimizer}", "tensorboard=true"), tmp_path / "run.h5")
+        train_mod.train(Plan.for_run(config(f"optimizer={optimizer}", "tensorboard=true"), tmp_path / "run.h5"))
     finally:
         torch.set_num_threads(threads)
     acc = EventAccumulator(str(tmp_path / "tensorboard"))
@@ -43,5 +44,5 @@ def test_event_files_hold_curves_and_phase_times(optimizer, tmp_path):
 def test_missing_package_is_one_line_before_anything_is_written(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # import fails as if not installed
     with pytest.raises(ConfigError, match=r"needs the tensorboard package: pip install"):
-        train_mod.preflight(config("optimizer=adam", "tensorboard=true"))
+        train_mod.check_build(config("optimizer=adam", "tensorboard=true"))
     assert not list(tmp_path.iterdir())

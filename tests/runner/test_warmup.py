@@ -10,6 +10,7 @@ from higbench import cli
 from higbench.runfile.reader import load_weights
 from higbench.runner import train as train_mod
 from higbench.runner import warmup
+from higbench.runner.plan import Plan
 
 
 def config(*overrides):
@@ -26,9 +27,9 @@ def test_warm_up_changes_nothing_but_is_recorded(optimizer, tmp_path, monkeypatc
     cfg = config("problem=oscillator", "problem.steps=8", "batch_size=8", f"optimizer={optimizer}")
     threads = torch.get_num_threads()
     try:
-        train_mod.train(cfg, tmp_path / "a.h5")
-        monkeypatch.setattr(train_mod, "warm_up", lambda problem, jacobian: 0.0)
-        train_mod.train(cfg, tmp_path / "b.h5")
+        train_mod.train(Plan.for_run(cfg, tmp_path / "a.h5"))
+        monkeypatch.setattr(train_mod, "warm_up", lambda problem, model, jacobian: 0.0)
+        train_mod.train(Plan.for_run(cfg, tmp_path / "b.h5"))
     finally:
         torch.set_num_threads(threads)
     a, b = load_weights(tmp_path / "a.h5"), load_weights(tmp_path / "b.h5")
@@ -46,5 +47,5 @@ def test_warm_up_calls_the_solver_each_way(monkeypatch):
     real = warmup.solver_jacobian
     monkeypatch.setattr(warmup, "solver_jacobian", lambda *a: calls.append("jacobian") or real(*a))
     state = torch.get_rng_state()
-    assert warmup.warm_up(problem, jacobian=True) > 0
+    assert warmup.warm_up(problem, problem.build_model(), jacobian=True) > 0
     assert calls == ["jacobian"] and torch.equal(torch.get_rng_state(), state)

@@ -1,0 +1,59 @@
+"""The run file records the final evaluation's test loss sample by sample (/final/test_losses):
+their mean is the curve's last test loss, so a median or a percentile of the same evaluation
+can be read without training again."""
+
+import numpy as np
+import torch
+from hydra import compose, initialize_config_dir
+
+from higbench.config import config_dir
+from higbench.results.index import read_run_summary
+from higbench.runfile.reader import load_final, load_run
+from higbench.runner import train as train_mod
+from higbench.runner.plan import Plan
+
+
+def config(*overrides):
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        return compose(
+            "config",
+            overrides=["problem=toy", "optimizer=adam", "budget.max_updates=5", "budget.seconds=null", "eval_unit=updates",
+                       "eval_every=2", "threads=1", "progress=false", "checkpoint_every=null", *overrides],
+        )  # fmt: skip
+
+
+def test_final_per_sample_losses_average_to_the_last_test_loss(tmp_path):
+    threads = torch.get_num_threads()
+    try:
+        train_mod.train(Plan.for_run(config("problem.test_size=300"), tmp_path / "run.h5"))
+    finally:
+        torch.set_num_threads(threads)
+    final = load_final(tmp_path / "run.h5")
+    _meta, curves = load_run(tmp_path / "run.h5")
+    losses = final["test_losses"]
+    assert losses.shape == (300,) and losses.dtype == np.float64 and (losses >= 0).all()
+    assert np.isclose(losses.mean(), curves["test_loss"].iloc[-1], rtol=1e-12, atol=0)
+    assert losses.std() > 0  # one value per sample, not the mean repeated
+    row, _ = read_run_summary(tmp_path / "run.h5")  # the index's robust view of the same evaluation
+    assert row["final_test_median"] == np.median(losses) and row["final_test_p95"] == np.percentile(losses, 95)
+
+
+def test_a_run_without_a_final_evaluation_has_no_final_record(tmp_path, monkeypatch):
+    import signal
+
+    from higbench.runner.train import StopSignals
+
+    original = StopSignals.check
+
+    def stop_now(self):  # as a SIGTERM before the first update: interrupted, no final evaluation
+        self.signum = signal.SIGTERM
+        original(self)
+
+    monkeypatch.setattr(StopSignals, "check", stop_now)
+    threads = torch.get_num_threads()
+    try:
+        summary = train_mod.train(Plan.for_run(config(), tmp_path / "run.h5"))
+    finally:
+        torch.set_num_threads(threads)
+    assert summary.status == "interrupted"
+    assert load_final(tmp_path / "run.h5") == {}
