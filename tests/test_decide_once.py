@@ -141,6 +141,7 @@ def test_the_front_door_keeps_no_module_level_mutable_state():
     assert state == [], state
 
 
+@pytest.mark.process  # a fresh interpreter: what importing does, before anything else ran
 def test_importing_the_readers_registers_nothing_with_hydra():
     probe = (
         "import higbench.results.index, higbench.runner.train, higbench.runner.plan\n"
