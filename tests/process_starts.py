@@ -107,8 +107,6 @@ def pytest_runtest_protocol(item, nextitem):
     try:
         yield
     finally:
-        if _current:
-            _by_test[item.nodeid] = (_current, item.get_closest_marker("slow") is not None)
         _current = None
 
 
@@ -116,14 +114,24 @@ def pytest_runtest_protocol(item, nextitem):
 def pytest_runtest_makereport(item, call):
     outcome = yield
     report = outcome.get_result()
-    unmarked = item.get_closest_marker("process") is None and item.get_closest_marker("slow") is None
-    if ENFORCE and call.when == "teardown" and _current and unmarked and report.passed:
+    if call.when != "teardown" or not _current:
+        return
+    slow = item.get_closest_marker("slow") is not None
+    report.user_properties.append(("process_starts", [dict(_current), slow]))  # to the summary (also from xdist's workers)
+    if ENFORCE and item.get_closest_marker("process") is None and not slow and report.passed:
         report.outcome = "failed"
         started = ", ".join(f"{n} x {program}" for program, n in sorted(_current.items()))
         report.longrepr = (
             f"{item.nodeid} started processes ({started}) but is not marked `process`: call higbench.cli.main(argv) "
             "in this process (the `higbench` fixture), or mark it @pytest.mark.process where the process is the point"
         )
+
+
+def pytest_runtest_logreport(report):
+    for name, value in getattr(report, "user_properties", ()):
+        if name == "process_starts":
+            counts, slow = value
+            _by_test[report.nodeid] = (Counter(counts), bool(slow))
 
 
 def _over_budget() -> list[str]:
