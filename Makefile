@@ -50,9 +50,11 @@ run: install
 # Default test suite (no test marked slow); CI runs this through .ci/run. Tests marked
 # `optuna` are skipped, with the reason shown, unless the optuna extra is installed. Its last
 # lines say how many tests started processes (tests/process_starts.py; at most 15, each marked
-# `process`); PYTEST_ARGS=--process-starts lists them.
+# `process`); PYTEST_ARGS=--process-starts lists them. TEST_WORKERS pytest-xdist workers, one
+# test file each at a time (a file's module fixtures are made once); TEST_WORKERS=0: in one process.
+TEST_WORKERS ?= 2
 test: install-dev
-	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist loadfile $(PYTEST_ARGS)
 
 test-slow: install-dev
 	$(BIN)/python -m pytest -q -m slow $(PYTEST_ARGS)
