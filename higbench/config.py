@@ -30,6 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.errors import ConfigError, dotted_get, show
+from higbench.optim.contract import needs_inverse_simulator
 from higbench.schema import check, keys_where, locate, value
 
 __all__ = ["ConfigError", "show", "validate", "RunConfig", "Budget", "to_plain", "check_hydra_references"]
@@ -172,7 +173,7 @@ def validate(cfg: DictConfig | dict) -> None:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
             raise ConfigError("batch_size", top["batch_size"], why)
     check_optimizer(data.get("optimizer"), device)
-    if getattr(optimizer_class(data["optimizer"]), "needs_inverse_simulator", False):  # SIP
+    if needs_inverse_simulator(optimizer_class(data["optimizer"])):  # SIP
         if not problem_class(data["problem"]).has_inverse_simulator():
             name = data["optimizer"].get("name", data["optimizer"]["_target_"])
             raise ConfigError("optimizer", name, f"problem {problem['name']} has no inverse simulator")
