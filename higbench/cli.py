@@ -312,11 +312,12 @@ def sweep_resume_command() -> str:
 def summary_lines(summary, cfg: DictConfig) -> list[str]:
     """The end-of-run lines, read back from the closed run file (the numbers the index shows)."""
     from higbench.results.index import read_run_summary, threshold_column
-    from higbench.runner.progress import job_label, summary_thresholds
+    from higbench.results.targets import for_problem
+    from higbench.runner.progress import job_label
 
     label = job_label()
     head = f"{label}{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in {summary.wall_time:.1f}s"
-    thresholds = summary_thresholds(summary.initial_test_loss)  # relative to where the loss started
+    thresholds = for_problem(cfg)  # the problem's targets (problem.targets), as the index times them
     row, _ = read_run_summary(summary.path, thresholds=thresholds)  # never raises
     if "final_test_loss" not in row:  # an unreadable file: say what the loop knew
         row["final_test_loss"] = summary.final_test_loss

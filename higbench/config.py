@@ -30,6 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.errors import ConfigError, dotted_get, show
+from higbench.optim.contract import needs_inverse_simulator
 from higbench.schema import check, keys_where, locate, value
 
 __all__ = ["ConfigError", "show", "validate", "RunConfig", "Budget", "to_plain", "check_hydra_references"]
@@ -106,10 +107,13 @@ def flat_dirname(name: str) -> str:
 
 def register_with_hydra() -> None:
     """What conf/config.yaml needs from Python: the schema (``higbench_schema``, first in its
-    defaults) and the ``higbench.flat_dirname`` resolver of its sweep subdir. Idempotent.
+    defaults), the ``higbench.flat_dirname`` resolver of its sweep subdir and the keys a job's
+    directory name leaves out (``higbench.job_dir_excluded_keys``, from the schema). Idempotent.
     Hydra hands both to its launchers' workers with its other global state."""
     ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
     OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
+    # hydra.job.config.override_dirname.exclude_keys: the keys the schema keeps out of job names
+    OmegaConf.register_new_resolver("higbench.job_dir_excluded_keys", lambda: list(JOB_DIR_EXCLUDED_KEYS), replace=True)
 
 
 def config_dir() -> str:
@@ -172,7 +176,7 @@ def validate(cfg: DictConfig | dict) -> None:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
             raise ConfigError("batch_size", top["batch_size"], why)
     check_optimizer(data.get("optimizer"), device)
-    if getattr(optimizer_class(data["optimizer"]), "needs_inverse_simulator", False):  # SIP
+    if needs_inverse_simulator(optimizer_class(data["optimizer"])):  # SIP
         if not problem_class(data["problem"]).has_inverse_simulator():
             name = data["optimizer"].get("name", data["optimizer"]["_target_"])
             raise ConfigError("optimizer", name, f"problem {problem['name']} has no inverse simulator")

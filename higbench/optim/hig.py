@@ -74,7 +74,7 @@ class JacobianPower(torch.optim.Optimizer, StepReporter):
         jacobian: "structured" (solver and network differentiated apart, see
             ``higbench.optim.structured``) or "naive" (torch.func Jacobian through
             network and solver per sample, J always materialised; the reference). Used by
-            ``step_structured`` (which the runner calls); ``step`` follows its closure.
+            ``step`` given a ``LossClosure`` (what the runner passes) and ``step_structured``.
         krylov_steps: solver="krylov": most Lanczos steps per update (memory rows x steps).
         krylov_tol: solver="krylov": stop early once the estimated relative error of the
             direction is below it (0: always take krylov_steps).
@@ -313,7 +313,7 @@ class JacobianPower(torch.optim.Optimizer, StepReporter):
         closure, one of:
 
         * a ``LossClosure`` (``higbench.optim.closure``): the network, solver and per-sample
-          loss as pieces; the fast path of ``step_structured`` (what the runner uses).
+          loss as pieces, taken by the structured fast path (what the runner passes).
         * a callable returning ``(y, loss)``: y the per-sample physical outputs (b, ...)
           computed from the parameters with autograd enabled, loss the per-sample losses
           (b,) or their scalar mean. Every row of J is one batched reverse pass through

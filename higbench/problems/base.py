@@ -28,8 +28,8 @@ Optional, each with a default that means "not declared":
   Jacobian-power optimizers then differentiate through it generically).
 * ``metrics(y, batch)``, ``eval_logs(model)``, ``val_set()``: extra curves and arrays.
 
-What the problem is judged by lives in its YAML file and is read through the problem (or,
-from a recorded config, through ``targets_of`` and ``league_seconds_of``):
+What the problem is judged by lives in its YAML file and is read through the problem (a
+recorded or shipped config without a problem built: ``higbench.results.targets``):
 
 * ``targets``: the test-loss targets of the time-to-target tables, the profile and the league;
 * ``league_seconds``: the league's training-clock budget per run.
@@ -191,23 +191,13 @@ class Problem(abc.ABC):
     @property
     def targets(self) -> tuple[float, ...]:
         """Test-loss targets, largest first as written (empty: the YAML names none)."""
-        return targets_of(self.cfg)
+        return tuple(float(t) for t in (self.cfg.get("targets") or ()))
 
     @property
     def league_seconds(self) -> float | None:
         """The league's training-clock budget per run (None: the YAML names none)."""
-        return league_seconds_of(self.cfg)
-
-
-def targets_of(problem_cfg) -> tuple[float, ...]:
-    """``problem.targets`` of a problem config node (composed or recorded in a run file)."""
-    return tuple(float(t) for t in (problem_cfg.get("targets") or ()))
-
-
-def league_seconds_of(problem_cfg) -> float | None:
-    """``problem.league_seconds`` of a problem config node (None where it has none)."""
-    seconds = problem_cfg.get("league_seconds")
-    return None if seconds is None else float(seconds)
+        seconds = self.cfg.get("league_seconds")
+        return None if seconds is None else float(seconds)
 
 
 class FixedDataProblem(Problem):

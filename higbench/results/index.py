@@ -193,7 +193,8 @@ def final_test_spread(per_sample: np.ndarray | None) -> dict[str, float]:
     then seen for what it is. NaN for runs that recorded none (interrupted, older files)."""
     if per_sample is None or not len(per_sample):
         return {"final_test_median": math.nan, "final_test_p95": math.nan}
-    return {"final_test_median": float(np.median(per_sample)), "final_test_p95": float(np.percentile(per_sample, 95))}
+    with np.errstate(invalid="ignore"):  # a diverged run's inf losses: inf or NaN, without a warning
+        return {"final_test_median": float(np.median(per_sample)), "final_test_p95": float(np.percentile(per_sample, 95))}
 
 
 def _summarise(

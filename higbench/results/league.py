@@ -260,7 +260,27 @@ def league_runs(runs: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds:
     done = runs[runs["status"].isin(DONE_STATUSES) & ~pd.to_numeric(runs["seed"], errors="coerce").isin(tuning_seeds)]
     if done.empty:
         return done.assign(task=pd.Series(dtype=object), league_setting=pd.Series(dtype=object))
-    return done.assign(task=done.apply(task_label, axis=1), league_setting=done.apply(lambda r: setting_label(r, spaces), axis=1))
+    labelled = done.assign(
+        task=done.apply(task_label, axis=1), league_setting=done.apply(lambda r: setting_label(r, spaces), axis=1)
+    )
+    check_one_setting_per_label(labelled)
+    return labelled
+
+
+def check_one_setting_per_label(runs: pd.DataFrame) -> None:
+    """Each (task, label) must be the seeds of one setting (``index.setting_config``): the label
+    names an optimizer, tuned or at the paper's settings, and two tuned configurations of it on
+    one task (two learning rates confirmed) would be scored as one. ValueError naming them."""
+    if "setting_config" not in runs:
+        return
+    counts = runs.groupby(["task", "league_setting"])["setting_config"].nunique()
+    mixed = counts[counts > 1]
+    if len(mixed):
+        (task, label), n = next(iter(mixed.items()))
+        raise ValueError(
+            f"task {task}: {label} has runs of {n} different settings (index.setting_config); the league scores one "
+            "configuration per optimizer and task on its confirmation seeds: keep one under the root"
+        )
 
 
 def task_targets(runs: pd.DataFrame) -> dict[str, list[float]]:

@@ -282,12 +282,14 @@ def check_no_links(out: Path, key: str) -> None:
 
 
 def check_tensorboard_dir(task: Mapping, out: Path, key: str) -> None:
-    """``tensorboard=true``: its directory in the run dir is absent or a real directory (a link
-    would take the event files elsewhere; a file or a dangling link would fail mid-run)."""
+    """TensorBoard asked for (``tensorboard=true`` or ``sink=tensorboard``): its directory in
+    the run dir is absent or a real directory (a link would take the event files elsewhere; a
+    file or a dangling link would fail mid-run)."""
+    from higbench.runner.sinks import side_sink_specs
     from higbench.runner.tensorboard import TENSORBOARD_DIR
 
     path = Path(out) / TENSORBOARD_DIR
-    if not task.get("tensorboard") or not os.path.lexists(path):
+    if "tensorboard" not in side_sink_specs(task) or not os.path.lexists(path):
         return
     if path.is_symlink():
         why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"

@@ -13,7 +13,6 @@ one ``write`` call so parallel jobs do not share a line.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 
@@ -44,17 +43,6 @@ def start_text(cfg) -> str:
     budget_text = " or ".join(b for b in budget if b) or "none"
     verb = "resuming" if cfg.get("resume") else "starting"
     return f"{cfg.problem.name}/{cfg.optimizer.name}: {verb}, batch size {cfg.batch_size}, budget {budget_text} (training clock)"
-
-
-def summary_thresholds(initial_test_loss: float) -> tuple[float, ...]:
-    """For a caller that knows only the initial test loss (not a target: no problem owns these):
-    the three decades below that loss's decade (Poisson, starting at ~440: 10, 1, 0.1; a loss
-    starting near 0.5: 1e-2, 1e-3, 1e-4). A caller with the run's config times its problem's
-    targets instead (``higbench.results.targets.for_problem(cfg)``: the problem config owns them)."""
-    if not math.isfinite(initial_test_loss) or initial_test_loss <= 0:
-        return ()
-    top = math.floor(math.log10(initial_test_loss))
-    return tuple(10.0**e for e in (top - 1, top - 2, top - 3))
 
 
 def announce(enabled: bool, text: str, transient: bool = False) -> None:

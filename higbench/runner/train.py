@@ -78,7 +78,7 @@ class RunSummary:
     final_test_loss: float
     path: Path
     reason: str = ""
-    initial_test_loss: float = math.nan  # the test loss at step 0 (the summary's thresholds are relative to it)
+    initial_test_loss: float = math.nan  # the test loss at step 0
 
 
 class TrainingClock:
@@ -281,8 +281,11 @@ def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, upda
 
 
 def check_sinks(cfg: DictConfig) -> None:
-    """The optional sinks the config asks for can be made (their package is installed)."""
-    if cfg.get("tensorboard"):
+    """The side sinks the config names import as sinks, and TensorBoard's extra is installed."""
+    from higbench.runner.sinks import check_side_sinks, side_sink_specs
+
+    check_side_sinks(cfg)
+    if "tensorboard" in side_sink_specs(cfg):
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
         summary_writer_class()

@@ -19,6 +19,7 @@ from higbench.optim.lm import LevenbergMarquardt
 from higbench.optim.sip import ScaleInvariantPhysics
 from higbench.optim.split import SplitOptimizer
 from higbench.problems.base import Problem, build_problem, registry
+from higbench.results import targets
 from higbench.runner.updates import Update, build_update
 
 PACKAGE = Path(higbench.__file__).parent
@@ -144,6 +145,8 @@ def test_every_problem_says_what_it_is_judged_by(name):
     p = build_problem(cfg.problem, dtype=torch.float64, device=torch.device("cpu"), seed=0)
     assert p.targets == tuple(cfg.problem.targets) and len(p.targets) >= 2 and list(p.targets) == sorted(p.targets, reverse=True)
     assert p.league_seconds == float(cfg.problem.league_seconds) and math.isfinite(p.league_seconds) and p.league_seconds > 0
+    # the readers of recorded and shipped configs (no problem built) agree with the problem's own
+    assert p.targets == targets.for_problem(name) and p.league_seconds == targets.league_seconds(name)
     assert p.has_inverse_simulator() == (type(p).inverse_simulator is not Problem.inverse_simulator)
 
 

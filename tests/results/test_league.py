@@ -130,10 +130,12 @@ def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line():
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
-def write_league_run(root: Path, name: str, optimizer: str, seed: int, losses, *, overrides=(), updates_per_eval=10):
+def write_league_run(root: Path, name: str, optimizer: str, seed: int, losses, *, overrides=(), updates_per_eval=10, lr=None):
     """A completed run of the toy problem whose test and validation curves are ``losses``."""
     config = {"problem": {"name": "toy", "targets": [1e-1, 1e-2]}, "optimizer": {"name": optimizer}, "seed": seed,
               "budget": {"seconds": 5.0, "max_updates": None}}  # fmt: skip
+    if lr is not None:
+        config["optimizer"]["lr"] = lr
     w = RunFileWriter(
         root / name / "run.h5", yaml.safe_dump(config), ["problem=toy", f"optimizer={optimizer}", f"seed={seed}", *overrides],
         env={"hostname": "test"}, meta={"problem": "toy", "optimizer": optimizer},
@@ -191,3 +193,14 @@ def test_more_trials_keep_the_first_ones():
     # A league run again with more trials reuses its earlier runs: the first points stay the same.
     space = league.load_space("hig")
     assert league.sobol_trials(space, 8)[:4] == league.sobol_trials(space, 4)
+
+
+def test_two_settings_under_one_league_label_are_refused(tmp_path, capsys):
+    """Two confirmed configurations of one optimizer on one task would be scored as one setting."""
+    from higbench.results.__main__ import main
+
+    for seed, lr in ((0, 0.01), (1, 0.01), (2, 0.02)):
+        write_league_run(tmp_path, f"a{seed}", "adam", seed, [1.0, 0.05], overrides=[f"optimizer.lr={lr}"], lr=lr)
+    assert main([str(tmp_path), "--league"]) == 2
+    err = capsys.readouterr().err
+    assert "task toy: adam has runs of 2 different settings" in err, err

@@ -73,17 +73,3 @@ def test_piped_by_updates_and_without_budget(monkeypatch):
         p.update(i, i * 0.1, 1.0, 1.0)
     p.close()
     assert len(out.getvalue().splitlines()) == 11
-
-
-@pytest.mark.parametrize(
-    "initial,expected",
-    [
-        (0.5, (1e-2, 1e-3, 1e-4)),
-        (440.0, (10.0, 1.0, 0.1)),  # Poisson (old: 1e-3..1e-5, never reached from ~440 on)
-        (5e-3, (1e-4, 1e-5, 1e-6)),
-        (25.0, (1.0, 0.1, 0.01)),
-        (float("nan"), ()),
-    ],
-)
-def test_summary_thresholds_are_relative_to_where_the_loss_started(initial, expected):
-    assert P.summary_thresholds(initial) == pytest.approx(expected)
