@@ -405,8 +405,36 @@ def _hydra_main(cfg: DictConfig) -> float:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry: Hydra's app; its composition errors become one line (exit 2)."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """Console-script entry: Hydra's app; its composition errors become one line (exit 2).
+
+    Called with ``argv`` (from code: a notebook, a test), it leaves the process as it found it:
+    ``sys.argv``, the SIGINT/SIGTERM handlers (a finished single run ignores them until the
+    console script exits) and torch's thread count (where torch was loaded) are put back.
+    """
+    if argv is None:
+        return _main(list(sys.argv[1:]))
+    with _process_kept():
+        return _main(list(argv))
+
+
+@contextlib.contextmanager
+def _process_kept():
+    saved_argv = list(sys.argv)
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    torch = sys.modules.get("torch")
+    threads = torch.get_num_threads() if torch is not None else None
+    try:
+        yield
+    finally:
+        sys.argv[:] = saved_argv
+        for s, handler in handlers.items():
+            if handler is not None:
+                signal.signal(s, handler)
+        if threads is not None:  # a run sets its own (``threads``)
+            torch.set_num_threads(threads)
+
+
+def _main(argv: list[str]) -> None:
     early = _refuse_early(argv)
     if early is not None:
         refuse(early)
