@@ -330,7 +330,10 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     for t in thresholds:
         value = row.get(threshold_column(t), math.nan)
         times.append(f"{t:.0e}: " + (f"{value:.1f}s" if math.isfinite(value) else "not reached"))
-    lines.append(f"{label}time to test loss " + ", ".join(times))
+    if times:
+        lines.append(f"{label}time to test loss " + ", ".join(times))
+    else:  # a problem of one's own may set none
+        lines.append(f"{label}time to test loss: the problem sets no targets (problem.targets=[1e-2,1e-3] times two)")
     lines.append(f"{label}run file: {summary.path}")
     return lines
 

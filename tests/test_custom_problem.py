@@ -46,8 +46,9 @@ def test_it_is_two_files_outside_higbench():
 
 @pytest.mark.parametrize("optimizer", ["hig", "adam", "sip"])  # sip: through its regularised inverse simulator
 def test_the_custom_problem_trains_through_the_cli(heat, tmp_path, optimizer):
-    code, _, err = heat(f"optimizer={optimizer}")
+    code, out, err = heat(f"optimizer={optimizer}")
     assert code == 0, err
+    assert "time to test loss: the problem sets no targets" in out + err  # heat.yaml sets none
     (path,) = sorted((tmp_path / "outputs").rglob("run.h5"))
     meta, curves = load_run(path)
     assert meta["status"] == "completed" and meta["problem"] == "heat" and meta["optimizer"] == optimizer
