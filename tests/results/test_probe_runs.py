@@ -5,6 +5,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
+import probe_oscillator_tail  # noqa: E402
 import probe_poisson_data  # noqa: E402
 import probe_runs  # noqa: E402
 
@@ -45,3 +46,19 @@ def test_run_missing_launches_only_what_is_not_done(monkeypatch, tmp_path):
     monkeypatch.setattr(jobs, "launch", lambda js, root, **kw: state["launched"].append(list(js)))
     left = jobs.run_missing([done, todo, waiting], tmp_path, n_jobs=1, log=lambda text: None)
     assert state["launched"] == [[todo]] and state["resolved"] == 2 and left == [waiting]
+
+
+def test_the_oscillator_tail_reads_the_final_per_sample_losses(tmp_path):
+    import numpy as np
+
+    from higbench.runfile.writer import RunFileWriter
+
+    losses = np.full(1000, 1e-8)
+    losses[-10:] = 1e-5  # ten samples carry almost all of the mean
+    w = RunFileWriter(tmp_path / "run.h5", "problem: {name: oscillator}\n", [], env={}, meta={"problem": "oscillator"})
+    w.write_final({"test_losses": losses}, 100)
+    w.close("completed", "", 100)
+    row = probe_oscillator_tail.tail_row(str(tmp_path / "run.h5"))
+    assert np.isclose(row["mean"], losses.mean()) and row["median"] == 1e-8
+    assert np.isclose(row["worst_share"], 1e-4 / (1e-4 + 990e-8)) and np.isclose(row["max_share"], 1e-5 / losses.sum())
+    assert len(probe_oscillator_tail.jobs(300)) == 6  # 3 data draws x 2 seeds
