@@ -39,6 +39,7 @@ def tail_row(path: str) -> dict[str, float]:
     """The final evaluation's per-sample losses of one run, summarised."""
     losses = np.sort(load_final(path)["test_losses"])
     return {
+        "samples": len(losses),
         "mean": losses.mean(),
         "median": np.median(losses),
         "p95": np.percentile(losses, 95),
