@@ -11,7 +11,7 @@ times the fastest (higbench.results.profile; AlgoPerf's scoring uses the same pr
 
     python scripts/performance_profile.py                      # train (~45 min on 2 cores), then report
     python scripts/performance_profile.py --report-only        # re-read outputs/profile, train nothing
-    python scripts/performance_profile.py --problems toy --seeds 0 --out /tmp/p   # a small look
+    python scripts/performance_profile.py --problems toy --seeds 0 --out outputs/profile-look   # a small look
 
 Runs go through ``higbench.jobs.run_missing`` per stage (one job-list multirun, joblib
 launcher, ``--jobs`` at once, one thread each) under ``outputs/profile/``; a run already there

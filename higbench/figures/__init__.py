@@ -1,7 +1,7 @@
 """The paper's figures and tables regenerated from run files, and a reproduction report.
 
     python -m higbench.figures all --preset quick     # `make figures`
-    python -m higbench.figures fig1 --preset smoke --runs-root /tmp/o --out /tmp/f
+    python -m higbench.figures fig1 --preset smoke --runs-root outputs/smoke --out figures-smoke
 
 Layout: ``spec`` (Figure/Sweep/Budget/presets, paper facts read from conf/), ``plot`` (the
 one plotting layer: panels as data), one module per family declaring its figures (``toy``,
