@@ -333,7 +333,7 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     if times:
         lines.append(f"{label}time to test loss " + ", ".join(times))
     else:  # a problem of one's own may set none
-        lines.append(f"{label}time to test loss: the problem sets no targets (problem.targets=[1e-2,1e-3] times two)")
+        lines.append(f"{label}time to test loss: the problem sets no targets (give some with problem.targets=[1e-2,1e-3])")
     lines.append(f"{label}run file: {summary.path}")
     return lines
 

@@ -397,20 +397,19 @@ class RunFileWriter:
             self.f[group].attrs[k] = v
 
     def write_weights(self, state: Mapping[str, np.ndarray], step: int) -> None:
-        self.check_space(sum(np.asarray(v).nbytes + 4096 for v in state.values()))
-        if "weights" in self.f:
-            del self.f["weights"]
-        g = self.f.create_group("weights")
-        g.attrs["step"] = step
-        for name, value in state.items():
-            g.create_dataset(name, data=np.asarray(value))
+        """``/weights``: the network's final weights, at ``step``."""
+        self._write_group("weights", state, step)
 
     def write_final(self, arrays: Mapping[str, np.ndarray], step: int) -> None:
         """``/final``: arrays of the final evaluation (the per-sample test losses), at ``step``."""
+        self._write_group("final", arrays, step)
+
+    def _write_group(self, group: str, arrays: Mapping[str, np.ndarray], step: int) -> None:
+        """``group`` replaced by ``arrays`` (one dataset each), its attr ``step``; space checked first."""
         self.check_space(sum(np.asarray(v).nbytes + 4096 for v in arrays.values()))
-        if "final" in self.f:
-            del self.f["final"]
-        g = self.f.create_group("final")
+        if group in self.f:
+            del self.f[group]
+        g = self.f.create_group(group)
         g.attrs["step"] = step
         for name, value in arrays.items():
             g.create_dataset(name, data=np.asarray(value))

@@ -146,27 +146,25 @@ class StopSignals:
 
 
 @torch.no_grad()
-def per_sample_losses(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> np.ndarray:
-    """The loss of each sample of ``batch`` (float64): the values whose mean ``evaluate`` reports."""
-    parts = []
-    for start in range(0, len(batch), chunk):
-        part = batch[start : start + chunk]
-        parts.append(problem.loss(problem.outputs(model, part), part.targets).double().cpu().numpy())
-    return np.concatenate(parts)
-
-
-@torch.no_grad()
-def evaluate(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> dict[str, float]:
-    """Mean test loss and extra metrics over ``batch`` (in chunks to bound memory)."""
+def evaluate_samples(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> tuple[dict, np.ndarray]:
+    """Mean test loss and extra metrics over ``batch`` (in chunks to bound memory), and the test
+    loss of each sample (float64: the values whose mean is ``test_loss``)."""
     sums: dict[str, float] = {}
+    losses = []
     for start in range(0, len(batch), chunk):
         part = batch[start : start + chunk]
         y = problem.outputs(model, part)
         values = {"test_loss": problem.loss(y, part.targets)}
         values.update({f"test_{k}": v for k, v in problem.metrics(y, part).items()})
+        losses.append(values["test_loss"].double().cpu().numpy())
         for k, v in values.items():
             sums[k] = sums.get(k, 0.0) + float(v.double().sum())
-    return {k: v / len(batch) for k, v in sums.items()}
+    return {k: v / len(batch) for k, v in sums.items()}, np.concatenate(losses)
+
+
+def evaluate(problem: Problem, model: torch.nn.Module, batch: Batch, chunk: int = 1024) -> dict[str, float]:
+    """Mean test loss and extra metrics over ``batch``."""
+    return evaluate_samples(problem, model, batch, chunk)[0]
 
 
 # -- the build, and the checks that need the network; before the run file exists ------------
@@ -366,6 +364,7 @@ class TrainingRun:
         self.epoch_start_rng = self.shuffle.get_state()
         self.resumed = state is not None
         self.initial_test_loss = math.nan
+        self.test_losses: np.ndarray | None = None  # of the last evaluation, sample by sample (the file's /final)
         if state is not None:
             self._restore(state)
         self.last_ckpt = clock()
@@ -398,7 +397,7 @@ class TrainingRun:
         self.clock.pause()
         self.last_eval_step = self.step
         self.model.eval()
-        metrics = evaluate(self.problem, self.model, self.test)
+        metrics, self.test_losses = evaluate_samples(self.problem, self.model, self.test)
         if self.val is not None:
             metrics["val_loss"] = evaluate(self.problem, self.model, self.val)["test_loss"]
         self.model.train()
@@ -520,12 +519,14 @@ class TrainingRun:
         writer.write_weights({k: v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}, self.step)
         writer.f.attrs["steps"] = self.step
         writer.f.attrs["wall_time"] = self.clock()
-        # The final evaluation's test loss sample by sample (outside the clock: it stopped
-        # above): a few samples can carry most of a mean (the oscillator's heavy tail), and
-        # the median or a percentile are then read from the file without training again.
+        # The final evaluation's test loss sample by sample (kept by ``record_evaluation``): a few
+        # samples can carry most of a mean (the oscillator's heavy tail), and the median or a
+        # percentile are then read from the file without training again.
         if status in ("completed", "diverged"):  # an interrupted run has no final evaluation yet
-            self.model.eval()
-            writer.write_final({"test_losses": per_sample_losses(self.problem, self.model, self.test)}, self.step)
+            if self.test_losses is None:  # resumed with nothing left to do: its last evaluation was another process's
+                self.model.eval()
+                self.test_losses = evaluate_samples(self.problem, self.model, self.test)[1]
+            writer.write_final({"test_losses": self.test_losses}, self.step)
         writer.check_file()
         self.sinks.close(status, reason, self.step)
 

@@ -124,18 +124,7 @@ def test_ctrl_c_in_a_joblib_sweep_loses_no_job(tmp_path):
     assert lines, err
     command = shlex.split(lines[-1].split(": ", 1)[1])
     assert command[0] == "higbench"
-    done = subprocess.run(
-        [sys.executable, "-m", "higbench.cli", *command[1:]],
-        cwd=tmp_path,
-        env=cli_env(),
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr[-3000:]
-    for n in (0, 1):
-        head = read_head(sweep / str(n) / "run.h5")
-        assert head.status == "completed" and head.n_updates >= 400, (n, head.status, done.stderr[-2000:])
+    _complete_sweep(tmp_path, sweep, command[1:], updates=400)
 
 
 def test_the_job_list_sweeper_is_found_without_the_figures_launcher(higbench, tmp_path):
@@ -195,12 +184,16 @@ def test_sigterm_to_a_joblib_sweeps_parent_alone_leaves_no_worker_training(tmp_p
     assert not alive, f"workers still running after their sweep's parent was killed: {alive}"
     for n in (0, 1):
         assert read_head(sweep / str(n) / "run.h5").status == "interrupted", n
+    _complete_sweep(tmp_path, sweep, [*args, "budget.max_updates=200", "resume=true"], updates=200)
+
+
+def _complete_sweep(tmp_path: Path, sweep: Path, argv: list[str], updates: int) -> None:
+    """Run ``higbench argv`` (the sweep's completing command) as a process: exit 0, and both jobs
+    completed with at least ``updates`` updates."""
     done = subprocess.run(
-        [sys.executable, "-m", "higbench.cli", *args[:5], "budget.max_updates=200", *args[5:], "resume=true"],
-        cwd=tmp_path,
-        env=cli_env(),
-        capture_output=True,
-        text=True,
-        timeout=600,
+        [sys.executable, "-m", "higbench.cli", *argv], cwd=tmp_path, env=cli_env(), capture_output=True, text=True, timeout=600
     )
     assert done.returncode == 0, done.stderr[-3000:]
+    for n in (0, 1):
+        head = read_head(sweep / str(n) / "run.h5")
+        assert head.status == "completed" and head.n_updates >= updates, (n, head.status, done.stderr[-2000:])

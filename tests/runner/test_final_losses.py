@@ -57,3 +57,34 @@ def test_a_run_without_a_final_evaluation_has_no_final_record(tmp_path, monkeypa
         torch.set_num_threads(threads)
     assert summary.status == "interrupted"
     assert load_final(tmp_path / "run.h5") == {}
+
+
+def test_a_run_resumed_with_nothing_left_records_its_last_evaluation_per_sample(tmp_path, monkeypatch):
+    """Stopped right after an evaluation, resumed with a budget it already met: no evaluation in
+    the resuming process, so the per-sample record is computed from the restored network."""
+    import signal
+
+    from higbench.runner.train import StopSignals
+
+    original, turns = StopSignals.check, {"n": 0}
+
+    def stop_at_third(self):
+        turns["n"] += 1
+        if turns["n"] == 3:  # after 2 updates, each evaluated (eval_every=1 update)
+            self.signum = signal.SIGTERM
+        original(self)
+
+    threads = torch.get_num_threads()
+    try:
+        with monkeypatch.context() as m:
+            m.setattr(StopSignals, "check", stop_at_third)
+            stopped = train_mod.train(Plan.for_run(config("eval_every=1", "checkpoint_every=1000"), tmp_path / "run.h5"))
+        assert stopped.status == "interrupted" and stopped.steps == 2
+        resumed = train_mod.train(Plan.for_run(config("eval_every=1", "budget.max_updates=2"), tmp_path / "run.h5", resume=True))
+    finally:
+        torch.set_num_threads(threads)
+    assert resumed.status == "completed" and resumed.steps == 2
+    _meta, curves = load_run(tmp_path / "run.h5")
+    losses = load_final(tmp_path / "run.h5")["test_losses"]
+    assert list(curves["step"]) == [0, 1, 2]  # nothing evaluated again on resume
+    assert np.isclose(losses.mean(), curves["test_loss"].iloc[-1], rtol=1e-12, atol=0)
