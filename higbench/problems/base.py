@@ -68,6 +68,10 @@ class ProblemConfig:
     # identity, results.index.config_id). The validation set is drawn after train and test, so
     # those draws stay what every earlier run had; 0: no validation curve.
     val_size: int = value(0, ge=0, identity=False)
+    # A second, large test draw (after every other set) evaluated once, at the end of a run
+    # (the file's /final/fresh_test_losses): a mean over one finite test set can rest on a few
+    # samples (the oscillator's heavy tail); 0: none.
+    fresh_test_size: int = value(0, ge=0, identity=False)
     # What the problem is judged by (the league, the profile, the progress line): test-loss targets,
     # the league's budget in training-clock seconds, and the held-out variants the league never tunes on
     # (each an override list, e.g. "problem.gamma=0.001").
@@ -183,6 +187,22 @@ class Problem(abc.ABC):
         Tuning reads only its curve (``val_loss``); the test loss is read for the table."""
         return getattr(self, "val", None)
 
+    def fresh_test_set(self) -> Batch | None:
+        """``problem.fresh_test_size`` samples drawn from ``data_seed``'s generator after every
+        other set (so those stay as they were), drawn when asked: the run evaluates it once, at
+        its end. None when the size is 0 or the problem keeps no generator state to draw from."""
+        n = int(self.cfg.get("fresh_test_size") or 0)
+        state = getattr(self, "_state_after_draws", None)
+        if not n or state is None:
+            return None
+        gen = torch.Generator()
+        gen.set_state(state)
+        return self._sample(n, gen)
+
+    def keep_fresh_draw(self, gen: torch.Generator) -> None:
+        """Remember ``gen`` after the last fixed set was drawn: ``fresh_test_set`` draws from there."""
+        self._state_after_draws = gen.get_state()
+
     def eval_logs(self, model: nn.Module) -> dict[str, np.ndarray]:
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
         return {}
@@ -221,6 +241,7 @@ class FixedDataProblem(Problem):
         self.train = self._sample(int(self.cfg.train_size), gen)
         self.test = self._sample(int(self.cfg.test_size), gen)
         self.val = draw_validation(self, gen)
+        self.keep_fresh_draw(gen)
 
     def train_size(self) -> int:
         return len(self.train)

@@ -53,6 +53,7 @@ class Poisson(Problem):
         gen = torch.Generator().manual_seed(int(cfg.data_seed))
         self.test = self._sample(int(cfg.test_size), gen)
         self.val = draw_validation(self, gen)
+        self.keep_fresh_draw(gen)
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         phi = sample_potential(n, gen, n=self.n, modes=int(self.cfg.modes), dtype=torch.float64, data=str(self.cfg.data))

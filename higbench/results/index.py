@@ -187,14 +187,20 @@ _CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  #
 _UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
 
 
-def final_test_spread(per_sample: np.ndarray | None) -> dict[str, float]:
+def final_test_spread(per_sample: np.ndarray | None, fresh: np.ndarray | None = None) -> dict[str, float]:
     """The final evaluation's test losses sample by sample (/final/test_losses) as a median
-    and a 95th percentile: a mean carried by a few samples (the oscillator's heavy tail) is
-    then seen for what it is. NaN for runs that recorded none (interrupted, older files)."""
-    if per_sample is None or not len(per_sample):
-        return {"final_test_median": math.nan, "final_test_p95": math.nan}
+    and a 95th percentile, and the mean over the problem's large fresh draw
+    (/final/fresh_test_losses, ``problem.fresh_test_size``): a mean carried by a few samples (the
+    oscillator's heavy tail) is then seen for what it is. NaN for runs that recorded none
+    (interrupted, older files, problems without a fresh draw)."""
+    row = {"final_test_median": math.nan, "final_test_p95": math.nan, "final_fresh_mean": math.nan}
     with np.errstate(invalid="ignore"):  # a diverged run's inf losses: inf or NaN, without a warning
-        return {"final_test_median": float(np.median(per_sample)), "final_test_p95": float(np.percentile(per_sample, 95))}
+        if per_sample is not None and len(per_sample):
+            row["final_test_median"] = float(np.median(per_sample))
+            row["final_test_p95"] = float(np.percentile(per_sample, 95))
+        if fresh is not None and len(fresh):
+            row["final_fresh_mean"] = float(np.mean(fresh))
+    return row
 
 
 def _summarise(
@@ -276,7 +282,8 @@ def _summarise(
         for t in thresholds:
             row[threshold_column(t)] = math.nan
 
-    row.update(final_test_spread(run.tables.get("final", {}).get("test_losses")))
+    final = run.tables.get("final", {})
+    row.update(final_test_spread(final.get("test_losses"), final.get("fresh_test_losses")))
 
     raw = run.tables.get("updates", {})
     # Spectrum columns cut apart: they may be shorter than the timings (a file from before they
@@ -306,7 +313,7 @@ def read_run_summary(
     thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets)."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
-    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": ("test_losses",)}
+    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": ("test_losses", "fresh_test_losses")}
     try:
         summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
         note = summary.pop("curves_note", "")

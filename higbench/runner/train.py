@@ -523,10 +523,14 @@ class TrainingRun:
         # samples can carry most of a mean (the oscillator's heavy tail), and the median or a
         # percentile are then read from the file without training again.
         if status in ("completed", "diverged"):  # an interrupted run has no final evaluation yet
+            self.model.eval()
             if self.test_losses is None:  # resumed with nothing left to do: its last evaluation was another process's
-                self.model.eval()
                 self.test_losses = evaluate_samples(self.problem, self.model, self.test)[1]
-            writer.write_final({"test_losses": self.test_losses}, self.step)
+            final = {"test_losses": self.test_losses}
+            fresh = self.problem.fresh_test_set()  # problem.fresh_test_size: a large second draw, once
+            if fresh is not None:
+                final["fresh_test_losses"] = evaluate_samples(self.problem, self.model, fresh)[1]
+            writer.write_final(final, self.step)
         writer.check_file()
         self.sinks.close(status, reason, self.step)
 
