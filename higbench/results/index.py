@@ -313,7 +313,8 @@ def read_run_summary(
     thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets)."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
-    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": ("test_losses", "fresh_test_losses")}
+    final = ("test_losses", "fresh_test_losses")
+    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": final}
     try:
         summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
         note = summary.pop("curves_note", "")
