@@ -444,11 +444,7 @@ def _main(argv: list[str]) -> None:
     argv = _flags_first(argv)
     if {"-m", "--multirun"} & set(argv) and {"-c", "--cfg"} & set(argv):
         return _print_sweep_configs(argv)
-    from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
-
-    # Hydra's plugin scan misses hydra_plugins/ of an editable install: register the job-list
-    # sweeper ourselves (tests/figures/test_figures_units.py::test_joblist_sweeper_runs_a_job_list).
-    register()
+    config_dir()  # registers the schema, resolvers and sweepers (the module's import did once; a test may have cleared them)
     # Hydra's documented switch: with it Hydra raises its composition errors instead of printing
     # a traceback hint and exiting 1, so they become one line, exit 2 (tests/reliability/test_bad_config.py)
     full_error = os.environ.get("HYDRA_FULL_ERROR")
@@ -459,6 +455,8 @@ def _main(argv: list[str]) -> None:
 
 def _run(argv: list[str], full_error: str | None) -> None:
     """Hydra's app until done (run again where a problem's own key needs ``++``); its ends as lines."""
+    from hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper import SweepFailed
+
     try:
         with output_never_fails():  # `higbench ... | head -3`: the output stops, the training goes on
             while argv is not None:
@@ -466,6 +464,8 @@ def _run(argv: list[str], full_error: str | None) -> None:
     except RecursionError:
         value = given_value(argv, "hydra.run.dir") or "?"
         refuse(ConfigError("hydra.run.dir", value, "nested too deep (Python's recursion limit)"))
+    except SweepFailed as exc:  # the sweeper ran every job, then raised the first failure
+        _sweep_failed(exc.first, exc.failed, exc.jobs)
     except JobFailed as exc:
         _sweep_failed(exc)
     except KeyboardInterrupt:  # between a sweep's jobs, or before a run installed its handler
@@ -502,9 +502,10 @@ def _run_app(argv: list[str]) -> list[str] | None:
     return None
 
 
-def _sweep_failed(exc: BaseException) -> None:
+def _sweep_failed(exc: BaseException, failed: int | None = None, jobs: int | None = None) -> None:
     """A sweep with a failed job exits 1 and says how many failed (the others ran to their end)."""
-    failed, jobs = invocation().failed, invocation().jobs
+    failed = invocation().failed if failed is None else failed
+    jobs = invocation().jobs if jobs is None else jobs
     count = f"{failed} of {jobs} sweep jobs failed" if failed else "a sweep job failed"
     first = " ".join(str(exc).split())
     again = "resume=true with the same hydra.sweep.dir runs them again"

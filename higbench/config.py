@@ -107,13 +107,19 @@ def flat_dirname(name: str) -> str:
 
 def register_with_hydra() -> None:
     """What conf/config.yaml needs from Python: the schema (``higbench_schema``, first in its
-    defaults), the ``higbench.flat_dirname`` resolver of its sweep subdir and the keys a job's
+    defaults), higbench's sweepers, the ``higbench.flat_dirname`` resolver of its sweep subdir and the keys a job's
     directory name leaves out (``higbench.job_dir_excluded_keys``, from the schema). Idempotent.
     Hydra hands both to its launchers' workers with its other global state."""
     ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
     OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
     # hydra.job.config.override_dirname.exclude_keys: the keys the schema keeps out of job names
     OmegaConf.register_new_resolver("higbench.job_dir_excluded_keys", lambda: list(JOB_DIR_EXCLUDED_KEYS), replace=True)
+    # Its sweepers (the default hydra/sweeper=higbench_basic, and joblist): Hydra's plugin scan
+    # misses hydra_plugins/ of an editable install (tests/figures/test_figures_units.py::
+    # test_joblist_sweeper_runs_a_job_list).
+    from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register
+
+    register()
 
 
 def config_dir() -> str:

@@ -257,6 +257,19 @@ def job_seconds(job: Job) -> float:
     return float(job.overrides.get("budget.max_updates") or 1)
 
 
+def training_text(jobs: Sequence[Job]) -> str:
+    """What the jobs have left to train, as a line says it: seconds where budgets are seconds,
+    updates where they are updates (their seconds are not known before they run)."""
+    seconds = [job_seconds(j) for j in jobs if j.overrides.get("budget.seconds") is not None]
+    updates = [int(j.overrides["budget.max_updates"]) for j in jobs
+               if j.overrides.get("budget.seconds") is None and j.overrides.get("budget.max_updates") is not None]  # fmt: skip
+    parts = [f"~{sum(seconds):.0f} s of training"] if seconds else []
+    parts += [f"{sum(updates):,} updates"] if updates else []
+    if len(seconds) + len(updates) < len(jobs):
+        parts.append(f"{len(jobs) - len(seconds) - len(updates)} on the problem's default budget")
+    return " and ".join(parts)
+
+
 def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print) -> list[Path]:
     """Run the jobs as one ``higbench -m`` multirun over their list, longest first, on the
     Hydra launcher (``Launcher``, or the name of one); returns the run files written. With
@@ -273,7 +286,7 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     figures = ", ".join(sorted({j.figure for j in jobs}))
     resumed = [j.resume_from for j in jobs if j.resume_from is not None]
     again = f", {len(resumed)} resumed in place" if resumed else ""
-    log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}{again}, ~{secs:.0f} s of training) -> {sweep_dir}")
+    log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}{again}, {training_text(jobs)}) -> {sweep_dir}")
     env = dict(os.environ)  # the checkout on the path: higbench and its hydra_plugins (the job-list sweeper)
     env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
     t0 = time.perf_counter()

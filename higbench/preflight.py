@@ -145,6 +145,13 @@ def _compose_plain(overrides: list[str]) -> dict:
         return OmegaConf.to_container(compose("config", overrides=overrides), resolve=False)
 
 
+def is_basic_sweeper(config: DictConfig) -> bool:
+    """Whether the sweep crosses its overrides as Hydra's basic sweeper does (higbench's
+    default, ``higbench_basic``, is that sweeper with every batch run)."""
+    target = str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
+    return target.endswith(("BasicSweeper", "EveryBatchSweeper"))
+
+
 def sweep_jobs(config: DictConfig) -> list[list[str]]:
     """Override lists of the jobs a multirun launches: all of them for Hydra's basic sweeper
     (its ``params`` and the command line's comma lists, crossed), the first one for others
@@ -152,7 +159,7 @@ def sweep_jobs(config: DictConfig) -> list[list[str]]:
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     lines = list(config.hydra.overrides.task)
-    basic = "BasicSweeper" in str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
+    basic = is_basic_sweeper(config)
     params = OmegaConf.select(config, "hydra.sweeper.params", default=None) if basic else None
     if params is not None:
         lines = [f"{k}={v}" for k, v in OmegaConf.to_container(params, resolve=False).items()] + lines
@@ -312,7 +319,7 @@ def launched_together(config: DictConfig, listed: int) -> int | None:
     the joblist sweeper its whole file (``sweep_jobs`` lists only the command line's job for
     it); None where unknown before the sweep (Optuna asks for its trials as it goes)."""
     target = str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
-    if "BasicSweeper" in target:
+    if is_basic_sweeper(config):
         batch = OmegaConf.select(config, "hydra.sweeper.max_batch_size", default=None)
         return min(listed, int(batch)) if batch else listed
     if "JobListSweeper" in target:

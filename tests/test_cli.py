@@ -211,6 +211,23 @@ def test_a_sweep_with_a_failed_job_exits_1_and_says_how_many(higbench, monkeypat
     assert code == 1 and "1 of 3 sweep jobs failed" in err, err
 
 
+def test_a_failed_job_does_not_stop_the_later_batches(higbench, monkeypatch, tmp_path):
+    """Hydra's basic sweeper raised a failure after its batch, so with max_batch_size the later
+    batches never ran; higbench's default sweeper runs them all, then says how many failed."""
+    ran = []
+    fake = _fake_train("completed", fail_for="adam")
+
+    def train(plan):
+        ran.append(plan.config["optimizer"]["name"])
+        return fake(plan)
+
+    monkeypatch.setattr("higbench.runner.train.train", train)
+    batches = ["hydra.sweeper.max_batch_size=1", f"hydra.sweep.dir={tmp_path / 'sw'}"]
+    code, _, err = higbench("-m", "optimizer=adam,hig,sgd", *batches)
+    assert code == 1 and "1 of 3 sweep jobs failed" in err, err
+    assert ran == ["adam", "hig", "sgd"]
+
+
 def test_ctrl_c_in_a_sweep_says_how_to_complete_the_sweep(higbench, monkeypatch, tmp_path):
     monkeypatch.setattr("higbench.runner.train.train", _fake_train("interrupted"))
     code, _, err = higbench("-m", "optimizer=adam,hig", f"hydra.sweep.dir={tmp_path / 'sw'}")

@@ -26,6 +26,8 @@ from hydra.core.plugins import Plugins
 from hydra.plugins.sweeper import Sweeper
 from omegaconf import OmegaConf
 
+from hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper import EveryBatchSweeper, FailureCountingLauncher
+
 
 @dataclass
 class JobListSweeperConf:
@@ -72,8 +74,8 @@ class JobListSweeper(Sweeper):
 
     def setup(self, *, hydra_context, task_function, config) -> None:
         self.hydra_context, self.config = hydra_context, config
-        self.launcher = Plugins.instance().instantiate_launcher(
-            hydra_context=hydra_context, task_function=task_function, config=config
+        self.launcher = FailureCountingLauncher(
+            Plugins.instance().instantiate_launcher(hydra_context=hydra_context, task_function=task_function, config=config)
         )
 
     def sweep(self, arguments: list[str]) -> Any:
@@ -87,13 +89,13 @@ class JobListSweeper(Sweeper):
         OmegaConf.save(self.config, sweep_dir / "multirun.yaml")
         self.validate_batch_is_legal(batch)
         results = self.launcher.launch(batch, initial_job_idx=0)
-        for r in results:
-            _ = r.return_value  # a failed job raises here, as with Hydra's basic sweeper
+        self.launcher.raise_failures()  # SweepFailed: the first failure, and how many
         return [results]
 
 
 def register() -> None:
-    """Make the sweeper known to Hydra where its plugin scan cannot see this package (an
+    """Make higbench's sweepers known to Hydra where its plugin scan cannot see this package (an
     editable install hides namespace packages from ``pkgutil``); importing this module has
-    stored its config (``hydra/sweeper=joblist``)."""
+    stored their configs (``hydra/sweeper=joblist``, ``hydra/sweeper=higbench_basic``)."""
     Plugins.instance().register(JobListSweeper)
+    Plugins.instance().register(EveryBatchSweeper)

@@ -227,6 +227,16 @@ def test_a_resumed_job_counts_only_the_budget_it_has_left():
     assert job.launch_overrides() == ["resume=x"]
 
 
+def test_the_launch_line_counts_update_budgets_as_updates():
+    from higbench.jobs import training_text
+
+    timed = Job("f", "s", {"budget.seconds": 60.0}, seed=0)
+    counted = Job("f", "s", {"budget.seconds": None, "budget.max_updates": 24657}, seed=0)
+    assert training_text([timed, timed]) == "~120 s of training"
+    assert training_text([timed, counted, counted]) == "~60 s of training and 49,314 updates"  # not 49,374 s
+    assert training_text([Job("f", "s", {}, seed=0)]) == "1 on the problem's default budget"
+
+
 def test_cli_lists_figures_and_plans_without_running(tmp_path, capsys):
     from higbench.figures.__main__ import main
 

@@ -468,8 +468,8 @@ def test_a_problem_schema_is_the_config_dataclass_of_its_class(monkeypatch):
         ({"alpha": "hot"}, "problem.alpha=hot: Value 'hot' of type 'str' could not be converted to Float"),
         (
             {"beta": 2},
-            "problem.beta=2: unknown key; valid keys: _target_, alpha, data_seed, held_out, init, league_seconds, "
-            "loss_reduction,",
+            "problem.beta=2: unknown key; valid keys: _target_, alpha, data_seed, fresh_test_size, held_out, init, "
+            "league_seconds, loss_reduction,",
         ),
         ({"train_size": 2}, "batch_size=4: must not exceed problem.train_size=2"),
         ({"_target_": "nowhere.Heat"}, "problem._target_=nowhere.Heat: cannot import this problem class"),

@@ -43,9 +43,11 @@ def test_a_job_killed_before_its_first_checkpoint_is_run_again_by_the_sweeps_res
     assert kept.read_bytes() == before and "kept as it is" in err
 
 
-def test_one_job_refused_in_its_directory_fails_alone(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("batches", [[], ["hydra.sweeper.max_batch_size=1"]], ids=["one batch", "a batch per job"])
+def test_one_job_refused_in_its_directory_fails_alone(tmp_path, monkeypatch, capsys, batches):
     """A link planted in one job's directory: that job is refused (one line), the other runs,
-    and the sweep exits 1 saying how many failed; nothing is written through the link."""
+    and the sweep exits 1 saying how many failed; nothing is written through the link. In
+    batches too: Hydra's basic sweeper stopped after the failed job's batch."""
     monkeypatch.chdir(tmp_path)
     sweep = tmp_path / "sweep"
     victim = tmp_path / "victim.h5"
@@ -53,7 +55,7 @@ def test_one_job_refused_in_its_directory_fails_alone(tmp_path, monkeypatch, cap
     (sweep / "0").mkdir(parents=True)
     (sweep / "0" / "run.h5").symlink_to(victim)
     with pytest.raises(SystemExit) as info:
-        _sweep(sweep)
+        _sweep(sweep, *batches)
     err = capsys.readouterr().err
     assert info.value.code == 1, err
     assert "symbolic link" in err and "1 of 2 sweep jobs failed" in err, err
