@@ -114,7 +114,7 @@ def register_with_hydra() -> None:
     OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
     # hydra.job.config.override_dirname.exclude_keys: the keys the schema keeps out of job names
     OmegaConf.register_new_resolver("higbench.job_dir_excluded_keys", lambda: list(JOB_DIR_EXCLUDED_KEYS), replace=True)
-    # Its sweepers (the default hydra/sweeper=higbench_basic, and joblist): Hydra's plugin scan
+    # Its sweepers (joblist, and the basic sweeper that runs every batch): Hydra's plugin scan
     # misses hydra_plugins/ of an editable install (tests/figures/test_figures_units.py::
     # test_joblist_sweeper_runs_a_job_list).
     from hydra_plugins.higbench_joblist_sweeper.joblist_sweeper import register

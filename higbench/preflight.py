@@ -147,7 +147,7 @@ def _compose_plain(overrides: list[str]) -> dict:
 
 def is_basic_sweeper(config: DictConfig) -> bool:
     """Whether the sweep crosses its overrides as Hydra's basic sweeper does (higbench's
-    default, ``higbench_basic``, is that sweeper with every batch run)."""
+    ``EveryBatchSweeper`` is that sweeper with every batch run)."""
     target = str(OmegaConf.select(config, "hydra.sweeper._target_", default=""))
     return target.endswith(("BasicSweeper", "EveryBatchSweeper"))
 
@@ -351,6 +351,20 @@ def _checked(check, config: DictConfig):
         sys.exit(1)
 
 
+# Hydra's wart: its basic sweeper stops after the batch that held a failed job
+# (hydra.sweeper.max_batch_size), and a default sweeper set in conf/config.yaml would win over an
+# experiment's own (conf/experiment/toy_optuna.yaml); so the sweep's config is changed here, after
+# composing and before Hydra builds the sweeper from it
+# (tests/test_cli.py::test_a_failed_job_does_not_stop_the_later_batches).
+def run_every_batch(config: DictConfig) -> None:
+    """Hydra's basic sweeper replaced by the same sweeper that runs every batch (``EveryBatchSweeper``)."""
+    from hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper import EVERY_BATCH_SWEEPER, HYDRA_BASIC_SWEEPER
+
+    if OmegaConf.select(config, "hydra.sweeper._target_", default=None) == HYDRA_BASIC_SWEEPER:
+        with read_write(config), open_dict(config):
+            config.hydra.sweeper._target_ = EVERY_BATCH_SWEEPER
+
+
 class Preflight(Callback):
     """Hydra calls these after composing and before creating any directory (conf/config.yaml)."""
 
@@ -362,6 +376,7 @@ class Preflight(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
         _checked(check_sweep, config)
+        run_every_batch(config)
         existing = Path(str(config.hydra.sweep.dir)) / "multirun.yaml"
         self._multirun_yaml = (existing, existing.read_bytes()) if existing.is_file() else None
 

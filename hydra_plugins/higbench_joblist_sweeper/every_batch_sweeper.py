@@ -1,29 +1,20 @@
-"""``hydra/sweeper=higbench_basic`` (higbench's default sweeper): Hydra's basic sweeper, except
-that a failed job fails alone.
+"""Hydra's basic sweeper, except that a failed job fails alone (what higbench runs where a
+sweep would use Hydra's basic sweeper: ``higbench.preflight.Preflight.on_multirun_start``).
 
 Hydra's basic sweeper raises a job's failure after the batch that held it, so with
 ``hydra.sweeper.max_batch_size`` the later batches never run. This one launches every batch,
 notes the failed jobs, and raises ``SweepFailed`` (the first failure and how many) at the end.
 Its keys are the basic sweeper's (``params``, ``max_batch_size``).
 """
-# No "from __future__ import annotations": Hydra imports plugins outside sys.modules, where a
-# dataclass with string annotations cannot be built.
-
 import dataclasses
 from typing import Any
 
 from hydra._internal.core_plugins import basic_sweeper
-from hydra.core.config_store import ConfigStore
 from hydra.core.utils import JobReturn, JobStatus
 from hydra.plugins.sweeper import Sweeper
 
-
-@dataclasses.dataclass
-class EveryBatchSweeperConf(basic_sweeper.BasicSweeperConf):
-    _target_: str = "hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper.EveryBatchSweeper"
-
-
-ConfigStore.instance().store(group="hydra/sweeper", name="higbench_basic", node=EveryBatchSweeperConf, provider="higbench")
+EVERY_BATCH_SWEEPER = "hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper.EveryBatchSweeper"
+HYDRA_BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 
 
 class SweepFailed(Exception):

@@ -96,6 +96,6 @@ class JobListSweeper(Sweeper):
 def register() -> None:
     """Make higbench's sweepers known to Hydra where its plugin scan cannot see this package (an
     editable install hides namespace packages from ``pkgutil``); importing this module has
-    stored their configs (``hydra/sweeper=joblist``, ``hydra/sweeper=higbench_basic``)."""
+    stored the job-list sweeper's config (``hydra/sweeper=joblist``)."""
     Plugins.instance().register(JobListSweeper)
     Plugins.instance().register(EveryBatchSweeper)
