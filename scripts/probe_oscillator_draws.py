@@ -61,6 +61,9 @@ def jobs(fraction: float = 1.0) -> list[list[str]]:
     ]  # fmt: skip
 
 
+TAIL_COLUMNS = ("samples", "mean", "median", "p95", "worst_share", "max_share", "fresh_samples", "fresh_mean")
+
+
 def tail_row(path: str) -> dict[str, float]:
     """The final evaluation's per-sample losses of one run, summarised, and its fresh-set mean."""
     final = load_final(path)
@@ -79,13 +82,19 @@ def tail_row(path: str) -> dict[str, float]:
 
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:
-    done = runs[runs["status"] == "completed"]
+    """One row per finished run; a diverged run keeps its row (status, the update it stopped at)
+    with no losses: that it diverged is the result."""
+    done = runs[runs["status"].isin(["completed", "diverged"])]
     cols = {
         "optimizer.name": "optimizer", "batch_size": "batch_size", "problem.data_seed": "data_seed", "seed": "seed",
-        "steps": "updates", "train_time_s": "seconds",
+        "status": "status", "steps": "updates", "train_time_s": "seconds",
     }  # fmt: skip
     table = done[[*cols, "path"]].rename(columns=cols)
-    tails = pd.DataFrame([tail_row(p) for p in table["path"]], index=table.index)
+    tails = pd.DataFrame(
+        [tail_row(p) if status == "completed" else {} for p, status in zip(table["path"], table["status"])],
+        index=table.index,
+        columns=list(TAIL_COLUMNS),
+    )
     keys = ["optimizer", "batch_size", "data_seed", "seed"]
     return pd.concat([table.drop(columns="path"), tails], axis=1).sort_values(keys)
 

@@ -371,22 +371,43 @@ def authors_probe(table) -> dict:
     return {k: float(v) if not isinstance(v, int) else v for k, v in out.items()}
 
 
-def tail_probe(table) -> dict:
-    """The oscillator tail probe (scripts/probe_oscillator_tail.py): how far the mean of the final
-    per-sample test losses sits above their median, and the share of the worst few."""
-    return {
-        "tail_draws": int(table["data_seed"].nunique()),
-        "tail_seeds": int(table["seed"].nunique()),
-        "tail_seconds": int(table["seconds"].min()),
-        "tail_samples": int(table["samples"].min()),
-        "tail_worst": WORST_SAMPLES,
-        "tail_decades": float(np.log10(table["mean"] / table["median"]).min()),
-        "tail_share_min": round(100 * float(table["worst_share"].min())),
-        "tail_share_max": round(100 * float(table["worst_share"].max())),
+def draws_probe(table) -> dict:
+    """The oscillator draws probe (scripts/probe_oscillator_draws.py): HIG and GN at table 2's settings
+    over (data draw, seed) pairs, each for the updates of the authors' documented hour on the paper's GPU at
+    its b. HIG at b=128 (osc-3): the range over pairs of the paper's metric (the mean over the 4,096 test
+    samples), of the per-sample median, of the mean over 32,768 fresh samples, and the share of the mean
+    the worst samples carry. Per optimizer and b (osc-5, osc-8): the median over pairs of the mean test
+    loss, and how many pairs diverged."""
+    done = table[table["status"] == "completed"]
+    head = done[(done["optimizer"] == "hig") & (done["batch_size"] == 128)]
+    out = {
+        "pairs": int(len(head)),
+        "draws": int(head["data_seed"].nunique()),
+        "seeds": int(head["seed"].nunique()),
+        "updates": int(head["updates"].min()),
+        "samples": int(head["samples"].min()),
+        "fresh_samples": int(head["fresh_samples"].min()),
+        "worst": WORST_SAMPLES,
+        "mean_min": float(head["mean"].min()),
+        "mean_max": float(head["mean"].max()),
+        "median_min": float(head["median"].min()),
+        "median_max": float(head["median"].max()),
+        "fresh_min": float(head["fresh_mean"].min()),
+        "fresh_max": float(head["fresh_mean"].max()),
+        "decades": float(np.log10(head["mean"] / head["median"]).min()),
+        "share_min": round(100 * float(head["worst_share"].min())),
+        "share_max": round(100 * float(head["worst_share"].max())),
     }
+    for (opt, b), rows in table.groupby(["optimizer", "batch_size"]):
+        finished = rows[rows["status"] == "completed"]
+        out[f"{opt}_{b}_pairs"] = int(len(rows))
+        out[f"{opt}_{b}_diverged"] = int((rows["status"] == "diverged").sum())
+        out[f"{opt}_{b}"] = float(finished["mean"].median()) if len(finished) else math.inf
+        out[f"{opt}_{b}_fresh"] = float(finished["fresh_mean"].median()) if len(finished) else math.inf
+    return out
 
 
-WORST_SAMPLES = 10  # scripts/probe_oscillator_tail.py's WORST
+WORST_SAMPLES = 10  # scripts/probe_oscillator_draws.py's WORST
 
 
 @claim(

@@ -5,7 +5,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
-import probe_oscillator_tail  # noqa: E402
+import probe_oscillator_draws  # noqa: E402
 import probe_poisson_data  # noqa: E402
 import probe_runs  # noqa: E402
 
@@ -48,17 +48,34 @@ def test_run_missing_launches_only_what_is_not_done(monkeypatch, tmp_path):
     assert state["launched"] == [[todo]] and state["resolved"] == 2 and left == [waiting]
 
 
-def test_the_oscillator_tail_reads_the_final_per_sample_losses(tmp_path):
+def test_the_oscillator_draws_probe_reads_the_final_per_sample_losses(tmp_path):
     import numpy as np
 
     from higbench.runfile.writer import RunFileWriter
 
     losses = np.full(1000, 1e-8)
     losses[-10:] = 1e-5  # ten samples carry almost all of the mean
+    fresh = np.full(5000, 2e-8)
     w = RunFileWriter(tmp_path / "run.h5", "problem: {name: oscillator}\n", [], env={}, meta={"problem": "oscillator"})
-    w.write_final({"test_losses": losses}, 100)
+    w.write_final({"test_losses": losses, "fresh_test_losses": fresh}, 100)
     w.close("completed", "", 100)
-    row = probe_oscillator_tail.tail_row(str(tmp_path / "run.h5"))
+    row = probe_oscillator_draws.tail_row(str(tmp_path / "run.h5"))
     assert np.isclose(row["mean"], losses.mean()) and row["median"] == 1e-8
     assert np.isclose(row["worst_share"], 1e-4 / (1e-4 + 990e-8)) and np.isclose(row["max_share"], 1e-5 / losses.sum())
-    assert len(probe_oscillator_tail.jobs(300)) == 6  # 3 data draws x 2 seeds
+    assert row["fresh_samples"] == 5000 and np.isclose(row["fresh_mean"], 2e-8)
+
+
+def test_the_oscillator_draws_probe_runs_the_paper_hour_at_each_batch_size():
+    """Updates, not seconds: the authors' hour on the paper's GPU at each b (table 3's cost ratio),
+    3 (draw, seed) pairs per setting and 6 for HIG at b=128."""
+    from collections import Counter
+
+    from higbench.jobs import parse_overrides
+
+    runs = [parse_overrides(j) for j in probe_oscillator_draws.jobs()]
+    per_setting = Counter((r["optimizer"], r["batch_size"]) for r in runs)
+    assert per_setting[("hig", 128)] == 6 and all(n >= 3 for n in per_setting.values())
+    assert len({(r["problem.data_seed"], r["seed"]) for r in runs if r["batch_size"] == 128}) == 6
+    updates = {r["batch_size"]: r["budget.max_updates"] for r in runs}
+    assert updates[128] == 24657 and round(updates[32] / updates[128], 2) == 1.68  # 3600 s / 0.146 s; 0.146 / 0.087
+    assert all(r["budget.seconds"] is None for r in runs)
