@@ -57,7 +57,8 @@ def _grid(opt: str, lrs: list) -> Sweep:
         GRID,
         grid={
             "optimizer.lr": PerPreset(lrs, smoke=lrs[1:2] if opt != "adam" else lrs[:2]),
-            "batch_size": PerPreset(GRID_BATCHES, [256, 1024], [512], long=GRID_BATCHES),  # long: b=512 too (the paper's best Adam)
+            # long: b=512 too, the paper's best Adam setting (eta=3e-4, b=512)
+            "batch_size": PerPreset(GRID_BATCHES, [256, 1024], [512], long=GRID_BATCHES),
         },
     )
 
