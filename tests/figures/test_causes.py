@@ -507,13 +507,13 @@ def _osc5_cause(monkeypatch, tmp_path, table):
 def test_osc5_cause_is_read_from_the_draws_probe(monkeypatch, tmp_path):
     """Fails on the old cause (fig. 2c's one seed per b, re-read at the paper's cost ratio): over (draw, seed) pairs
     at the paper's hour of updates per b, the cause is the probe's ordering, whichever way it goes."""
-    level = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 0}))
+    level = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 2}))
     assert level[0] == "disagreement" and "2.0e-6 at b=32" in level[1] and "diverged at b=32 in 3 of 3" in level[1], level
-    lower = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 5e-7}, {32: 3, 128: 0}))
+    lower = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 5e-7}, {32: 3, 128: 3}))
     assert lower[0] == "seeds" and "cannot show it" in lower[1], lower
-    gn_fails = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 3}))
-    assert gn_fails[0] == "open" and "contradicted" in gn_fails[1], gn_fails  # GN diverging at b=128 too: neither holds
-    few = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 2, 128: 0}, pairs=2))
+    gn_trains = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 0}))
+    assert gn_trains[0] == "open" and "contradicted" in gn_trains[1], gn_trains  # GN's median would then be a level
+    few = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 2, 128: 2}, pairs=2))
     assert few[0] == "open", few  # two pairs are not a median over seeds
 
 
