@@ -94,7 +94,7 @@ def summarise(runs: pd.DataFrame) -> pd.DataFrame:
         [tail_row(p) if status == "completed" else {} for p, status in zip(table["path"], table["status"])],
         index=table.index,
         columns=list(TAIL_COLUMNS),
-    )
+    ).astype({"samples": "Int64", "fresh_samples": "Int64"})  # counts stay integers beside a diverged run's blanks
     keys = ["optimizer", "batch_size", "data_seed", "seed"]
     return pd.concat([table.drop(columns="path"), tails], axis=1).sort_values(keys)
 
