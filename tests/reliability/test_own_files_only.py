@@ -252,3 +252,18 @@ def test_a_log_link_planted_once_the_job_runs_turns_the_log_off_and_the_run_goes
     stream.close()
     assert victim.read_text() == "someone's file\n"
     assert "turned off" in capsys.readouterr().err
+
+
+@pytest.mark.xfail(strict=True, reason="claims.rules.read_results_text opens without O_NOFOLLOW (owned elsewhere)")
+def test_a_results_file_that_is_a_link_out_of_the_results_directory_is_not_read(tmp_path):
+    """`python -m higbench.figures --report-only --out DIR` put the contents of a file outside DIR,
+    reached through a link planted as DIR/fig10.json, into DIR/REPORT.md."""
+    from higbench.claims.rules import ResultsFileError, read_results_json
+
+    private = tmp_path / "private.json"
+    private.write_text('{"secret": 1}')
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "fig10.json").symlink_to(private)
+    with pytest.raises(ResultsFileError):
+        read_results_json(results / "fig10.json")
