@@ -85,7 +85,8 @@ def fig2a(d: FigureData, ax) -> None:
         err = float(((torch.as_tensor(states[-1]) - batch.targets[0].double()) ** 2).sum())
         ax.set_title(f"a) oscillators under the HIG-trained network ({run.label()}); final squared error {sci(err)}", fontsize=8)
         ax.plot([], [], "o", color="k", mfc="none", label="targets (= initial state)")
-    legend(ax, **({"loc": "upper left"} if found else {}))
+    # below the axes: the states fill the whole panel (inside, the legend hid x2's first peak)
+    legend(ax, **({"loc": "upper center", "bbox_to_anchor": (0.5, -0.17), "ncol": 3} if found else {}))
     ax.set(xlabel="time t", ylabel="oscillator position")
 
 

@@ -23,6 +23,9 @@ What an optimizer class declares, on the class (``StepReporter``'s attributes):
   layout. ``uses_jacobian(cls_or_optimizer)`` is the one answer to that question.
 * ``needs_inverse_simulator``: it calls the problem's inverse simulator
   (``LossClosure.inverse``; SIP). A problem without one is refused before any work.
+* ``sets_threads``: it sets torch's thread count inside its step from its ``threads``
+  attribute (``"auto"``, N, or None: leave it); under the runner the run's ``threads`` key
+  decides instead, so the runner sets the attribute to None (``leave_threads_to_run``).
 
 A new optimizer class is one module plus one YAML file in ``conf/optimizer/``: subclass
 ``torch.optim.Optimizer`` (and ``StepReporter`` when it times its own phases), take the
@@ -76,6 +79,7 @@ class StepReporter:
 
     uses_jacobian: ClassVar[bool] = False
     needs_inverse_simulator: ClassVar[bool] = False
+    sets_threads: ClassVar[bool] = False
     last_report: StepReport | None = None
 
 
@@ -93,6 +97,12 @@ def uses_jacobian(cls_or_optimizer: object) -> bool:
     """Whether an optimizer (class or instance) builds the per-sample Jacobian (HIG, GN, LM)."""
     cls = _class(cls_or_optimizer)
     return issubclass(cls, StepReporter) and cls.uses_jacobian
+
+
+def leave_threads_to_run(optimizer: object) -> None:
+    """An optimizer that sets torch's threads inside its step leaves them to the run's ``threads`` key."""
+    if isinstance(optimizer, StepReporter) and optimizer.sets_threads:
+        optimizer.threads = None
 
 
 def needs_inverse_simulator(cls_or_optimizer: object) -> bool:

@@ -86,6 +86,7 @@ class JacobianPower(torch.optim.Optimizer, StepReporter):
     """
 
     uses_jacobian = True  # the step contract (optim.contract): J is built; memory guard, spectrum, warm-up
+    sets_threads = True  # its `threads` (the Gram eigen-solve's BLAS threads); a run's own key wins
 
     def __init__(
         self,

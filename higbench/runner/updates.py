@@ -27,7 +27,7 @@ from torch import nn
 
 from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
 from higbench.optim.closure import LossClosure, NonFiniteStep
-from higbench.optim.contract import PHASES, StepReporter, report_of
+from higbench.optim.contract import PHASES, StepReporter, leave_threads_to_run, report_of
 from higbench.problems.base import Batch, Problem
 
 
@@ -108,6 +108,5 @@ class Update:
 def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig) -> Update:
     """The optimizer class comes from ``optimizer._target_``; its arguments from the rest."""
     optimizer = get_class(opt_cfg._target_)(model.parameters(), **optimizer_kwargs(opt_cfg))
-    if hasattr(optimizer, "threads"):  # the run's `threads` key sets them (train._setup), not the optimizer
-        optimizer.threads = None
+    leave_threads_to_run(optimizer)  # the run's `threads` key sets them (train._setup), not the optimizer
     return Update(problem, model, optimizer)

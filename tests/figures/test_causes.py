@@ -83,12 +83,6 @@ OSC6_SHORT = dict(spread_min=1.4, spread_max=6.5, diverged=4, cells=10, calm=3, 
 # (claim, values the cause's facts hold for, the same with one value flipped)
 SYNTHETIC = [
     # osc-5 at the paper's cost ratio (table 3): b=32 and b=128 level for HIG and GN, one seed each
-    (
-        "osc-5",
-        dict(b_lo=32, b_hi=128, hig_lo_paper=8.4e-7, hig_hi=7.6e-7, gn_lo_paper=7.4e-7, gn_hi=6.5e-7, paper_ratio=1.68)
-        | dict(hig_lo_updates=283737, hig_hi_updates=36799, seeds=1),
-        dict(hig_lo_paper=3e-6),  # HIG's b=32 far above b=128 at the paper's ratio: neither cause holds
-    ),
     # osc-6 at standard (15 s): the calm largest-η runs still falling; at long one has stopped (its other cause)
     ("osc-6", OSC6_SHORT, dict(calm_falling=2)),
     # dip-1's rule is decided from these values (``decide``): Adam still in the band at the end reads partly (budget)
@@ -125,11 +119,6 @@ SYNTHETIC = [
     ),  # fmt: skip
     ("dip-4", dict(low=2.3e-8), dict(low=3e-6)),  # "below the float32 floor" with a run at 3e-6
     ("osc-4", dict(t_cross=8.0), dict(t_cross=150.0)),  # "before the paper's window" for a crossing inside it
-    (
-        "osc-3",
-        dict(hig=7.6e-7, hig_half=1e-6, hig_updates=36799, lowest=6.5e-7, lowest_name="GN", seeds=1),
-        dict(seeds=3),  # three seeds: the spread of one seed no longer explains it
-    ),
     # poi-1 at the paper's b=64: the run length, from the per-update trend of the long runs
     (
         "poi-1",
@@ -487,13 +476,65 @@ def test_dip1_counts_the_plateau_in_updates():
     assert row["values"]["adam_plateau_s"] < 10 and row["verdict"] == "reproduced", row["why"]
 
 
-def test_osc5_cause_is_the_papers_cost_ratio():
-    """Fails on the old cause (equal update counts, hardware): at table 3's cost ratio b=32 and b=128 are level."""
-    from higbench.claims.report import collect
+def _draws_table(hig: dict, gn_diverged: dict, pairs: int = 3):
+    """A draws probe's table (scripts/probe_oscillator_draws.py): HIG's mean test loss per b
+    (the same in every pair), GN diverged in ``gn_diverged[b]`` of ``pairs`` pairs, else at 1e-6."""
+    import pandas as pd
 
-    row = {r["id"]: r for r in collect(RESULTS)}["osc-5"]
-    assert row["values"]["paper_ratio"] == pytest.approx(0.146 / 0.087)
-    assert row["cause"][0] == "seeds" and "cost ratio" in row["cause"][1], row["cause"]
+    rows = []
+    for i in range(pairs):
+        for b, mean in hig.items():
+            rows.append(dict(optimizer="hig", batch_size=b, data_seed=i, seed=i % 2, status="completed", mean=mean))
+        for b, diverged in gn_diverged.items():
+            rows.append(dict(optimizer="gn", batch_size=b, data_seed=i, seed=i % 2, mean=math.nan if i < diverged else 1e-6,
+                             status="diverged" if i < diverged else "completed"))  # fmt: skip
+    table = pd.DataFrame(rows)
+    per_sample = dict(updates=24657, samples=4096, fresh_samples=32768, median=3e-8, worst_share=0.8, fresh_mean=3e-6)
+    return table.assign(**per_sample, mean=table["mean"])
+
+
+OSC5_FIG2C = dict(b_lo=32, b_hi=128, hig_lo=1.9e-7, hig_hi=7.6e-7, seeds=1)
+
+
+def _osc5_cause(monkeypatch, tmp_path, table):
+    from higbench.claims import rules
+
+    table.to_csv(tmp_path / "oscillator_draws.csv", index=False)
+    monkeypatch.setattr(rules, "PROBES_DIR", tmp_path)
+    return finish(registry.claims()["osc-5"], _row("osc-5", "partly", OSC5_FIG2C))["cause"]
+
+
+def test_osc5_cause_is_read_from_the_draws_probe(monkeypatch, tmp_path):
+    """Fails on the old cause (fig. 2c's one seed per b, re-read at the paper's cost ratio): over (draw, seed) pairs
+    at the paper's hour of updates per b, the cause is the probe's ordering, whichever way it goes."""
+    level = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 2}))
+    assert level[0] == "disagreement" and "2.0e-6 at b=32" in level[1] and "diverged at b=32 in 3 of 3" in level[1], level
+    lower = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 5e-7}, {32: 3, 128: 3}))
+    assert lower[0] == "seeds" and "cannot show it" in lower[1], lower
+    gn_trains = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 0}))
+    assert gn_trains[0] == "open" and "contradicted" in gn_trains[1], gn_trains  # GN's median would then be a level
+    few = _osc5_cause(monkeypatch, tmp_path, _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 2, 128: 2}, pairs=2))
+    assert few[0] == "open", few  # two pairs are not a median over seeds
+
+
+def test_osc3_cause_reads_the_per_sample_view_over_draws(monkeypatch, tmp_path):
+    """Fails on the old cause (the tail probe at 300 s, no fresh draw): the paper's metric, the per-sample median
+    and the fresh-set mean over (draw, seed) pairs at the paper's hour of updates."""
+    from higbench.claims import rules
+
+    table = _draws_table({32: 2e-6, 64: 1e-6, 128: 1.5e-6}, {32: 3, 128: 0}, pairs=6)
+    table.to_csv(tmp_path / "oscillator_draws.csv", index=False)
+    monkeypatch.setattr(rules, "PROBES_DIR", tmp_path / "none")  # the authors' probe missing: evidence absent
+    c = registry.claims()["osc-3"]
+    values = dict(hig=7.6e-7, hig_half=1e-6, hig_updates=36799, lowest=6.5e-7, lowest_name="GN", seeds=1)
+    assert finish(c, _row("osc-3", "partly", values))["cause"][0] == "open"
+    monkeypatch.setattr(rules, "PROBES_DIR", RESULTS / "probes")
+    committed = evidence(_row("osc-3", "partly", values), c.cause)
+    if "probe_pairs" not in committed:
+        pytest.skip("the draws probe is not committed")
+    assert committed["probe_pairs"] >= 3 and committed["probe_fresh_samples"] == 32768
+    kind, text = finish(c, _row("osc-3", "partly", values))["cause"]
+    assert kind == "seeds" and "fresh samples" in text and "per-sample median" in text, text
 
 
 def test_abl3_cause_is_the_budget():
