@@ -107,7 +107,7 @@ def guard_log_files(output_dir: Path, key: str) -> None:
                 continue
             if os.path.islink(filename):
                 raise ConfigError(key, str(output_dir), f"{filename} is a symbolic link; higbench never writes through links")
-            handler._open = functools.partial(_open_log, filename, getattr(handler, "encoding", None))
+            handler._open = functools.partial(_open_log_or_off, filename, getattr(handler, "encoding", None))
 
 
 def _open_log(filename: str, encoding: str | None):
@@ -119,6 +119,18 @@ def _open_log(filename: str, encoding: str | None):
         raise OSError(f"{filename} is not the run's own log file (not a regular file, or has a second hard link)")
     os.set_blocking(fd, True)
     return os.fdopen(fd, "a", encoding=encoding or "utf-8")
+
+
+def _open_log_or_off(filename: str, encoding: str | None):
+    """The log is a side sink: refused at its first line (a link planted since the checks), it is
+    turned off with one line and the run goes on; the run file is the record."""
+    try:
+        return _open_log(filename, encoding)
+    except OSError as exc:
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+        line = f"higbench: {filename} turned off ({why}); the run goes on, its run file is the record"
+        print(line, file=sys.stderr, flush=True)
+        return open(os.devnull, "a", encoding=encoding or "utf-8")  # noqa: SIM115 - the handler owns and closes it
 
 
 # Hydra's wart (why conf/config.yaml sets hydra.output_subdir: null): Hydra writes .hydra/*.yaml by

@@ -182,6 +182,7 @@ def check_initial_weights(model: torch.nn.Module, weights, path: str) -> None:
 def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
     """The network and its optimizer; a network or arguments they refuse become ConfigError."""
     try:
+        check_network_size(cfg, problem)
         model = problem.build_model()
         return model, build_update(problem, model, cfg.optimizer)
     except ConfigError:
@@ -195,6 +196,25 @@ def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
         first = " ".join(str(exc).split())[:200]
         hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
         raise ConfigError(key, hidden, f"the network does not fit in memory ({first})") from None
+
+
+def check_network_size(cfg: DictConfig, problem: Problem) -> None:
+    """The network, built on the meta device (no memory), fits in the memory there is. torch's
+    allocator over-commits: a network far too large is otherwise killed by the kernel mid-way."""
+    try:
+        with torch.device("meta"):
+            meta = problem.make_model()
+    except Exception:  # noqa: BLE001 - one the meta device cannot build: the real build says what is wrong
+        return
+    n = sum(t.numel() for t in [*meta.parameters(), *meta.buffers()])
+    need = 4 * n * DTYPES[cfg.dtype].itemsize  # weights, gradients and an optimizer's two moments
+    available, where = memory_guard.available_bytes(str(problem.device))
+    if need > available:
+        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
+        hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
+        need_mb, have_mb = memory_guard.mb(need), memory_guard.mb(available)
+        why = f"{need_mb} for {n:,} parameters (weights, gradients, optimizer state), {have_mb} is {where}"
+        raise ConfigError(key, hidden, f"the network does not fit in memory ({why})")
 
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:

@@ -47,3 +47,16 @@ def test_a_network_too_large_for_memory_is_one_line(tmp_path, monkeypatch, capsy
     line = refused(args, capsys)
     assert "problem.hidden=" in line and "does not fit in memory" in line, line
     assert not (tmp_path / "run").exists()
+
+
+def test_a_network_the_allocator_would_overcommit_is_refused_before_it_is_built(tmp_path, monkeypatch, capsys):
+    """torch's allocator over-commits: a toy network of 10**9 hidden units was built and then
+    killed by the kernel (SIGKILL, no line). Its size is estimated on the meta device first."""
+    from higbench.optim import memory_guard
+
+    monkeypatch.setattr(memory_guard, "available_bytes", lambda device="cpu": (10**6, "available memory"))
+    monkeypatch.chdir(tmp_path)
+    args = ["problem=toy", "optimizer=adam", "problem.hidden=100000", *TINY, "hydra.run.dir=run"]
+    line = refused(args, capsys)
+    assert "problem.hidden=100000" in line and "does not fit in memory" in line and "parameters" in line, line
+    assert not (tmp_path / "run").exists()

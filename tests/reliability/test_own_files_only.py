@@ -239,3 +239,31 @@ def test_a_continued_run_never_opens_the_file_its_stored_init_from_names(complet
     from higbench.runfile.reader import read_head
 
     assert read_head(run).status == "completed"
+
+
+def test_a_log_link_planted_once_the_job_runs_turns_the_log_off_and_the_run_goes_on(tmp_path, capsys):
+    """The handler's opener refuses the link (above); the job does not die of it at its first line."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("someone's file\n")
+    log = tmp_path / "higbench.log"
+    log.symlink_to(victim)
+    stream = cli._open_log_or_off(str(log), None)
+    stream.write("a line\n")
+    stream.close()
+    assert victim.read_text() == "someone's file\n"
+    assert "turned off" in capsys.readouterr().err
+
+
+@pytest.mark.xfail(strict=True, reason="claims.rules.read_results_text opens without O_NOFOLLOW (owned elsewhere)")
+def test_a_results_file_that_is_a_link_out_of_the_results_directory_is_not_read(tmp_path):
+    """`python -m higbench.figures --report-only --out DIR` put the contents of a file outside DIR,
+    reached through a link planted as DIR/fig10.json, into DIR/REPORT.md."""
+    from higbench.claims.rules import ResultsFileError, read_results_json
+
+    private = tmp_path / "private.json"
+    private.write_text('{"secret": 1}')
+    results = tmp_path / "results"
+    results.mkdir()
+    (results / "fig10.json").symlink_to(private)
+    with pytest.raises(ResultsFileError):
+        read_results_json(results / "fig10.json")
