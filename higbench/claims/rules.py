@@ -8,6 +8,7 @@ budgets sized by them. Runs are read duck-typed: a figure's data answers ``runs(
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import math
@@ -534,10 +535,13 @@ class ResultsFileError(ValueError):
 
 def read_results_text(path: Path) -> str:
     """The text of a file of a results directory. Opened without blocking and checked on the
-    open file, so a FIFO (or a device, a directory) among the results is refused, never waited on."""
+    open file, so a FIFO (or a device, a directory) among the results is refused, never waited on;
+    never through a link (one planted there would put a file from elsewhere into the report)."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW)
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise ResultsFileError(f"{path}: a symbolic link; results are read only from the files themselves") from None
         raise ResultsFileError(f"{path}: cannot be read ({exc.strerror})") from None
     with os.fdopen(fd, "rb") as f:
         if not stat.S_ISREG(os.fstat(fd).st_mode):

@@ -254,7 +254,6 @@ def test_a_log_link_planted_once_the_job_runs_turns_the_log_off_and_the_run_goes
     assert "turned off" in capsys.readouterr().err
 
 
-@pytest.mark.xfail(strict=True, reason="claims.rules.read_results_text opens without O_NOFOLLOW (owned elsewhere)")
 def test_a_results_file_that_is_a_link_out_of_the_results_directory_is_not_read(tmp_path):
     """`python -m higbench.figures --report-only --out DIR` put the contents of a file outside DIR,
     reached through a link planted as DIR/fig10.json, into DIR/REPORT.md."""
