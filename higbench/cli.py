@@ -304,7 +304,7 @@ def _interrupted(summary, multirun: bool, parent: int | None = None) -> None:
         why = "checkpoint_every=null, or stopped before the first"
         print(f"no checkpoint was written ({why}): it cannot be resumed", file=sys.stderr)
     if multirun:  # the whole sweep stops: one command runs what is left and continues this job
-        print(f"complete the sweep with: {sweep_resume_command()}", file=sys.stderr)
+        print(f"complete the sweep with: {sweep_resume_command(HydraConfig.get().sweep.dir)}", file=sys.stderr)
     signum = next((s for s in (signal.SIGINT, signal.SIGTERM) if s.name in summary.reason), signal.SIGINT)
     sys.stdout.flush()
     if parent is not None and os.getppid() != parent:  # an orphaned worker: nobody takes its result
@@ -314,9 +314,9 @@ def _interrupted(summary, multirun: bool, parent: int | None = None) -> None:
     sys.exit(128 + int(signum))
 
 
-def sweep_resume_command() -> str:
+def sweep_resume_command(sweep_dir: str) -> str:
     """The command that completes this sweep: the same arguments, its directory, resume=true."""
-    sweep_dir = os.path.abspath(str(HydraConfig.get().sweep.dir))
+    sweep_dir = os.path.abspath(str(sweep_dir))
     args = [a for a in sys.argv[1:] if not a.startswith(("hydra.sweep.dir=", "resume="))]
     return shlex.join(["higbench", *args, f"hydra.sweep.dir={sweep_dir}", "resume=true"])
 
@@ -482,6 +482,8 @@ def _run(argv: list[str], full_error: str | None) -> None:
         _sweep_failed(exc)
     except KeyboardInterrupt:  # between a sweep's jobs, or before a run installed its handler
         print("\nhigbench: interrupted", file=sys.stderr)
+        if invocation().sweep_dir is not None:  # a parallel sweep's parent: its workers may be gone before their line
+            print(f"complete the sweep with: {sweep_resume_command(invocation().sweep_dir)}", file=sys.stderr)
         sys.exit(128 + int(signal.SIGINT))
     finally:
         if full_error is None:

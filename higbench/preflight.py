@@ -194,6 +194,7 @@ class Invocation:
     failed: int = 0
     job_started: bool = False  # errors after a job started are the job's, not the command line's
     main: bool = False  # opened by ``cli.main`` (False: a launcher's worker process, or code calling the job)
+    sweep_dir: str | None = None  # a sweep's directory, known to the parent (its Ctrl-C line)
 
 
 _INVOCATION: contextvars.ContextVar[Invocation] = contextvars.ContextVar("higbench_invocation")
@@ -377,6 +378,7 @@ class Preflight(Callback):
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
         _checked(check_sweep, config)
         run_every_batch(config)
+        invocation().sweep_dir = os.path.abspath(str(config.hydra.sweep.dir))
         existing = Path(str(config.hydra.sweep.dir)) / "multirun.yaml"
         self._multirun_yaml = (existing, existing.read_bytes()) if existing.is_file() else None
 
