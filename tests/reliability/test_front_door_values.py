@@ -56,7 +56,7 @@ def test_a_network_the_allocator_would_overcommit_is_refused_before_it_is_built(
 
     monkeypatch.setattr(memory_guard, "available_bytes", lambda device="cpu": (10**6, "available memory"))
     monkeypatch.chdir(tmp_path)
-    args = ["problem=toy", "optimizer=adam", "problem.hidden=100000", *TINY, "hydra.run.dir=run"]
+    args = ["problem=toy", "optimizer=adam", "problem.hidden=10000000", *TINY, "hydra.run.dir=run"]  # 640 MB
     line = refused(args, capsys)
-    assert "problem.hidden=100000" in line and "does not fit in memory" in line and "parameters" in line, line
+    assert "problem.hidden=10000000" in line and "does not fit in memory" in line and "parameters" in line, line
     assert not (tmp_path / "run").exists()
