@@ -122,9 +122,16 @@ def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds,
     return jobs
 
 
-def run_jobs(jobs: list[Job], root: Path, n_jobs: int) -> None:
-    """Launch the jobs not done under ``root`` (reusing every done one: ``jobs.run_missing``)."""
-    run_missing(jobs, root, n_jobs=n_jobs, launcher="basic" if n_jobs == 1 else "joblib", log=_log)
+def run_jobs(jobs: list[Job], root: Path, n_jobs: int, phase: str) -> None:
+    """Launch the jobs not done under ``root`` (reusing every done one: ``jobs.run_missing``).
+    Stops the league when some are still not done (interrupted, failed): a setting chosen from
+    part of a tuning, or a next problem started after a Ctrl-C, is not what was asked for."""
+    left = run_missing(jobs, root, n_jobs=n_jobs, launcher="basic" if n_jobs == 1 else "joblib", log=_log)
+    if left:
+        raise SystemExit(
+            f"league: {len(left)} {phase} run(s) not done (interrupted or failed); "
+            "the same command continues them, reusing every run already done"
+        )
 
 
 def _log(text: str) -> None:
@@ -242,7 +249,7 @@ def main(argv=None) -> int:
         usable = [o for o in optimizers if o not in refused]
         tune = {o: tuning_jobs(problem, o, args.trials, seconds) for o in usable}
         if not args.report_only:
-            run_jobs([j for jobs in tune.values() for j in jobs], args.root, args.jobs)
+            run_jobs([j for jobs in tune.values() for j in jobs], args.root, args.jobs, f"{problem} tuning")
         else:
             resolve([j for jobs in tune.values() for j in jobs], run_index(args.root))
         chosen = {o: choose(jobs) for o, jobs in tune.items()}
@@ -251,7 +258,7 @@ def main(argv=None) -> int:
         ]
         confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
         if not args.report_only:
-            run_jobs(confirm, args.root, args.jobs)
+            run_jobs(confirm, args.root, args.jobs, f"{problem} confirmation")
         else:
             resolve(confirm, run_index(args.root))
         manifest["problems"][problem] = {"seconds": seconds, "targets": node.get("targets"), "held_out": variants,

@@ -127,6 +127,29 @@ def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line():
     assert script.refusal("toy", "sip") is None and script.refusal("oscillator", "hig") is None
 
 
+def test_an_interrupted_tuning_stops_the_league(tmp_path, monkeypatch):
+    """A Ctrl-C during tuning went on to confirm settings chosen from part of the tuning (and
+    to the next problem); now the league stops and says the same command continues."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    launched = []
+
+    def interrupted(jobs, root, **kw):
+        launched.append(len(jobs))
+        return list(jobs)[1:]  # all but one still not done
+
+    monkeypatch.setattr(script, "run_missing", interrupted)
+    monkeypatch.setattr(script, "calibration", lambda: {})
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "", "--trials", "2", "--seeds", "1"]
+    with pytest.raises(SystemExit, match=r"toy tuning run\(s\) not done .*the same command continues"):
+        script.main([*argv, "--seconds", "1", "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
+    assert launched == [4]  # the tuning only: nothing confirmed
+
+
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
