@@ -2,6 +2,11 @@
 
     python scripts/league.py --problems toy,oscillator --seconds 5 --trials 4      # a small league
     python scripts/league.py --report-only --out docs/results/league               # re-read, train nothing
+    python scripts/league.py --problems poisson --set poisson/hig:device=cuda   # HIG on a GPU
+
+Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewise ``--seconds``;
+``--set [SCOPE:]KEY=VALUE`` adds an override to every job (no SCOPE), or to those of a problem,
+an optimizer or a ``problem/optimizer`` (SCOPE). The same flags re-read the runs with ``--report-only``.
 
 Per problem (its config owns the budget ``problem.league_seconds``, the targets
 ``problem.targets`` and the held-out variants ``problem.held_out``; ``--seconds`` replaces the
@@ -54,20 +59,58 @@ def problem_config(problem: str) -> dict:
         return compose((f"problem={problem}",))["problem"]
 
 
+LEAGUE_KEYS = {"problem", "optimizer", "seed", "budget.seconds", "eval_every"}
+EXTRA: list[tuple[str | None, str, str]] = []  # (scope, key, value) of --set; set by main
+
+
+def extra_overrides(problem: str, optimizer: str) -> dict[str, str]:
+    """The --set overrides for one (problem, optimizer): unscoped ones, and those scoped to the
+    problem, the optimizer or ``problem/optimizer``."""
+    scopes = {None, problem, optimizer, f"{problem}/{optimizer}"}
+    return {key: value for scope, key, value in EXTRA if scope in scopes}
+
+
 def base_overrides(problem: str, optimizer: str, seed: int, seconds: float) -> dict:
+    extra = extra_overrides(problem, optimizer)
     return {"problem": problem, "optimizer": optimizer, "seed": seed, "budget.seconds": seconds,
-            "eval_every": float(f"{seconds / EVALUATIONS:.3g}")}  # fmt: skip
+            "eval_every": float(f"{seconds / EVALUATIONS:.3g}"), **extra}  # fmt: skip
 
 
-def refusal(problem: str, optimizer: str) -> str | None:
+def per_problem(text: str | None, flag: str, cast=float) -> dict[str | None, float]:
+    """``'4,toy=16'`` -> {None: 4, 'toy': 16}: a bare value is every problem's, ``problem=value``
+    one problem's. One line naming the flag on a bad item."""
+    values: dict[str | None, float] = {}
+    for item in filter(None, (text or "").split(",")):
+        name, _, value = item.rpartition("=") if "=" in item else (None, "", item)
+        try:
+            values[name or None] = cast(value)
+        except ValueError:
+            raise SystemExit(f"league: error: {flag} {text}: {item!r} is not a number or problem=number") from None
+    return values
+
+
+def parse_set(item: str) -> tuple[str | None, str, str]:
+    """``'poisson/hig:device=cuda'`` -> ('poisson/hig', 'device', 'cuda'); ``'threads=1'`` -> (None, 'threads', '1')."""
+    head, sep, value = item.partition("=")
+    if not sep or not head.rpartition(":")[2]:
+        raise SystemExit(f"league: error: --set {item}: expected [SCOPE:]KEY=VALUE")
+    scope, _, key = head.rpartition(":")
+    if key in LEAGUE_KEYS:
+        raise SystemExit(f"league: error: --set {item}: {key} is the league's own (--problems, --optimizers, --seeds, --seconds)")
+    return scope or None, key, value
+
+
+def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
     """Why ``optimizer`` cannot run on ``problem`` (the CLI's one line: SIP without an inverse
-    simulator, a package's missing extra), or None."""
+    simulator, a package's missing extra), or None. ``with_set=False`` leaves the --set
+    overrides out: re-reading runs trained on a GPU needs none here."""
     from higbench.config import validate
     from higbench.errors import ConfigError
     from higbench.jobs import compose, hydra_conf
 
+    extra = [f"{k}={v}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
     with hydra_conf():
-        cfg = compose((f"problem={problem}", f"optimizer={optimizer}"))
+        cfg = compose((f"problem={problem}", f"optimizer={optimizer}", *extra))
     try:
         validate(cfg)
     except ConfigError as exc:
@@ -211,9 +254,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--optimizers", default=",".join(DEFAULT_OPTIMIZERS), help="comma-separated; each needs conf/search/<name>.yaml"
     )
     p.add_argument("--paper", default="hig,gn,adam", help="optimizers also run at their shipped (paper) settings")
-    p.add_argument("--trials", type=int, default=6, help="Sobol trials per (problem, optimizer), the same for every optimizer")
+    p.add_argument("--trials", default="6", help="Sobol trials per (problem, optimizer), the same for every optimizer; "
+                   "'4,toy=16': 16 on the toy")  # fmt: skip
     p.add_argument("--seeds", type=int, default=3, help="confirmation seeds 0..N-1 (never a tuning seed)")
-    p.add_argument("--seconds", type=float, help="training-clock budget per run (default: each problem's league_seconds)")
+    p.add_argument("--seconds", help="training-clock budget per run (default: each problem's league_seconds); "
+                   "'toy=10': the toy's")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="[SCOPE:]KEY=VALUE",
+                   help="an override for every job, or for those of one problem or optimizer (SCOPE); repeatable")  # fmt: skip
     p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
     p.add_argument("--root", type=Path, default=ROOT / "outputs" / "league", help="where the runs go (and are reused from)")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "league", help="league.txt and league.json")
@@ -227,6 +274,9 @@ def main(argv=None) -> int:
     problems = [p for p in args.problems.split(",") if p]
     optimizers = [o for o in args.optimizers.split(",") if o]
     paper = [o for o in args.paper.split(",") if o in optimizers]
+    trials = per_problem(args.trials, "--trials", int)
+    budgets = per_problem(args.seconds, "--seconds")
+    EXTRA[:] = [parse_set(item) for item in args.set]
     seeds = list(range(args.seeds))
     if set(seeds) & set(league.TUNING_SEEDS):
         raise SystemExit(f"league: error: --seeds {args.seeds}: overlaps the tuning seeds {league.TUNING_SEEDS}")
@@ -234,20 +284,23 @@ def main(argv=None) -> int:
         league.load_space(o)  # a missing or bad search space stops the league before any run
     args.root.mkdir(parents=True, exist_ok=True)
     manifest: dict = {"command": " ".join(["python scripts/league.py", *(argv if argv is not None else sys.argv[1:])]),
-                      "trials": args.trials, "tuning_seeds": list(league.TUNING_SEEDS), "confirmation_seeds": seeds,
+                      "tuning_seeds": list(league.TUNING_SEEDS), "confirmation_seeds": seeds,
                       "problems": {}, "calibration": [calibration()]}  # fmt: skip
     all_jobs: list[tuple[str, Job]] = []
     for problem in problems:
         node = problem_config(problem)
-        seconds = args.seconds or node.get("league_seconds")
+        seconds = budgets.get(problem, budgets.get(None)) or node.get("league_seconds")
+        n_trials = trials.get(problem, trials.get(None))
+        if not n_trials:
+            raise SystemExit(f"league: error: --trials {args.trials}: no count for problem={problem}")
         if not seconds:
             raise SystemExit(f"league: error: problem={problem}: no problem.league_seconds; give --seconds")
         variants = list(node.get("held_out") or [])[: args.variants]
-        refused = {o: why for o in optimizers if (why := refusal(problem, o))}
+        refused = {o: why for o in optimizers if (why := refusal(problem, o, with_set=not args.report_only))}
         for o, why in refused.items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         usable = [o for o in optimizers if o not in refused]
-        tune = {o: tuning_jobs(problem, o, args.trials, seconds) for o in usable}
+        tune = {o: tuning_jobs(problem, o, n_trials, seconds) for o in usable}
         if not args.report_only:
             run_jobs([j for jobs in tune.values() for j in jobs], args.root, args.jobs, f"{problem} tuning")
         else:
@@ -261,7 +314,8 @@ def main(argv=None) -> int:
             run_jobs(confirm, args.root, args.jobs, f"{problem} confirmation")
         else:
             resolve(confirm, run_index(args.root))
-        manifest["problems"][problem] = {"seconds": seconds, "targets": node.get("targets"), "held_out": variants,
+        manifest["problems"][problem] = {"seconds": seconds, "trials": n_trials, "targets": node.get("targets"),
+                                         "held_out": variants, "set": {o: extra_overrides(problem, o) for o in usable},
                                          "chosen": chosen, "left_out": refused}  # fmt: skip
         all_jobs += [("tune", j) for jobs in tune.values() for j in jobs] + [(j.sweep.split("/")[0], j) for j in confirm]
     manifest["calibration"].append(calibration())

@@ -150,6 +150,36 @@ def test_an_interrupted_tuning_stops_the_league(tmp_path, monkeypatch):
     assert launched == [4]  # the tuning only: nothing confirmed
 
 
+def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkeypatch):
+    """``--trials 1,toy=2`` tunes the toy on 2 trials and the oscillator on 1; ``--set
+    toy/hig:threads=1`` reaches the toy's HIG jobs alone; a league key is refused by --set."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    launched = []
+
+    def stop(jobs, root, **kw):
+        launched.append(list(jobs))
+        return list(jobs)  # nothing done: the league stops after this problem's tuning
+
+    monkeypatch.setattr(script, "run_missing", stop)
+    monkeypatch.setattr(script, "calibration", lambda: {})
+    common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path)]
+    for problem, trials in (("toy", 2), ("oscillator", 1)):
+        with pytest.raises(SystemExit, match="tuning"):
+            script.main(["--problems", problem, "--trials", "1,toy=2", "--set", "toy/hig:threads=1", *common])
+        jobs = launched.pop()
+        assert len(jobs) == 2 * trials
+        assert {j.overrides["budget.seconds"] for j in jobs} == {2.0 if problem == "toy" else 1.0}
+        threads = {j.overrides["optimizer"]: j.overrides.get("threads") for j in jobs}
+        assert threads == {"adam": None, "hig": "1" if problem == "toy" else None}
+    with pytest.raises(SystemExit, match="--set seed=3: seed is the league's own"):
+        script.main(["--problems", "toy", "--set", "seed=3", *common])
+
+
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
