@@ -65,9 +65,10 @@ EXTRA: list[tuple[str | None, str, str]] = []  # (scope, key, value) of --set; s
 
 def extra_overrides(problem: str, optimizer: str) -> dict[str, str]:
     """The --set overrides for one (problem, optimizer): unscoped ones, and those scoped to the
-    problem, the optimizer or ``problem/optimizer``."""
-    scopes = {None, problem, optimizer, f"{problem}/{optimizer}"}
-    return {key: value for scope, key, value in EXTRA if scope in scopes}
+    problem, the optimizer or ``problem/optimizer``; the narrower scope wins a key."""
+    ranks = {None: 0, problem: 1, optimizer: 1, f"{problem}/{optimizer}": 2}
+    chosen = sorted((ranks[scope], key, value) for scope, key, value in EXTRA if scope in ranks)
+    return {key: value for _, key, value in chosen}
 
 
 def base_overrides(problem: str, optimizer: str, seed: int, seconds: float) -> dict:

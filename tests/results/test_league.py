@@ -152,7 +152,8 @@ def test_an_interrupted_tuning_stops_the_league(tmp_path, monkeypatch):
 
 def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkeypatch):
     """``--trials 1,toy=2`` tunes the toy on 2 trials and the oscillator on 1; ``--set
-    toy/hig:threads=1`` reaches the toy's HIG jobs alone; a league key is refused by --set."""
+    toy/hig:threads=1`` reaches the toy's HIG jobs alone, over ``toy:threads=2`` given after it;
+    a league key is refused by --set."""
     import importlib.util
 
     path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
@@ -170,12 +171,13 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkey
     common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path)]
     for problem, trials in (("toy", 2), ("oscillator", 1)):
         with pytest.raises(SystemExit, match="tuning"):
-            script.main(["--problems", problem, "--trials", "1,toy=2", "--set", "toy/hig:threads=1", *common])
+            sets = ["--set", "toy/hig:threads=1", "--set", "toy:threads=2"]
+            script.main(["--problems", problem, "--trials", "1,toy=2", *sets, *common])
         jobs = launched.pop()
         assert len(jobs) == 2 * trials
         assert {j.overrides["budget.seconds"] for j in jobs} == {2.0 if problem == "toy" else 1.0}
         threads = {j.overrides["optimizer"]: j.overrides.get("threads") for j in jobs}
-        assert threads == {"adam": None, "hig": "1" if problem == "toy" else None}
+        assert threads == ({"adam": "2", "hig": "1"} if problem == "toy" else {"adam": None, "hig": None})  # narrower wins
     with pytest.raises(SystemExit, match="--set seed=3: seed is the league's own"):
         script.main(["--problems", "toy", "--set", "seed=3", *common])
 
