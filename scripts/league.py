@@ -207,21 +207,55 @@ def calibration() -> dict:
             "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
 
 
-def machine(runs: pd.DataFrame) -> dict:
-    """What the runs had of the machine: their CPU share (CPU seconds over wall seconds per
-    thread; 1 = a core of their own), the load average at their end, threads and revisions."""
-    share = pd.to_numeric(runs.get("env.cpu_share"), errors="coerce").dropna()
-    load = runs.get("env.load_at_finish", pd.Series(dtype=object)).dropna().map(lambda v: float(v[0]))
-    return {
-        "runs": len(runs),
-        "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
-        "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
-        "load_1min_median": round(float(load.median()), 2) if len(load) else None,
-        "cpu_count": int(pd.to_numeric(runs.get("env.cpu_count"), errors="coerce").max()) if len(runs) else None,
-        "threads_per_run": sorted(set(pd.to_numeric(runs.get("env.torch_threads"), errors="coerce").dropna().astype(int))),
-        "revisions": sorted(set(runs.get("env.git_revision", pd.Series(dtype=str)).dropna().astype(str).str[:12])),
-        "trained": [str(runs["started"].min()), str(runs["finished"].max())] if "started" in runs else None,
-    }
+def hardware(runs: pd.DataFrame) -> pd.Series:
+    """Per run, what it trained on: the GPU's name, else 'CPU, N cores' (the machine's count)."""
+    gpu = runs.get("env.device_name", pd.Series("", index=runs.index)).fillna("").astype(str)
+    cores = pd.to_numeric(runs.get("env.cpu_count"), errors="coerce").fillna(0).astype(int)
+    on_gpu = runs.get("env.device", pd.Series("cpu", index=runs.index)).astype(str).str.startswith("cuda")
+    return gpu.where(on_gpu, "CPU, " + cores.astype(str) + " cores")
+
+
+def machine(runs: pd.DataFrame) -> list[dict]:
+    """Per problem and hardware, what the runs had of the machine: their CPU share (CPU seconds
+    over wall seconds per thread; 1 = a core of their own), the load average at their end,
+    threads, revisions and when they trained."""
+    if runs.empty:
+        return []
+
+    def column(group: pd.DataFrame, name: str) -> pd.Series:
+        return group[name] if name in group else pd.Series(dtype=object)
+
+    groups = []
+    for (problem, where), group in runs.groupby([runs["problem.name"], hardware(runs)], sort=True):
+        share = pd.to_numeric(column(group, "env.cpu_share"), errors="coerce").dropna()
+        load = column(group, "env.load_at_finish").dropna().map(lambda v: float(v[0]))
+        threads = pd.to_numeric(column(group, "env.torch_threads"), errors="coerce").dropna().astype(int)
+        groups.append({
+            "problem": problem, "hardware": where, "runs": len(group),
+            "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
+            "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
+            "load_1min_median": round(float(load.median()), 2) if len(load) else None,
+            "threads_per_run": sorted({int(t) for t in threads}),
+            "revisions": sorted(set(column(group, "env.git_revision").dropna().astype(str).str[:12])),
+            "trained": [str(group["started"].min()), str(group["finished"].max())] if "started" in group else None,
+        })  # fmt: skip
+    return groups
+
+
+def recorded_calibrations(root: Path, out: Path) -> list[dict]:
+    """The calibrations earlier league invocations wrote beside their runs (``ROOT/manifests/``,
+    or a league.json they left under the root, as a run on another machine brings back), each
+    with where it was read (the report's own ``out`` left out)."""
+    found = []
+    for path in sorted([*root.glob("manifests/*.json"), *root.rglob("league.json")]):
+        if path.resolve().is_relative_to(out.resolve()):
+            continue
+        try:
+            entries = json.loads(path.read_text()).get("calibration") or []
+        except (OSError, ValueError, AttributeError):
+            continue
+        found += [{**entry, "file": str(path.relative_to(root))} for entry in entries if isinstance(entry, dict)]
+    return found
 
 
 def report(root: Path, out: Path, manifest: dict) -> str:
@@ -236,11 +270,13 @@ def report(root: Path, out: Path, manifest: dict) -> str:
     runs, curves = load_runs(root, curves=True, figure_runs=True)
     scored, reached, _ = league.league_frames(runs, curves, league.all_spaces())
     manifest["machine"] = machine(runs)
-    text = "machine: " + ", ".join(f"{k} {v}" for k, v in manifest["machine"].items()) + "\n" + text
+    manifest["recorded_calibration"] = recorded_calibrations(root, out)
+    lines = ["machine: " + ", ".join(f"{k} {v}" for k, v in group.items()) for group in manifest["machine"]]
+    text = "\n".join([*lines, text])
     if len(scored):
         league.plot_league(reached, league.interval_table(scored, reached), out)
         identities = scored[["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps",
-                             "train_time_s", "config_id", "path"]].copy()  # fmt: skip
+                             "train_time_s", "config_id", "path"]].assign(hardware=hardware(scored))  # fmt: skip
         identities["path"] = identities["path"].map(lambda p: str(Path(p).resolve().relative_to(root.resolve())))
         identities.sort_values(["task", "league_setting", "seed"]).to_csv(out / "runs.csv", index=False)
     (out / "league.txt").write_text(text)  # after the machine line
@@ -323,6 +359,10 @@ def main(argv=None) -> int:
     manifest["runs"] = [{"role": role, "job": j.sweep, "seed": j.seed, "identity": j.identity, "status": j.status,
                          "path": str(Path(j.path).relative_to(args.root.resolve())) if j.path else None}
                         for role, j in all_jobs]  # fmt: skip
+    if not args.report_only:  # kept beside the runs: a later --report-only, anywhere, reads it back
+        (args.root / "manifests").mkdir(exist_ok=True)
+        stamp = time.strftime("%Y-%m-%dT%H-%M-%S") + f"-{os.getpid()}"
+        (args.root / "manifests" / f"{stamp}.json").write_text(json.dumps(manifest, indent=1, default=str) + "\n")
     print(report(args.root, args.out, manifest))
     missing = [j for _, j in all_jobs if not j.done]
     if missing:

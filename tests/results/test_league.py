@@ -182,6 +182,33 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkey
         script.main(["--problems", "toy", "--set", "seed=3", *common])
 
 
+def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(tmp_path):
+    """A league trained on two machines (the Poisson rows on a GPU machine) reports each
+    (problem, hardware) apart, and re-reads the calibration each invocation left beside its runs."""
+    import importlib.util
+    import json
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    runs = pd.DataFrame({
+        "problem.name": ["toy", "poisson", "poisson"], "env.device": ["cpu", "cuda", "cpu"],
+        "env.device_name": ["", "NVIDIA H100", ""], "env.cpu_count": [2, 16, 16], "env.cpu_share": [0.9, 0.3, 1.0],
+    })  # fmt: skip
+    assert list(script.hardware(runs)) == ["CPU, 2 cores", "NVIDIA H100", "CPU, 16 cores"]
+    groups = script.machine(runs)
+    assert [(g["problem"], g["hardware"], g["runs"]) for g in groups] == [
+        ("poisson", "CPU, 16 cores", 1), ("poisson", "NVIDIA H100", 1), ("toy", "CPU, 2 cores", 1)
+    ]  # fmt: skip
+    (tmp_path / "gpu-out").mkdir()
+    (tmp_path / "gpu-out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 0.01}]}))
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 9.0}]}))
+    found = script.recorded_calibrations(tmp_path, tmp_path / "out")
+    assert found == [{"matmul_50x256_s": 0.01, "file": "gpu-out/league.json"}]  # the report's own out left out
+
+
 # -- --league on synthetic run files ---------------------------------------------------------
 
 
