@@ -374,6 +374,26 @@ def improvement_table(runs: pd.DataFrame, reference: str = HIG, metric: str = TE
     return pd.DataFrame(rows)
 
 
+def leaders(table: pd.DataFrame, metric: str = TEST_METRIC) -> pd.DataFrame:
+    """Per task (an ``interval_table``): the setting with the lowest IQM ``metric``, the
+    runner-up, whether the runner-up's interval reaches below the leader's upper bound (then
+    the seeds do not separate them), and the rank of HIG tuned and at the paper's settings."""
+    rows = []
+    for task, group in table.groupby("task"):
+        point = group[metric].map(lambda cell: cell[0] if isinstance(cell, tuple) else math.nan)
+        ranked = group.assign(_point=point.fillna(math.inf)).sort_values("_point", kind="stable")
+        first, second = ranked.iloc[0], ranked.iloc[1] if len(ranked) > 1 else None
+        rank = {name: i + 1 for i, name in enumerate(ranked["setting"])}
+        rows.append({
+            "task": task, "best": first["setting"], metric: first[metric],
+            "runner-up": None if second is None else second["setting"],
+            "runner-up " + metric: None if second is None else second[metric],
+            "separated": None if second is None else bool(second[metric][1] > first[metric][2]),
+            "hig rank": rank.get(HIG), "hig (paper) rank": rank.get(f"{HIG} (paper)"), "settings": len(ranked),
+        })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
 def _ci(cell, inf: str = "not reached") -> str:
     if not isinstance(cell, tuple):
         return "" if cell is None or (isinstance(cell, float) and math.isnan(cell)) else str(cell)
@@ -424,6 +444,11 @@ def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str,
         out += ["", "per task: IQM over seeds [95% stratified-bootstrap interval]; targets no setting reached are left out"]
         for task, group in table.groupby("task"):
             out += [f"-- {task}", _task_table(group).to_string()]
+        best = leaders(table)
+        for c in (TEST_METRIC, "runner-up " + TEST_METRIC):
+            best[c] = best[c].map(lambda v: _ci(v, "inf (seeds diverged)"))
+        out += ["", "lowest final test loss per task, IQM [95% interval]; separated: the runner-up's interval lies above"]
+        out.append(best.to_string(index=False))
         for reference in (HIG, f"{HIG} (paper)"):  # HIG tuned as every optimizer, and at the paper's settings
             if reference not in set(scored["league_setting"]):
                 continue

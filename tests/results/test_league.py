@@ -74,6 +74,20 @@ def test_integrated_score_known_answer_and_numeric_area():
 # -- search spaces and the tuning rule -------------------------------------------------------
 
 
+def test_leaders_name_the_lowest_setting_per_task_and_hig_s_rank():
+    inf = math.inf
+    table = pd.DataFrame({
+        "task": ["a", "a", "a", "b", "b"],
+        "setting": ["adam", "hig", "hig (paper)", "adam", "hig"],
+        "final_test_loss": [(1.0, 0.5, 1.5), (3.0, 2.0, 4.0), (inf, inf, inf), (2.0, 1.0, 3.0), (1.0, 0.5, 2.5)],
+    })  # fmt: skip
+    best = league.leaders(table).set_index("task")
+    assert best.loc["a", "best"] == "adam" and best.loc["a", "runner-up"] == "hig"
+    assert bool(best.loc["a", "separated"])  # hig's interval [2, 4] lies above adam's [0.5, 1.5]
+    assert (best.loc["a", "hig rank"], best.loc["a", "hig (paper) rank"]) == (2, 3)  # diverged last
+    assert best.loc["b", "best"] == "hig" and not bool(best.loc["b", "separated"])  # [1, 3] overlaps [0.5, 2.5]
+
+
 def test_every_shipped_optimizer_has_a_search_space():
     from higbench.config import config_dir
 
