@@ -23,6 +23,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -88,7 +89,8 @@ def parse_spec(spec: str) -> tuple[str, str, list[str]]:
     optimizer, _, extra = rest.partition(":")
     if not problem or not optimizer:
         raise ValueError(f"--runs {spec}: expected PROBLEM:OPTIMIZER[:KEY=VALUE,...]")
-    return problem, optimizer, [kv for kv in extra.split(",") if kv]
+    # a comma starts the next override only before KEY=: list values (problem.hidden=[64,64]) keep theirs
+    return problem, optimizer, [kv for kv in re.split(r",(?=[\w.+~/@-]+=)", extra) if kv]
 
 
 def jobs_of(specs: list[str], budget: float, eval_every: float, extra: list[str]) -> list:

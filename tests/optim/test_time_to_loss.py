@@ -50,3 +50,8 @@ def test_levels_go_below_the_targets_as_far_as_a_run_went():
     assert time_to_loss.levels(targets, 1e-3) == list(targets)  # no run below the targets: nothing added
     assert time_to_loss.levels(targets, 6.1e-7) == pytest.approx([*targets, 1e-5, 1e-6])
     assert time_to_loss.levels(targets, 1e-6) == pytest.approx([*targets, 1e-5, 1e-6])  # reached exactly
+
+
+def test_a_run_spec_keeps_list_values_whole():
+    spec = "toy:hig:problem.hidden=[64,64],seed=7"
+    assert time_to_loss.parse_spec(spec) == ("toy", "hig", ["problem.hidden=[64,64]", "seed=7"])
