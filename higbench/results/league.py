@@ -490,6 +490,14 @@ def profile_band(reached: pd.DataFrame, unit: str, taus: Sequence[float], reps: 
     }
 
 
+def highlighted(bands: Mapping[str, tuple], tau_max: float = TAU_MAX, top: int = 5) -> set[str]:
+    """The profile curves drawn in colour: the ``top`` settings by the area under rho (the
+    integrated score's), and HIG tuned and at the paper's settings."""
+    area = {name: float(np.mean(rho)) for name, (rho, _, _) in bands.items()}
+    leaders = sorted(area, key=lambda name: -area[name])[:top]
+    return {*leaders, *(n for n in (HIG, f"{HIG} (paper)") if n in bands)}
+
+
 def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: float = TAU_MAX) -> list[Path]:
     """profile.png (rho in seconds and in updates, with bands) and time_to_target.png (per task,
     the IQM of seconds to each target with its interval, per setting)."""
@@ -500,26 +508,35 @@ def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: 
 
     out.mkdir(parents=True, exist_ok=True)
     taus = np.linspace(1.0, tau_max, 61)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    settings = sorted(table["setting"].unique())
+    colour = {name: plt.get_cmap("tab20")(i % 20) for i, name in enumerate(settings)}  # one colour per setting
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
     for ax, unit in zip(axes, ("seconds", "updates")):
-        for name, (rho, lo, hi) in sorted(profile_band(reached, unit, taus).items()):
-            (line,) = ax.step(taus, rho, where="post", label=name, lw=1.6)
-            ax.fill_between(taus, lo, hi, step="post", color=line.get_color(), alpha=0.12)
+        bands = profile_band(reached, unit, taus)
+        shown = highlighted(bands, tau_max)
+        for name, (rho, lo, hi) in sorted(bands.items()):
+            if name not in shown:  # the rest thin and grey, so that the leaders and HIG can be read
+                ax.step(taus, rho, where="post", color="0.75", lw=0.8, zorder=1)
+                continue
+            ax.step(taus, rho, where="post", label=name, lw=1.8, color=colour.get(name), zorder=3)
+            ax.fill_between(taus, lo, hi, step="post", color=colour.get(name), alpha=0.12, zorder=2)
         ax.set_xlabel(f"tau ({unit} to target over the fastest)")
-        ax.set_title(f"equal {'wall clock' if unit == 'seconds' else 'updates'}")
+        ax.set_title(f"equal {'wall clock' if unit == 'seconds' else 'updates'} (grey: the other settings)", fontsize=10)
         ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left", ncol=2)
     axes[0].set_ylabel("rho(tau): fraction of (task, target) pairs")
-    axes[1].legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     paths = [out / "profile.png"]
     fig.savefig(paths[0], dpi=120)
     plt.close(fig)
 
     tasks = sorted(table["task"].unique())
-    settings = sorted(table["setting"].unique())
-    colour = {name: plt.get_cmap("tab20")(i % 20) for i, name in enumerate(settings)}  # one colour per setting
-    fig, axes = plt.subplots(1, len(tasks), figsize=(3.6 * len(tasks), 4.4), squeeze=False)
-    for ax, task in zip(axes[0], tasks):
+    ncols = min(len(tasks), 3)
+    nrows = -(-len(tasks) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows + 1.0), squeeze=False)
+    for ax in axes.flat[len(tasks) :]:
+        ax.set_visible(False)
+    for ax, task in zip(axes.flat, tasks):
         rows = table[table["task"] == task]
         cols = [c for c in rows.columns if c.startswith("seconds_to_") and rows[c].map(lambda v: isinstance(v, tuple)).any()]
         cols.sort(key=lambda c: -float(c.split("_to_")[1]))  # this task's targets, highest first
@@ -542,12 +559,13 @@ def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: 
         else:
             ax.text(0.5, 0.5, "no setting reached a target", ha="center", transform=ax.transAxes, fontsize=8)
         ax.set_title(task, fontsize=9)
-        ax.set_xlabel("test-loss target (not reached: no point)")
+        ax.set_xlabel("test-loss target (not reached: no point)", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("seconds to target (IQM over seeds, 95% interval)")
+    for row_axes in axes:
+        row_axes[0].set_ylabel("seconds to target\n(IQM over seeds, 95% interval)", fontsize=8)
     handles = [plt.Line2D([], [], marker="o", ls="", color=colour[n], label=n) for n in settings]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(settings), 6), fontsize=7)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(settings), 9), fontsize=8)
+    fig.tight_layout(rect=(0, 0.9 / (3.6 * nrows + 1.0), 1, 1))
     paths.append(out / "time_to_target.png")
     fig.savefig(paths[1], dpi=120)
     plt.close(fig)

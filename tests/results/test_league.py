@@ -300,3 +300,10 @@ def test_two_settings_under_one_league_label_are_refused(tmp_path, capsys):
     assert main([str(tmp_path), "--league"]) == 2
     err = capsys.readouterr().err
     assert "task toy: adam has runs of 2 different settings" in err, err
+
+
+def test_the_profile_draws_the_leaders_and_hig_in_colour():
+    flat = np.zeros(3)
+    bands = {name: (np.full(3, level), flat, flat) for name, level in
+             [("a", 0.9), ("b", 0.8), ("c", 0.1), ("hig", 0.0), ("hig (paper)", 0.05)]}  # fmt: skip
+    assert league.highlighted(bands, top=2) == {"a", "b", "hig", "hig (paper)"}
