@@ -179,7 +179,9 @@ def run_jobs(jobs: list[Job], root: Path, n_jobs: int, phase: str) -> None:
 
 
 def _log(text: str) -> None:
-    print(text.replace("[jobs]", "[league]", 1), file=sys.stderr)
+    for prefix in ("[jobs]", "[figures]"):  # the launcher's lines, as the league's
+        text = text.replace(prefix, "[league]", 1)
+    print(text, file=sys.stderr)
 
 
 def calibration() -> dict:
