@@ -108,15 +108,57 @@ def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
     from higbench.config import validate
     from higbench.errors import ConfigError
     from higbench.jobs import compose, hydra_conf
+    from higbench.preflight import composition_error
 
-    extra = [f"{k}={v}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
-    with hydra_conf():
-        cfg = compose((f"problem={problem}", f"optimizer={optimizer}", *extra))
+    overrides = [f"problem={problem}", f"optimizer={optimizer}"]
+    overrides += [f"{k}={v}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
     try:
+        with hydra_conf():
+            cfg = compose(tuple(overrides))
         validate(cfg)
     except ConfigError as exc:
         return str(exc)
+    except Exception as exc:  # Hydra's composition errors (an unknown key in --set): the CLI's line
+        return str(composition_error(exc, overrides))
     return None
+
+
+def check_protocol(trials: dict, budgets: dict, problems: list[str], optimizers: list[str]) -> None:
+    """Before any run: each per-problem count or budget, and each --set scope, names a shipped
+    problem (or optimizer), and counts and budgets are positive. A typo in a scope would
+    otherwise train on the wrong device without a word. Names outside this league's --problems
+    pass: one set of flags serves each problem's command and the --report-only over all."""
+    from higbench.config import config_dir
+
+    shipped = {group: sorted(p.stem for p in (Path(config_dir()) / group).glob("*.yaml")) for group in ("problem", "optimizer")}
+    problems, optimizers = sorted({*problems, *shipped["problem"]}), sorted({*optimizers, *shipped["optimizer"]})
+    for flag, values in (("--trials", trials), ("--seconds", budgets)):
+        for name, value in values.items():
+            if name is not None and name not in problems:
+                choices = ", ".join(problems)
+                raise SystemExit(f"league: error: {flag} {name}={value:g}: no problem {name} (conf/problem/: {choices})")
+            if not value > 0:
+                raise SystemExit(f"league: error: {flag} {value:g}: must be positive")
+    for scope, key, value in EXTRA:
+        names = scope.split("/") if scope else []
+        known = (
+            not names
+            or (len(names) == 1 and names[0] in problems + optimizers)
+            or (len(names) == 2 and names[0] in problems and names[1] in optimizers)
+        )
+        if not known:
+            why = "is not a problem, an optimizer or problem/optimizer (conf/problem/, conf/optimizer/)"
+            raise SystemExit(f"league: error: --set {scope}:{key}={value}: {scope} {why}")
+
+
+def check_set(problem: str, optimizers: list[str]) -> None:
+    """A --set that makes an optimizer refuse a problem it runs without it is the user's value,
+    not the optimizer's limit: one line naming it, before any run."""
+    for optimizer in optimizers:
+        extra = extra_overrides(problem, optimizer)
+        if extra and refusal(problem, optimizer, with_set=False) is None and (why := refusal(problem, optimizer)):
+            given = " ".join(f"{k}={v}" for k, v in extra.items())
+            raise SystemExit(f"league: error: --set ({problem}, {optimizer}: {given}): {why}")
 
 
 def variant_overrides(variant: str) -> dict:
@@ -316,6 +358,7 @@ def main(argv=None) -> int:
     trials = per_problem(args.trials, "--trials", int)
     budgets = per_problem(args.seconds, "--seconds")
     EXTRA[:] = [parse_set(item) for item in args.set]
+    check_protocol(trials, budgets, problems, optimizers)
     seeds = list(range(args.seeds))
     if set(seeds) & set(league.TUNING_SEEDS):
         raise SystemExit(f"league: error: --seeds {args.seeds}: overlaps the tuning seeds {league.TUNING_SEEDS}")
@@ -335,7 +378,9 @@ def main(argv=None) -> int:
         if not seconds:
             raise SystemExit(f"league: error: problem={problem}: no problem.league_seconds; give --seconds")
         variants = list(node.get("held_out") or [])[: args.variants]
-        refused = {o: why for o in optimizers if (why := refusal(problem, o, with_set=not args.report_only))}
+        if not args.report_only:
+            check_set(problem, optimizers)
+        refused = {o: why for o in optimizers if (why := refusal(problem, o, with_set=False))}
         for o, why in refused.items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         usable = [o for o in optimizers if o not in refused]

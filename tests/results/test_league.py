@@ -3,6 +3,7 @@ rule, and ``higbench-results --league`` on synthetic run files."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -125,31 +126,31 @@ def test_tuning_never_reads_the_test_loss():
         league.best_trial(trials.assign(final_test_loss=[0.0, 1.0, 1.0]), metric="final_test_loss")
 
 
+@pytest.fixture(scope="module")
+def script():
+    """scripts/league.py as a module (a script, not part of the package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
+    spec = importlib.util.spec_from_file_location("league_script", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_the_league_script_tunes_on_the_validation_loss():
     source = (Path(__file__).resolve().parents[2] / "scripts" / "league.py").read_text()
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
-def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line():
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+def test_the_league_leaves_out_what_cannot_run_with_the_cli_s_line(script):
     assert script.refusal("oscillator", "sip") == "optimizer=sip: problem oscillator has no inverse simulator"
     assert script.refusal("toy", "sip") is None and script.refusal("oscillator", "hig") is None
 
 
-def test_an_interrupted_tuning_stops_the_league(tmp_path, monkeypatch):
+def test_an_interrupted_tuning_stops_the_league(script, tmp_path, monkeypatch):
     """A Ctrl-C during tuning went on to confirm settings chosen from part of the tuning (and
     to the next problem); now the league stops and says the same command continues."""
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
     launched = []
 
     def interrupted(jobs, root, **kw):
@@ -164,16 +165,10 @@ def test_an_interrupted_tuning_stops_the_league(tmp_path, monkeypatch):
     assert launched == [4]  # the tuning only: nothing confirmed
 
 
-def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkeypatch):
+def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path, monkeypatch):
     """``--trials 1,toy=2`` tunes the toy on 2 trials and the oscillator on 1; ``--set
     toy/hig:threads=1`` reaches the toy's HIG jobs alone, over ``toy:threads=2`` given after it;
     a league key is refused by --set."""
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
     launched = []
 
     def stop(jobs, root, **kw):
@@ -196,16 +191,9 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(tmp_path, monkey
         script.main(["--problems", "toy", "--set", "seed=3", *common])
 
 
-def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(tmp_path):
+def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(script, tmp_path):
     """A league trained on two machines (the Poisson rows on a GPU machine) reports each
     (problem, hardware) apart, and re-reads the calibration each invocation left beside its runs."""
-    import importlib.util
-    import json
-
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
     runs = pd.DataFrame({
         "problem.name": ["toy", "poisson", "poisson"], "env.device": ["cpu", "cuda", "cpu"],
         "env.device_name": ["", "NVIDIA H100", ""], "env.cpu_count": [2, 16, 16], "env.cpu_share": [0.9, 0.3, 1.0],
@@ -221,6 +209,28 @@ def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(t
     (tmp_path / "out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 9.0}]}))
     found = script.recorded_calibrations(tmp_path, tmp_path / "out")
     assert found == [{"matmul_50x256_s": 0.01, "file": "gpu-out/league.json"}]  # the report's own out left out
+
+
+@pytest.mark.parametrize(
+    "flags, line",
+    [
+        (["--set", "devic=cuda"], "--set (toy, adam: devic=cuda): devic=cuda: unknown key"),
+        (["--set", "threads=0"], "--set (toy, adam: threads=0): threads=0: must be auto, null or an integer >= 1"),
+        (["--set", "poison/adam:threads=1"], "poison/adam is not a problem, an optimizer or problem/optimizer"),
+        (["--trials", "2,tyo=3"], "--trials tyo=3: no problem tyo (conf/problem/: "),
+        (["--seconds", "0"], "--seconds 0: must be positive"),
+    ],
+)
+def test_a_bad_protocol_flag_is_one_line_before_any_run(script, tmp_path, monkeypatch, flags, line):
+    """A typo in a --set scope trained on the wrong device without a word; a bad --set value made
+    every optimizer 'left out' and ended in a KeyError; --seconds 0 fell back to the default."""
+    launched = []
+    monkeypatch.setattr(script, "run_missing", lambda jobs, root, **kw: launched.append(jobs) or [])
+    monkeypatch.setattr(script, "calibration", lambda: {})
+    argv = ["--problems", "toy", "--optimizers", "adam", "--trials", "1", "--seeds", "1", "--seconds", "1", *flags]
+    with pytest.raises(SystemExit) as stop:
+        script.main([*argv, "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
+    assert line in str(stop.value) and not launched
 
 
 # -- --league on synthetic run files ---------------------------------------------------------
