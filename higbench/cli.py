@@ -69,6 +69,11 @@ log = logging.getLogger("higbench")
 # -- the job's directory: claimed, Hydra's files written by us, never through a link ----------
 
 
+class DirectoryHeld(ConfigError):
+    """The job's directory is held by another run: the refused job leaves it, and everything in
+    it, alone (removing it as an empty leftover pulled it from under the run that holds it)."""
+
+
 @contextlib.contextmanager
 def claimed_dir(output_dir: Path, key: str):
     """Hold a lock on the job's directory while the job runs (flock on the directory itself).
@@ -81,7 +86,7 @@ def claimed_dir(output_dir: Path, key: str):
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise ConfigError(key, str(output_dir), "another higbench process is running in it; refusing to overwrite it") from None
+        raise DirectoryHeld(key, str(output_dir), "another higbench process is running in it; refusing to overwrite it") from None
     except OSError:  # a file system without locks: the run file's exclusive creation still decides
         pass
     try:
@@ -394,7 +399,8 @@ def _hydra_main(cfg: DictConfig) -> float:
             return _run_job(plan, multirun)
     except ConfigError as exc:  # refused before its run file: nothing of it stays
         remove_job_files(made)
-        remove_hydra_outputs(output_dir, None)
+        if not isinstance(exc, DirectoryHeld):  # the directory (and its log) is the other run's
+            remove_hydra_outputs(output_dir, None)
         if not multirun:
             refuse(exc)
         # One job of a sweep refused: it fails alone (one line), the others run; the sweep says how many failed.

@@ -417,6 +417,30 @@ def test_existing_run_dir_is_never_overwritten(tmp_path, monkeypatch, capsys):
         assert f.attrs["status"] == "completed"
 
 
+def test_a_run_refused_by_a_held_directory_leaves_it_to_its_holder(tmp_path, monkeypatch, capsys):
+    """Two runs into one directory: the loser, refused, removed the still-empty directory (and
+    its log) as its own leftover, and the winner's next step failed with FileNotFoundError
+    (seen under load in tests/reliability/test_concurrent.py). The holder is played here by a
+    lock this test takes on the directory."""
+    import fcntl
+    import os
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "_run_job", lambda *a: pytest.fail("reached the job"))
+    holder = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(SystemExit) as exit_info:
+            cli.main(["problem=toy", "optimizer=adam", f"hydra.run.dir={run_dir}"])
+    finally:
+        os.close(holder)
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "another higbench process is running in it" in err, err
+    assert run_dir.is_dir(), "the refused run removed the directory another run holds"
+
+
 def test_remove_hydra_outputs_keeps_foreign_files(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     job = tmp_path / "outputs" / "runs" / "d" / "job"
