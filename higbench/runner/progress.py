@@ -197,3 +197,56 @@ class Progress:
         elif self._unprinted is not None:  # piped: the last evaluation always shows
             _line(self._unprinted)
             self._unprinted = None
+
+
+def _span(seconds: float) -> str:
+    """A coarse duration for a forecast: '40 s', '3 min', '2.5 h'."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def count_text(label: str, done: int, total: int, noun: str = "runs", seconds_left: float | None = None, failed: int = 0) -> str:
+    """The one wording of work counted in pieces (figure runs, sweep jobs, league runs):
+    ``[figures] 7 of 24 runs done (1 failed), about 3 min left``."""
+    text = f"[{label}] {done} of {total} {noun} done"
+    if failed:
+        text += f" ({failed} failed)"
+    if seconds_left is not None and done < total:
+        text += f", about {_span(seconds_left)} left"
+    return text
+
+
+class CountProgress:
+    """Progress of work counted in pieces, in one style across the tool (``count_text``).
+
+    On a terminal one line redrawn in place; piped (a log, CI), a line at the start, about one
+    per tenth of the pieces (``PIPE_LINES``) and one at the end; nothing when disabled (the
+    ``progress=false`` of the runs it launches). ``seconds_left`` is the caller's forecast
+    (the budgets still to train), never a rate guess."""
+
+    def __init__(self, enabled: bool, label: str, total: int, noun: str = "runs"):
+        self.enabled, self.label, self.total, self.noun = enabled and total > 0, label, total, noun
+        self.tty = self.enabled and sys.stderr.isatty()
+        self._next_line = 0.0
+        self.last = ""
+
+    def update(self, done: int, seconds_left: float | None = None, failed: int = 0) -> None:
+        if not self.enabled:
+            return
+        self.last = count_text(self.label, done, self.total, self.noun, seconds_left, failed)
+        if self.tty:
+            sys.stderr.write("\r\033[K" + self.last)
+            sys.stderr.flush()
+            return
+        fraction = done / self.total
+        if fraction >= self._next_line or done >= self.total:
+            _line(self.last)
+            self._next_line = (int(fraction * PIPE_LINES + 1e-9) + 1) / PIPE_LINES
+
+    def close(self) -> None:
+        if self.tty and self.last:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
