@@ -128,18 +128,16 @@ def test_tuning_never_reads_the_test_loss():
 
 @pytest.fixture(scope="module")
 def script():
-    """scripts/league.py as a module (a script, not part of the package)."""
-    import importlib.util
+    """The league's driver (higbench.league.driver, the ``higbench-league`` command)."""
+    from higbench.league import driver
 
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return driver
 
 
 def test_the_league_script_tunes_on_the_validation_loss():
-    source = (Path(__file__).resolve().parents[2] / "scripts" / "league.py").read_text()
+    from higbench.league import driver
+
+    source = Path(driver.__file__).read_text()
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
