@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import warnings
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -92,6 +93,17 @@ def sobol_trials(space: Mapping[str, Mapping], n: int, seed: int = 0) -> list[di
                 trial[key] = float(f"{value:.3g}")
         trials.append(trial)
     return trials
+
+
+def tuning_seed(study: int) -> int:
+    """The seed of tuning study ``study`` (1000, 1001, ...): never a confirmation seed."""
+    return 1000 + study
+
+
+def trial_points(optimizer: str, space: Mapping[str, Mapping], n: int, study: int = 0) -> list[dict[str, float | int]]:
+    """The ``n`` trial points of ``optimizer`` in study ``study``: Sobol points scrambled with a
+    seed of their own per (optimizer, study), so studies draw apart and more trials keep the first."""
+    return sobol_trials(space, n, seed=zlib.crc32(f"{optimizer}/{study}".encode()))
 
 
 def best_trial(trials: pd.DataFrame, metric: str = VALIDATION_METRIC) -> pd.Series | None:
