@@ -84,6 +84,16 @@ def use_searchpath(folders: list[Path]) -> None:
             fail(f"--searchpath {folder}: no such folder")
     value = os.pathsep.join(str(f.resolve()) for f in folders)
     if value:
+        from hydra.core.plugins import Plugins
+
+        from hydra_plugins.higbench_searchpath import HigbenchSearchPath
+
+        # Hydra finds plugins by listing hydra_plugins/ folders on the path; an editable install has
+        # none to list: registered here, and its folder's parent put on the launched runs' PYTHONPATH
+        Plugins.instance().register(HigbenchSearchPath)
+        plugins_parent = str(Path(inspect.getfile(HigbenchSearchPath)).resolve().parents[2])
+        paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        os.environ["PYTHONPATH"] = os.pathsep.join([*paths, plugins_parent] if plugins_parent not in paths else paths)
         os.environ[SEARCHPATH_ENV] = value
     else:
         os.environ.pop(SEARCHPATH_ENV, None)
@@ -130,6 +140,16 @@ def problem_config(problem: str) -> dict:
 
     with hydra_conf():
         return compose((f"problem={problem}",))["problem"]
+
+
+def has_validation(problem: str, node: dict) -> bool:
+    """Whether the problem's runs have a validation loss (what tuning reads): its config's
+    ``val_size``, or one given with --set for every optimizer of it."""
+    given = [v for scope, key, v in EXTRA if key.lstrip("+") == "problem.val_size" and scope in (None, problem)]
+    try:
+        return int(given[-1] if given else node.get("val_size") or 0) > 0
+    except ValueError:
+        return True  # not a number: the --set check names it
 
 
 # -- the protocol's flags ---------------------------------------------------------------------
@@ -581,6 +601,10 @@ def seconds_of(problem: str, budgets: dict, node: dict) -> float | None:
     return budgets.get(problem, budgets.get(None)) or node.get("league_seconds")
 
 
+def span(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
 def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
     """Runs, training hours and hardware per task, before anything runs."""
     lines, total_runs, total_s = [], 0, 0.0
@@ -590,11 +614,11 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
         threads = sorted({str(j.overrides.get("threads", "auto")) for j in jobs})
         tune = sum(j.sweep.startswith("tune/") for j in jobs)
         lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({tune} tuning, {len(jobs) - tune} confirmation), "
-                     f"{seconds / 3600:.2f} h of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
+                     f"{span(seconds)} of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
         total_runs += len(jobs)
         total_s += seconds
-    lines.append(f"[league] plan: {total_runs} runs, {total_s / 3600:.2f} h of training (budgets x runs), about "
-                 f"{total_s / max(1, n_jobs) / 3600:.2f} h wall clock at --jobs {n_jobs} "
+    lines.append(f"[league] plan: {total_runs} runs, {span(total_s)} of training (budgets x runs), about "
+                 f"{span(total_s / max(1, n_jobs))} wall clock at --jobs {n_jobs} "
                  "(evaluations and start-up come on top)")  # fmt: skip
     return "\n".join(lines)
 
@@ -649,6 +673,9 @@ def _main(argv=None) -> int:
             fail(f"--trials {args.trials}: no count for problem={problem}")
         if not seconds_of(problem, budgets, nodes[problem]):
             fail(f"problem={problem}: no problem.league_seconds; give --seconds")
+        if not has_validation(problem, nodes[problem]):
+            fail(f"problem={problem}: no validation set (problem.val_size is 0), and tuning reads the validation loss; "
+                 f"give one in its YAML or --set {problem}:++problem.val_size=256")  # fmt: skip
         if not args.report_only:
             check_set(problem, optimizers)
     protocol = protocol_of(args, root, problems, optimizers, paper, trials, budgets, nodes)

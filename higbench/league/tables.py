@@ -100,6 +100,7 @@ def runs_table(root: Path, runs: pd.DataFrame, roles: Mapping[str, dict]) -> pd.
     from higbench.results import league
 
     runs = runs[runs["config_id"].isin(roles)] if len(runs) else runs
+    runs = runs[[_readable(row) for _, row in runs.iterrows()]] if len(runs) else runs
     if runs.empty:
         return pd.DataFrame(columns=list(RUN_COLUMNS))
     base = Path(root).resolve()
@@ -118,6 +119,19 @@ def runs_table(root: Path, runs: pd.DataFrame, roles: Mapping[str, dict]) -> pd.
     table = table[list(RUN_COLUMNS)].copy()
     table["problem.targets"] = table["problem.targets"].map(_targets_text)
     return table
+
+
+def _readable(row: pd.Series) -> bool:
+    """Whether a run's row can be scored (a file from elsewhere may hold anything); one line naming
+    the run file for one that cannot."""
+    seed, status = row.get("seed"), row.get("status")
+    if isinstance(seed, bool) or not isinstance(seed, int | float) or seed != seed or int(seed) != seed:
+        _warn(f"{row['path']}: skipped, seed {seed!r} is not an integer")
+        return False
+    if not isinstance(status, str):
+        _warn(f"{row['path']}: skipped, status {status!r} is not a status")
+        return False
+    return True
 
 
 def _targets_text(value) -> str | None:
