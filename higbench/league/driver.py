@@ -57,7 +57,7 @@ from higbench.results import league
 EVALUATIONS = 100  # per run: time-to-target ratios up to TAU_MAX = 4 are resolved (a target at 1/25 of the budget)
 DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig",
                       "adamw", "muon", "soap", "shampoo", "sip")  # fmt: skip
-LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm")
+LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm", "slurm")  # slurm: conf/hydra/launcher/slurm.yaml
 SEARCHPATH_ENV = "HIGBENCH_SEARCHPATH"  # read by hydra_plugins/higbench_searchpath
 
 
