@@ -237,3 +237,25 @@ def test_the_plan_counts_runs_and_hours_and_runs_nothing(tmp_path, no_runs, caps
     assert "toy: 42 runs (12 tuning, 30 confirmation), 42 min of training, hardware cpu" in out
     assert "about 21 min wall clock at --jobs 2" in out
     assert not no_runs and not (tmp_path / "runs").exists()
+
+
+def test_help_lists_the_flags_with_examples(capsys):
+    from higbench.league.__main__ import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0 and out.startswith("usage: higbench-league")
+    assert "examples:" in out and "higbench-league --report-only --root runs-a --root runs-b" in out
+    for flag in ("--searchpath", "--launcher-set", "--studies", "--plan", "--report-only", "--root", "--out"):
+        assert flag in out
+
+
+def test_progress_counts_runs_and_is_quiet_under_progress_false(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "2", "--studies", "1", "--seeds", "1",
+            "--seconds", "3", "--variants", "0"]  # fmt: skip
+    assert driver.main([*argv, "--root", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "[league] 0 of 3 runs done, about 9 s left" in err and "[league] 2 of 3 runs done" in err
+    assert driver.main([*argv, "--root", str(tmp_path / "b"), "--set", "progress=false"]) == 0
+    assert "runs done" not in capsys.readouterr().err
