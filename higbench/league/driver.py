@@ -508,7 +508,7 @@ def check_out(out: Path, root: Path, protocol: dict) -> None:
 def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, reached: pd.DataFrame) -> None:
     """league.txt, league.json, runs.csv and the profile figure into ``out`` (links refused)."""
     safe_dir(out, create=True)
-    if len(scored):
+    if len(reached):  # the profile needs targets (a problem of your own may declare none)
         # drawn apart, then moved in: a link planted in out is replaced, not written through
         plots = out / f".plots-{os.getpid()}"
         shutil.rmtree(plots, ignore_errors=True)
@@ -518,6 +518,7 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
                 os.replace(path, out / path.name)
         finally:
             shutil.rmtree(plots, ignore_errors=True)
+    if len(scored):
         columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
                    "config_id", "run", "hardware", "root"]  # fmt: skip
         rows = scored[[c for c in columns if c in scored]].sort_values(["task", "league_setting", "seed"])

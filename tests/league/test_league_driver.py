@@ -259,3 +259,12 @@ def test_progress_counts_runs_and_is_quiet_under_progress_false(tmp_path, no_run
     assert "[league] 0 of 3 runs done, about 9 s left" in err and "[league] 2 of 3 runs done" in err
     assert driver.main([*argv, "--root", str(tmp_path / "b"), "--set", "progress=false"]) == 0
     assert "runs done" not in capsys.readouterr().err
+
+
+def test_a_problem_without_targets_gets_its_report_without_a_profile(tmp_path):
+    """A problem of your own may declare no targets: the league crashed drawing an empty profile
+    after all its training (numpy: need at least one array to concatenate)."""
+    scored = pd.DataFrame({"task": ["heat"], "league_setting": ["adam"], "seed": [0], "status": ["completed"]})
+    reached = pd.DataFrame(columns=["task", "setting", "seed", "target", "seconds", "updates"])
+    driver.write_report(tmp_path / "out", "scores\n", {}, scored, reached)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["league.json", "league.txt", "runs.csv"]
