@@ -113,6 +113,8 @@ def runs_table(root: Path, runs: pd.DataFrame, roles: Mapping[str, dict]) -> pd.
     )
     for key in ("league_role", "league_job", "study", "trial"):
         table[key] = table["identity"].map(lambda i, key=key: roles[i][key])
+    for key in ("study", "trial"):  # whole numbers, empty for confirmation runs (not 0.0)
+        table[key] = pd.to_numeric(table[key], errors="coerce").astype("Int64")
     for column in RUN_COLUMNS:
         if column not in table:
             table[column] = None

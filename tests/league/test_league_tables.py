@@ -58,6 +58,9 @@ def test_tables_hold_the_contract_columns_and_the_load(tmp_path):
     assert set(runs["league_role"]) == {"confirm"} and set(runs["hardware"]) == {"CPU, 2 cores"}
     assert set(runs["env.load_1min"]) == {3.5}  # the first of the three load averages, not its first character
     assert runs["run"].str.startswith("figures-runs/x/").all()
+    roles = tables._roles(tmp_path, {i: {"role": "tune", "job": "tune/toy/adam/1/3", "study": 1, "trial": 3} for i in jobs})
+    tune = tables.runs_table(tmp_path, load_runs(tmp_path, figure_runs=True), roles)
+    assert "1,3," in tune.to_csv(index=False)  # study and trial as whole numbers
     curves = pd.read_csv(curves_path)
     assert list(curves.columns) == list(tables.CURVE_COLUMNS) and len(curves) == 2 * 3 + 2 * 4
     assert 0.37 * 3 in set(curves["wall_time"])  # full precision
