@@ -49,7 +49,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from higbench.jobs import Job, job_seconds, resolve, run_index, run_missing
+from higbench.jobs import LAUNCH_OVERRIDES, Job, job_seconds, resolve, run_index, run_missing
 from higbench.league import tables
 from higbench.league.files import ROOT_FILE_ERRORS, read_json_files, safe_dir, write_text
 from higbench.results import league
@@ -612,7 +612,8 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
     for problem, jobs in planned:
         seconds = sum(job_seconds(j) for j in jobs)
         devices = sorted({str(j.overrides.get("device", "cpu")) for j in jobs})
-        threads = sorted({str(j.overrides.get("threads", "auto")) for j in jobs})
+        launched = dict(o.split("=", 1) for o in LAUNCH_OVERRIDES)  # what every launched run gets unless --set says otherwise
+        threads = sorted({str(j.overrides.get("threads", launched["threads"])) for j in jobs})
         tune = sum(j.sweep.startswith("tune/") for j in jobs)
         lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({tune} tuning, {len(jobs) - tune} confirmation), "
                      f"{span(seconds)} of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip

@@ -234,7 +234,7 @@ def test_the_plan_counts_runs_and_hours_and_runs_nothing(tmp_path, no_runs, caps
     assert driver.main(argv) == 0
     out = capsys.readouterr().out
     # tuning 2 x 3 x 2 = 12; confirmation (2 tuned + 1 paper) x (base + 1 variant) x 5 seeds = 30
-    assert "toy: 42 runs (12 tuning, 30 confirmation), 42 min of training, hardware cpu" in out
+    assert "toy: 42 runs (12 tuning, 30 confirmation), 42 min of training, hardware cpu threads=1" in out
     assert "about 21 min wall clock at --jobs 2" in out
     assert not no_runs and not (tmp_path / "runs").exists()
 
