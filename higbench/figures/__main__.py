@@ -119,7 +119,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def run_build(args: argparse.Namespace, launcher) -> int:
     from higbench.claims.rules import ResultsFileError
+    from higbench.display import busy_summary
     from higbench.figures.build import build
+    from higbench.results.index import cpu_uses
 
     try:
         result = build(
@@ -140,6 +142,9 @@ def run_build(args: argparse.Namespace, launcher) -> int:
         f"[figures] preset {args.preset}: {len(result.drawn)} drawn, {result.launched} run(s) launched, "
         f"{result.seconds:.1f} s; outputs in {args.out}/"
     )
+    busy = busy_summary(cpu_uses(result.run_files), noun="runs of this build")
+    if busy:  # a busy machine: the figures' curves and verdicts are not an idle machine's
+        print(f"[figures] {busy}")
     if result.missing:
         print("[figures] runs still missing (failed or not run): " + ", ".join(f"{k}: {v}" for k, v in result.missing.items()))
     for k, v in result.errors.items():

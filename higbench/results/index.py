@@ -33,6 +33,7 @@ import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pandas as pd
 
@@ -47,6 +48,7 @@ from higbench.runfile.reader import (
     RunFileOpenForWrite,
     RunTables,
     UnreadableRunFile,
+    read_meta,
     read_tables,
     run_file_path,
 )
@@ -638,3 +640,18 @@ def _median_over_seeds(values: pd.Series) -> float:
 
 def _time_and_conditioning(df: pd.DataFrame) -> list[str]:
     return [c for c in df.columns if c.startswith("time_to_") or c in CONDITIONING_COLUMNS]
+
+
+def cpu_uses(paths: Iterable[str | Path]) -> list[tuple[float, str]]:
+    """(CPU share, load at the end) of each readable run file that records them (env/cpu_share):
+    what the closing lines of sweeps and figure builds judge the machine's load from."""
+    uses = []
+    for path in paths:
+        try:
+            with h5py.File(run_file_path(path), "r", locking=False) as f:
+                env = read_meta(f)["env"]
+        except Exception:  # noqa: BLE001 - a failed job's missing or half-written file: nothing to say
+            continue
+        if "cpu_share" in env:
+            uses.append((float(env["cpu_share"]), str(env.get("load_at_finish", ""))))
+    return uses
