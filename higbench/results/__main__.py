@@ -415,6 +415,10 @@ def _summary_line(df: pd.DataFrame, total: int, roots: list[Path], args: argpars
     )
 
 
+FIRST_LINE = (
+    "the first line, 'N of M runs under ROOT': the runs kept by --problem/--optimizer/--status of the M run files"
+    " found, by status"
+)
 # What each column of the tables means: printed under a table for the columns it shows.
 LEGEND = {
     "status": "completed (its budget ran out), diverged (loss NaN/inf), interrupted, failed, running or corrupt",
@@ -472,6 +476,7 @@ def _print_settings(df: pd.DataFrame, args: argparse.Namespace) -> None:
         print(table.to_string(index=False))
     print("columns (steps, train_time_s and the times: medians over the seeds):")
     print("\n".join(_legend(list(table.columns), m)))
+    print(f"  ({FIRST_LINE})")
 
 
 def _busy_marker(df: pd.DataFrame) -> pd.Series | None:
@@ -516,6 +521,7 @@ def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) 
     legend = _legend(list(table.columns), args.metric)
     if legend:
         print("columns:\n" + "\n".join(legend))
+        print(f"  ({FIRST_LINE})")
     errors = df[df["error"].fillna("") != ""] if "error" in df else df.iloc[0:0]
     for _, row in errors.iterrows():
         print(f"note: {row['path']}: {row['status']}: {row['error']}", file=sys.stderr)
