@@ -1,7 +1,8 @@
 """`python -m higbench.figures` (`higbench-figures`): the paper's figures and tables from run files.
 
     python -m higbench.figures all --preset quick            # what `make figures` runs
-    python -m higbench.figures fig1 fig2b --preset smoke
+    python -m higbench.figures fig1 --preset quick           # one figure, its claims judged and printed (~8 min)
+    python -m higbench.figures fig1 fig2b --preset smoke     # the plumbing check: no verdicts
     python -m higbench.figures all --preset paper --plan     # runs needed/missing, cost; runs nothing
     python -m higbench.figures all --no-run                  # draw from the runs that exist
     python -m higbench.figures --report-only --out docs/results   # REPORT.md from the data there, no runs
