@@ -463,7 +463,8 @@ def _legend(columns: list[str], metric: str) -> list[str]:
 def _print_settings(df: pd.DataFrame, args: argparse.Namespace) -> None:
     """--best: one row per best setting, then the legend of its columns."""
     m = args.metric
-    shown = ["problem.name", "optimizer.name", "setup", "setting", "budget", "seeds", f"{m}_median", f"{m}_min", f"{m}_max"]
+    shown = ["problem.name", "optimizer.name", "setup", "setting", "optimizer.lr", "batch_size", "budget", "seeds"]
+    shown += [f"{m}_median", f"{m}_min", f"{m}_max"]
     optional = ["runs_not_completed", "busy_seeds"]  # shown where some row has one
     shown += [c for c in optional if c in df and pd.to_numeric(df[c], errors="coerce").fillna(0).gt(0).any()]
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)

@@ -226,7 +226,7 @@ def test_best_reports_the_setting_by_its_median_over_seeds(tmp_path, capsys):
     assert "lr=0.1" in hig and "0.0001" in hig and "5e-05" in hig and "0.002" in hig
     legend = out.split("columns", 1)[1]
     for column in header:  # every column that does not explain itself has its line
-        if column not in ("problem.name", "optimizer.name"):
+        if column not in ("problem.name", "optimizer.name", "optimizer.lr", "batch_size"):  # names that explain themselves
             assert f"  {column}: " in legend, column
 
     assert results_main([str(root), "--best-seed"]) == 0
