@@ -430,8 +430,9 @@ LEGEND = {
     "final_test_loss": "test loss at the last evaluation",
     "best_test_loss": "lowest test loss at any evaluation",
     "overrides": "the command-line overrides of the run",
-    "seeds": "completed runs of the setting with a finite metric: the median and range are over these",
-    "runs_not_completed": "the setting's other runs (diverged, interrupted, ...): not in the median",
+    "seeds": "completed and diverged runs of the setting: the median and range are over these (a diverged seed as inf)",
+    "diverged_seeds": "seeds whose loss turned NaN/inf: counted in the median as the worst value (inf)",
+    "runs_not_completed": "the setting's other runs (interrupted, failed, running): not in the median",
     "busy": f"under {BUSY_SHARE} of a core (the run's CPU share, with the load at its end): its update count and loss"
     " are not what an idle machine gives",
     "busy_seeds": f"seeds that had under {BUSY_SHARE} of a core: their update counts and losses are not an idle machine's",
@@ -465,7 +466,7 @@ def _print_settings(df: pd.DataFrame, args: argparse.Namespace) -> None:
     m = args.metric
     shown = ["problem.name", "optimizer.name", "setup", "setting", "optimizer.lr", "batch_size", "budget", "seeds"]
     shown += [f"{m}_median", f"{m}_min", f"{m}_max"]
-    optional = ["runs_not_completed", "busy_seeds"]  # shown where some row has one
+    optional = ["diverged_seeds", "runs_not_completed", "busy_seeds"]  # shown where some row has one
     shown += [c for c in optional if c in df and pd.to_numeric(df[c], errors="coerce").fillna(0).gt(0).any()]
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
     conditioning = [c for c in CONDITIONING_SHOWN if c in df and pd.to_numeric(df[c], errors="coerce").notna().any()]

@@ -588,9 +588,10 @@ def best_settings(
     """The best setting per group, judged by its seeds: one row per group.
 
     A setting is the runs that share the ``setting`` column (their seeds). Its completed runs
-    with a finite ``metric`` are its seeds: their median (``<metric>_median``), count
-    (``seeds``), least and greatest (``<metric>_min``, ``<metric>_max``); its other runs
-    (diverged, interrupted, ...) are counted in ``runs_not_completed``. The setting with the
+    with a ``metric``, and its diverged runs (counted as inf: the worst), are its seeds: their
+    median (``<metric>_median``), count (``seeds``), least and greatest (``<metric>_min``,
+    ``<metric>_max``), and ``diverged_seeds``; its other runs (interrupted, failed, ...) are
+    counted in ``runs_not_completed``. The setting with the
     lowest median wins its group (ties: more seeds, then the label). Groups as in
     ``best_runs``. Other numeric columns (steps, times, conditioning) are medians over the
     seeds; ``busy_seeds`` counts seeds that had under ``display.BUSY_SHARE`` of their cores.
@@ -602,7 +603,10 @@ def best_settings(
     if missing:
         raise KeyError(f"best_settings: no column(s) {missing} in the runs table")
     values = pd.to_numeric(df[metric], errors="coerce")
-    ok = df["status"].isin(RUN_STATUSES_DONE) & np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
+    # A diverged seed is a seed that ended worst, not one to leave out: otherwise a setting whose
+    # seeds mostly diverge would win on its one survivor.
+    values = values.where(df["status"] != "diverged", math.inf)
+    ok = df["status"].isin(DONE_STATUSES) & ~np.isnan(values.to_numpy(dtype=float, na_value=np.nan))
     seeds = df[ok].assign(_metric=values[ok])
     if seeds.empty:
         return df.iloc[0:0]
@@ -618,6 +622,9 @@ def best_settings(
     if "env.cpu_share" in seeds:
         share = pd.to_numeric(seeds["env.cpu_share"], errors="coerce")
         rows = rows.join((share < BUSY_SHARE).groupby([seeds[k] for k in group], dropna=False).sum().rename("busy_seeds"))
+    rows = rows.join(
+        (seeds["status"] == "diverged").groupby([seeds[k] for k in group], dropna=False).sum().rename("diverged_seeds")
+    )
     all_runs = df.groupby(group, sort=True, dropna=False).size().rename("_runs")
     rows = rows.join(all_runs)
     rows["runs_not_completed"] = rows.pop("_runs") - rows["seeds"]

@@ -191,14 +191,20 @@ def test_best_reports_the_setting_by_its_median_over_seeds(tmp_path, capsys):
     """Three seeds per setting. HIG lr=1 has the single best seed (1e-6) but a median of 1e-2;
     HIG lr=0.1 has median 1e-4 over 3 seeds (range 5e-5 to 2e-3): --best names lr=0.1 with
     3 seeds and that range. --best-seed names the lucky lr=1 seed instead. Adam's lr=0.01
-    has a diverged seed: its median is over the 2 completed ones, and the column says 1."""
+    has a diverged seed, counted as the worst value: median 3e-3 over 3 seeds, 1 diverged;
+    Adam's lr=0.1 has one good seed (1e-5) and two diverged: its median is inf, so it loses."""
     import pandas as pd
 
     from higbench.results.index import best_settings, load_runs
     from higbench.results.profile import setting_labels
 
     root = tmp_path / "sweep"
-    finals = {("hig", 1.0): [1e-6, 1e-2, 5e-2], ("hig", 0.1): [2e-3, 1e-4, 5e-5], ("adam", 0.01): [3e-3, 1e-3, None]}
+    finals = {
+        ("hig", 1.0): [1e-6, 1e-2, 5e-2],
+        ("hig", 0.1): [2e-3, 1e-4, 5e-5],
+        ("adam", 0.01): [3e-3, 1e-3, None],
+        ("adam", 0.1): [1e-5, None, None],
+    }
     for (opt, lr), losses in finals.items():
         for seed, final in enumerate(losses):
             write_run(
@@ -214,8 +220,9 @@ def test_best_reports_the_setting_by_its_median_over_seeds(tmp_path, capsys):
     assert best.loc["hig", "optimizer.lr"] == 0.1 and best.loc["hig", "seeds"] == 3
     assert best.loc["hig", "final_test_loss_median"] == pytest.approx(1e-4)
     assert (best.loc["hig", "final_test_loss_min"], best.loc["hig", "final_test_loss_max"]) == pytest.approx((5e-5, 2e-3))
-    assert best.loc["adam", "seeds"] == 2 and best.loc["adam", "runs_not_completed"] == 1
-    assert best.loc["adam", "final_test_loss_median"] == pytest.approx(2e-3)
+    assert best.loc["adam", "optimizer.lr"] == 0.01 and best.loc["adam", "seeds"] == 3
+    assert best.loc["adam", "diverged_seeds"] == 1 and best.loc["adam", "runs_not_completed"] == 0
+    assert best.loc["adam", "final_test_loss_median"] == pytest.approx(3e-3)
 
     assert results_main([str(root), "--best"]) == 0
     out = capsys.readouterr().out
