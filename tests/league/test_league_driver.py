@@ -268,3 +268,8 @@ def test_a_problem_without_targets_gets_its_report_without_a_profile(tmp_path):
     reached = pd.DataFrame(columns=["task", "setting", "seed", "target", "seconds", "updates"])
     driver.write_report(tmp_path / "out", "scores\n", {}, scored, reached)
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["league.json", "league.txt", "runs.csv"]
+
+
+def test_set_hydra_searchpath_is_the_searchpath_flag():
+    rest, folders = driver.searchpath_of_set(["threads=1", "hydra.searchpath=[file://examples/heat/conf,file:///x/conf]"])
+    assert rest == ["threads=1"] and folders == [Path("examples/heat/conf"), Path("/x/conf")]
