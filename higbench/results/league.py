@@ -396,10 +396,15 @@ def format_final_loss_table(table: pd.DataFrame, metric: str = TEST_METRIC) -> s
 def aggregate_table(scored: pd.DataFrame, metric: str = TEST_METRIC, reference: str = HIG, seed: int = 0) -> pd.DataFrame:
     """Across tasks, the rliable way, per setting: the IQM over (task, seed) of normalised scores
     (``stats.normalised_scores``: 1 at the task leader's median, 0 at the task's worst finite
-    median or worse, diverged 0), with the stratified bootstrap's percentile interval, and
+    median or worse, diverged 0; a loss <= 0, float rounding, counts as the task's lowest positive
+    loss), with the stratified bootstrap's percentile interval, and
     P(``reference`` < X) averaged over the tasks both ran. Settings are compared on the tasks
     they ran ('tasks')."""
     seeds = final_loss_seeds(scored, metric)
+    for task, by_setting in seeds.items():  # a loss <= 0 is rounding (the dipole's 1 - |<psi, target>|^2 in float32)
+        positive = np.concatenate([v[(v > 0) & np.isfinite(v)] for v in by_setting.values()])
+        floor = positive.min() if len(positive) else 1.0
+        seeds[task] = {name: np.where(v > 0, v, floor) for name, v in by_setting.items()}
     best, worst = {}, {}
     for task, by_setting in seeds.items():
         medians = np.array([np.median(v) for v in by_setting.values()])
@@ -577,6 +582,13 @@ def interval_table(runs: pd.DataFrame, reached: pd.DataFrame) -> pd.DataFrame:
 # -- the report ------------------------------------------------------------------------------
 
 
+def seeds_text(scored: pd.DataFrame) -> str:
+    """'3 seeds' or '3-10 seeds' per task and setting."""
+    counts = scored.groupby(["task", "league_setting"]).size()
+    low, high = int(counts.min()), int(counts.max())
+    return f"{low} seeds" if low == high else f"{low}-{high} seeds"
+
+
 def hardware_line(scored: pd.DataFrame) -> str:
     if "hardware" not in scored:
         return "hardware: not recorded in these runs (one hardware class per task cannot be checked)"
@@ -595,10 +607,9 @@ def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str,
     left_out = len(runs) - len(scored)
     if scored.empty:
         return f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out (tuning, unfinished)"
-    seed_counts = scored.groupby(["task", "league_setting"]).size()
     out = [
         f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings, "
-        f"{seed_counts.min()}-{seed_counts.max()} seeds per task and setting); {left_out} run(s) left out "
+        f"{seeds_text(scored)} per task and setting); {left_out} run(s) left out "
         "(tuning, unfinished, or a second run of one identity)",
         hardware_line(scored),
         "",
@@ -635,10 +646,9 @@ def format_runs_csv(path: Path, constant_loss: Mapping[str, float] | None = None
     """The final-loss re-read of a published runs.csv: per task the table of ``final_loss_table``,
     then the aggregate across tasks."""
     scored = runs_csv_frame(path)
-    seed_counts = scored.groupby(["task", "league_setting"]).size()
     out = [
         f"{len(scored)} scored runs from {Path(path).name} ({scored['task'].nunique()} tasks, "
-        f"{seed_counts.min()}-{seed_counts.max()} seeds per task and setting); final losses only "
+        f"{seeds_text(scored)} per task and setting); final losses only "
         "(no curves: no time to target)",
         hardware_line(scored),
         "",
@@ -671,7 +681,7 @@ def _colours(settings: Sequence[str], leaders: Sequence[str]) -> dict[str, str]:
 
 def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
     """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
-    log scale, diverged drawn at the top edge as x), the median as a bar; settings sorted by
+    log scale; diverged: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
     median, leaders and HIG in colour, the rest grey. ``table``: ``final_loss_table``."""
     import matplotlib
 
@@ -689,14 +699,15 @@ def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
         colours = _colours(list(rows["setting"]), list(rows["setting"][:3]))
         finite = np.concatenate([np.asarray(s, dtype=float) for s in rows["seeds"]])
         finite = finite[np.isfinite(finite) & (finite > 0)]
-        top = finite.max() * 3 if len(finite) else 1.0
+        top, bottom = (finite.max() * 3, finite.min() / 3) if len(finite) else (1.0, 0.1)
         for i, r in rows.iterrows():
             seeds = np.asarray(r["seeds"], dtype=float)
             c = colours[r["setting"]]
             ok = np.isfinite(seeds) & (seeds > 0)
             ax.scatter(np.full(ok.sum(), i), seeds[ok], s=14, color=c, zorder=3)
-            if (~ok).any():
-                ax.scatter(np.full((~ok).sum(), i), np.full((~ok).sum(), top), marker="x", s=20, color=c, zorder=3)
+            for where, marker, level in ((~np.isfinite(seeds), "x", top), (np.isfinite(seeds) & (seeds <= 0), "v", bottom)):
+                if where.any():  # diverged at the top edge; a loss <= 0 (float rounding) at the bottom
+                    ax.scatter(np.full(where.sum(), i), np.full(where.sum(), level), marker=marker, s=20, color=c, zorder=3)
             if math.isfinite(r["median"]) and r["median"] > 0:
                 ax.hlines(r["median"], i - 0.3, i + 0.3, color=c, lw=2, zorder=4)
         ax.set_yscale("log")
@@ -706,7 +717,7 @@ def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
         ax.set_title(f"{task} (leader by median: {rows['setting'][0]})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     for row_axes in axes:
-        row_axes[0].set_ylabel("final test loss (dots: seeds; bar: median;\nx: diverged)", fontsize=8)
+        row_axes[0].set_ylabel("final test loss (dots: seeds; bar: median;\nx: diverged; v: <= 0, rounding)", fontsize=8)
     fig.tight_layout()
     out.mkdir(parents=True, exist_ok=True)
     path = out / "final_losses.png"

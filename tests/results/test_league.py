@@ -286,3 +286,22 @@ def test_a_row_whose_seeds_never_moved_from_the_first_evaluation_is_flagged():
     table = league.final_loss_table(scored, first=league.first_losses(scored, curves)).set_index("setting")
     assert "constant predictor" in table.loc["muon", "flag"] and table.loc["adam", "flag"] == ""
     assert league.final_loss_table(scored).set_index("setting").loc["muon", "flag"] == ""  # without curves: not known
+
+
+@pytest.mark.slow  # draws the 11-panel figure
+def test_the_published_runs_csv_re_reads_to_the_committed_table(tmp_path):
+    """docs/results/league/reread.txt is what scripts/league_reread.py makes of runs.csv alone."""
+    import importlib.util
+
+    docs = Path(__file__).resolve().parents[2] / "docs" / "results" / "league"
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league_reread.py"
+    spec = importlib.util.spec_from_file_location("league_reread", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main([str(docs / "runs.csv"), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "reread.txt").read_text() == (docs / "reread.txt").read_text()
+    table = league.final_loss_table(league.runs_csv_frame(docs / "runs.csv"))
+    leaders = table[table["leader"]].set_index("task")["setting"]
+    assert leaders["toy"] == "lm" and leaders["dipole dt=0.04"] == "lm"  # by median, as the audit found
+    assert not table["separated"].any() and table["p_holm"].min() == pytest.approx(0.25)  # 3 seeds separate nothing
+    assert table.groupby("task")["setting"].count().sum() == 147 and (table["n"] == 3).all()
