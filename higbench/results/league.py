@@ -598,9 +598,19 @@ def hardware_line(scored: pd.DataFrame) -> str:
     )
 
 
-def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None) -> str:
+def format_league(
+    runs: pd.DataFrame,
+    curves: pd.DataFrame,
+    spaces: Mapping[str, Mapping],
+    tuning_seeds=None,
+    validation_targets: Mapping[str, float] | None = None,
+    budgets: Mapping[str, float] | None = None,
+    held_out: Mapping[str, Sequence[str]] | None = None,
+) -> str:
     """The league as text: per task the final test loss (median, every seed, order-statistics
-    interval, tests against the leader), flagged rows, the aggregate across tasks, and the time to
+    interval, tests against the leader), flagged rows, the aggregate across tasks, AlgoPerf's
+    score where target-setting runs gave ``validation_targets`` and ``budgets`` per task
+    (``algoperf_table``; ``held_out``: problem -> its variant tasks, the gates), and the time to
     the problems' test-loss targets (equal wall clock; no equal-updates view: an update of L-BFGS
     or LM is many evaluations, so updates are not equal work)."""
     scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds)
@@ -621,6 +631,12 @@ def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str,
                 "0: the task's worst finite median or diverged), percentile stratified bootstrap (nominal 95%; "
                 "not exact at few seeds); P(hig < X) averaged over the tasks both ran"]  # fmt: skip
         out.append(aggregate_table(scored).to_string(index=False))
+        if validation_targets and budgets:
+            given = "; ".join(f"{t}: target {validation_targets[t]:g}, budget {budgets[t]:g} s" for t in validation_targets)
+            out += ["", "AlgoPerf: seconds to the validation target within the budget (median over seeds; inf: fewer "
+                    f"than half reach it), each problem weighing the same; held-out variants are gates: {given}"]  # fmt: skip
+            table = algoperf_table(scored, curves, validation_targets, budgets, held_out)
+            out.append(table.to_string(index=False))
         out += ["", "targets (problem.targets, test loss): " + "; ".join(f"{t}: {', '.join(f'{v:g}' for v in vs)}"
                                                                          for t, vs in targets.items())]  # fmt: skip
         out += [f"performance profile, equal wall clock (seconds to target; score: area under rho up to tau={TAU_MAX:g})"]

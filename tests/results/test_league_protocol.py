@@ -187,3 +187,21 @@ def test_time_to_target_scores_each_problem_the_same_and_held_out_variants_gate(
     over_budget = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1},
                                         budgets={"p": 1.5, "q": 10}).set_index("setting")  # fmt: skip
     assert math.isinf(over_budget.loc["b", "s to target: p"])  # 2 s is past p's 1.5 s budget
+
+
+def test_the_report_prints_the_algoperf_table_when_targets_and_budgets_are_given():
+    runs = pd.DataFrame({
+        "path": ["a0", "a1", "b0", "b1"], "status": ["completed"] * 4, "problem.name": ["toy"] * 4,
+        "optimizer.name": ["adam", "adam", "sgd", "sgd"], "overrides": ["optimizer.lr=0.1"] * 4, "seed": [0, 1, 0, 1],
+        "final_test_loss": [0.01, 0.02, 0.5, 0.6], "final_val_loss": [0.01, 0.02, 0.5, 0.6],
+        "config_id": ["a0", "a1", "b0", "b1"], "problem.targets": [(0.1,)] * 4,
+    })  # fmt: skip
+    curves = pd.DataFrame({"path": [p for p in runs["path"] for _ in range(2)], "wall_time": [0.0, 2.0] * 4,
+                           "step": [0, 5] * 4, "test_loss": [1, 0.01, 1, 0.02, 1, 0.5, 1, 0.6],
+                           "val_loss": [1, 0.01, 1, 0.02, 1, 0.5, 1, 0.6]})  # fmt: skip
+    text = league.format_league(runs, curves, league.all_spaces(), validation_targets={"toy": 0.05}, budgets={"toy": 6.0})
+    algoperf = text.split("AlgoPerf:")[1].split("targets (problem.targets")[0]
+    assert "toy: target 0.05, budget 6 s" in algoperf
+    rows = {line.split()[0]: line.split() for line in algoperf.splitlines()[2:] if line.strip()}
+    assert float(rows["adam"][1]) == 1.0 and float(rows["sgd"][1]) == 0.0  # sgd never reaches 0.05
+    assert "AlgoPerf" not in league.format_league(runs, curves, league.all_spaces())  # no target-setting runs: no table
