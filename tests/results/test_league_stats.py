@@ -136,3 +136,15 @@ def test_aggregate_matches_rliable(case):
     assert (lo, hi) == pytest.approx(case["iqm_x_interval"], abs=0.03)
     _, lo, hi = stats.probability_of_improvement_ci(-x, -y, reps=1000, seed=case["seed"])
     assert (lo, hi) == pytest.approx(case["probability_interval"], abs=0.05)
+
+
+def test_the_tied_rank_sum_count_equals_scipy_s_exact_test_without_ties():
+    from scipy import stats as scipy_stats
+
+    rng = np.random.default_rng(0)
+    for n, m in ((3, 3), (5, 7), (10, 10)):
+        x, y = rng.random(n), rng.random(m)
+        doubled = np.rint(2 * scipy_stats.rankdata(np.r_[x, y])).astype(int)
+        counts = stats._rank_sum_counts(doubled, n)
+        p = counts[: int(doubled[:n].sum()) + 1].sum() / math.comb(n + m, n)
+        assert p == pytest.approx(scipy_stats.mannwhitneyu(x, y, alternative="less", method="exact").pvalue, abs=1e-12)
