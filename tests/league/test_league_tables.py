@@ -49,6 +49,12 @@ def score(runs: pd.DataFrame, curves: pd.DataFrame) -> str:
     return league.format_league(runs, curves, league.all_spaces())
 
 
+def score_files(root: Path) -> str:
+    """The score of the run files themselves, each run's hardware named as the tables name it."""
+    runs, curves = load_runs(root, curves=True, figure_runs=True)
+    return score(runs.assign(hardware=tables.hardware(runs)), curves)
+
+
 def test_tables_hold_the_contract_columns_and_the_load(tmp_path):
     jobs = league_root(tmp_path, [0, 1])
     runs_path, curves_path = tables.export(tmp_path, jobs)
@@ -68,10 +74,11 @@ def test_tables_hold_the_contract_columns_and_the_load(tmp_path):
 
 def test_a_root_without_its_run_files_rescores_the_same_from_its_tables(tmp_path):
     jobs = league_root(tmp_path, [0, 1, 2])
-    from_files = score(*load_runs(tmp_path, curves=True, figure_runs=True))
+    from_files = score_files(tmp_path)
     tables.export(tmp_path, jobs)
     shutil.rmtree(tmp_path / "figures-runs")
-    assert "6 scored runs" in from_files and score(*tables.read(tmp_path)) == from_files
+    assert "6 scored runs" in from_files and "toy: CPU, 2 cores" in from_files
+    assert score(*tables.read(tmp_path)) == from_files
     tables.export(tmp_path)  # exporting again without the run files keeps their rows
     assert score(*tables.read(tmp_path)) == from_files
 
@@ -79,11 +86,13 @@ def test_a_root_without_its_run_files_rescores_the_same_from_its_tables(tmp_path
 def test_two_roots_merge_into_the_score_of_one_root_holding_both(tmp_path):
     a, b, both = tmp_path / "a", tmp_path / "b", tmp_path / "both"
     tables.export(a, league_root(a, [0, 1]))
-    tables.export(b, league_root(b, [2, 3], cores=16))  # another machine
+    tables.export(b, league_root(b, [2, 3]))  # another machine of the same class
     jobs = league_root(both, [0, 1, 2, 3])
     merged_runs, merged_curves = tables.read([a, b])
-    assert set(merged_runs["hardware"]) == {"CPU, 2 cores", "CPU, 16 cores"} and set(merged_runs["root"]) == {str(a), str(b)}
+    assert set(merged_runs["hardware"]) == {"CPU, 2 cores"} and set(merged_runs["root"]) == {str(a), str(b)}
     tables.export(both, jobs)
     single = score(*tables.read(both))
     assert "8 scored runs" in single
-    assert score(merged_runs, merged_curves) == single == score(*load_runs(both, curves=True, figure_runs=True))
+    tables.export(b, league_root(b, [4], cores=16))  # a machine of another class: the scorer splits its task
+    assert "toy [CPU, 16 cores]" in score(*tables.read([a, b]))
+    assert score(merged_runs, merged_curves) == single == score_files(both)
