@@ -186,12 +186,14 @@ def test_a_user_s_problem_and_search_space_through_searchpath(tmp_path, monkeypa
     conf = tmp_path / "conf"
     (conf / "optimizer").mkdir(parents=True)
     (conf / "problem").mkdir()
-    (conf / "problem" / "heat.yaml").write_text((HEAT / "conf" / "problem" / "heat.yaml").read_text())
+    heat = (HEAT / "conf" / "problem" / "heat.yaml").read_text()
+    assert "val_size: 64" in heat  # the example declares its validation set; this copy drops it
+    (conf / "problem" / "heat.yaml").write_text(heat.replace("val_size: 64", "val_size: 0"))
     (conf / "optimizer" / "mysgd.yaml").write_text(yaml.safe_dump({"_target_": "torch.optim.SGD", "name": "mysgd", "lr": 0.01}))
     monkeypatch.syspath_prepend(str(HEAT))
     argv = ["--searchpath", str(conf), "--problems", "heat", "--trials", "1", "--studies", "1", "--seeds", "1",
             "--seconds", "1", "--root", str(tmp_path / "runs")]  # fmt: skip
-    assert driver.main([*argv, "--optimizers", "adam"]) == 2  # the example declares no validation set
+    assert driver.main([*argv, "--optimizers", "adam"]) == 2  # a problem without a validation set
     assert "problem=heat: no validation set" in capsys.readouterr().err
     argv += ["--set", "heat:++problem.val_size=64"]
     assert driver.main([*argv, "--optimizers", "adam,mysgd"]) == 2
