@@ -328,7 +328,10 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     ledger = Ledger(runs_root)
     claimed = bool(jobs) and all(j.identity for j in jobs)  # jobs resolved: each has its identity in the ledger
     held = _held_elsewhere(jobs, ledger, log) if claimed else []
-    jobs = [j for j in jobs if j not in held and not (claimed and ledger.final(j.identity))]
+    final = [j for j in jobs if claimed and j not in held and ledger.final(j.identity)]
+    if final:
+        log(f"[jobs] {len(final)} run(s) not run again: the ledger records them refused or failed repeatedly ({ledger.dir})")
+    jobs = [j for j in jobs if j not in held and j not in final]
     new = _launch(jobs, runs_root, ledger if claimed else None, n_jobs=n_jobs, launcher=launcher, log=log) if jobs else []
     if claimed:
         wait_for_holders([j for j in [*jobs, *held] if not j.done], ledger, log)
@@ -418,9 +421,14 @@ def watching(jobs: Sequence[Job], ledger: Ledger | None, workers: int):
     before = {j.identity: ledger.record(j.identity).get("finished") for j in jobs}
     stop = threading.Event()
 
+    shown = [(0, 0)]
+
     def look() -> None:
         ended = {j.identity: r for j in jobs if (r := ledger.record(j.identity)).get("finished") != before[j.identity]}
         failed = sum(1 for r in ended.values() if r.get("status") not in DONE_STATUSES)
+        if (len(ended), failed) == shown[0]:
+            return  # a line when something ended, not one per look
+        shown[0] = (len(ended), failed)
         left = [j for j in jobs if j.identity not in ended]
         progress.update(len(ended), sum(map(job_seconds, left)) / max(1, min(workers, len(left))), failed)
 

@@ -248,6 +248,7 @@ def test_progress_counts_the_ledgers_records_and_is_quiet_under_progress_false(t
         ledger.write_record(jobs[1].identity, "failed", "b/run.h5", "boom")
     err = capsys.readouterr().err
     assert "[jobs] 0 of 2 runs done, about 2 min left" in err and "[jobs] 2 of 2 runs done (1 failed)" in err
+    assert err.count("2 of 2 runs done") == 1  # a line when something ends, not one per look
     quiet = toy_jobs(2, "progress=false")
     for i, j in enumerate(quiet):
         j.identity = f"{i + 20:016x}"
