@@ -21,8 +21,14 @@ process is refused by the resume and left alone.
 Running. The jobs that can run now (a continued run waits for its parent, a searched seed for
 its search) form one ``higbench -m`` multirun over their list (the job-list sweeper,
 ``hydra/sweeper=joblist``), longest first, on a Hydra launcher: joblib with ``--jobs``
-workers locally, or any other (``--launcher slurm``, ...) with extra ``hydra.*`` overrides.
-Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
+workers locally, or any other (``--launcher slurm``, ...) with extra ``hydra.*`` overrides;
+with ``submitit_local`` or ``submitit_slurm`` one submitit job array whose task i runs job i
+of that list (``arrays``). Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
+
+The ledger. The runs root is the ledger of its jobs (``ledger``): each job is claimed there by
+the worker that runs it (``worker``), so a job held by a live worker is waited for instead of
+run twice (two drivers on one root), a dead worker's job runs again (resumed from its
+checkpoint where it left one), and a job refused for memory or failed repeatedly is final.
 """
 
 from __future__ import annotations
