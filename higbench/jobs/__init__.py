@@ -498,7 +498,7 @@ def run_missing(
     runs_root: Path,
     *,
     n_jobs: int = 1,
-    launcher: str | Launcher = "basic",
+    launcher: str | Launcher = "joblib",  # with n_jobs=1 the same as basic
     launcher_overrides: Sequence[str] = (),
     log=print,
 ) -> list[Job]:

@@ -44,10 +44,10 @@ def run_claimed(task, cfg, root: str | Path, identity: str, run_file: str | Path
         if (final := ledger.final(identity)) is not None:
             _say(f"{identity}: not run again ({final.get('status')}: {final.get('reason', '')[:200]})")
             return None
-        earlier = ledger.record(identity).get("run")
-        if earlier and run_status(earlier) in DONE_STATUSES:
-            _say(f"{identity}: already done by another worker ({earlier})")
-            return None
+        for earlier in (ledger.record(identity).get("run"), run_file):  # the last attempt's run; the one to resume
+            if earlier and run_status(earlier) in DONE_STATUSES:
+                _say(f"{identity}: already done by another worker ({earlier})")
+                return None
         try:
             result = task(cfg)
         except BaseException as exc:
