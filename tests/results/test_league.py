@@ -93,18 +93,16 @@ def test_tuning_never_reads_the_test_loss():
 
 @pytest.fixture(scope="module")
 def script():
-    """scripts/league.py as a module (a script, not part of the package)."""
-    import importlib.util
+    """The league's driver (higbench.league.driver, the ``higbench-league`` command)."""
+    from higbench.league import driver
 
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return driver
 
 
 def test_the_league_script_tunes_on_the_validation_loss():
-    source = (Path(__file__).resolve().parents[2] / "scripts" / "league.py").read_text()
+    from higbench.league import driver
+
+    source = Path(driver.__file__).read_text()
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
@@ -124,13 +122,13 @@ def test_an_interrupted_tuning_stops_the_league(script, tmp_path, monkeypatch):
 
     monkeypatch.setattr(script, "run_missing", interrupted)
     monkeypatch.setattr(script, "calibration", lambda: {})
-    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "", "--trials", "2", "--seeds", "1"]
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "", "--trials", "2", "--seeds", "1", "--studies", "1"]
     with pytest.raises(SystemExit, match=r"toy tuning run\(s\) not done .*the same command continues"):
         script.main([*argv, "--seconds", "1", "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
     assert launched == [4]  # the tuning only: nothing confirmed
 
 
-def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path, monkeypatch):
+def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path, monkeypatch, capsys):
     """``--trials 1,toy=2`` tunes the toy on 2 trials and the oscillator on 1; ``--set
     toy/hig:threads=1`` reaches the toy's HIG jobs alone, over ``toy:threads=2`` given after it;
     a league key is refused by --set."""
@@ -142,7 +140,8 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path
 
     monkeypatch.setattr(script, "run_missing", stop)
     monkeypatch.setattr(script, "calibration", lambda: {})
-    common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path)]
+    common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path),
+              "--studies", "1"]  # fmt: skip
     for problem, trials in (("toy", 2), ("oscillator", 1)):
         with pytest.raises(SystemExit, match="tuning"):
             sets = ["--set", "toy/hig:threads=1", "--set", "toy:threads=2"]
@@ -152,8 +151,8 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path
         assert {j.overrides["budget.seconds"] for j in jobs} == {2.0 if problem == "toy" else 1.0}
         threads = {j.overrides["optimizer"]: j.overrides.get("threads") for j in jobs}
         assert threads == ({"adam": "2", "hig": "1"} if problem == "toy" else {"adam": None, "hig": None})  # narrower wins
-    with pytest.raises(SystemExit, match="--set seed=3: seed is the league's own"):
-        script.main(["--problems", "toy", "--set", "seed=3", *common])
+    assert script.main(["--problems", "toy", "--set", "seed=3", *common]) == 2
+    assert "--set seed=3: seed is the league's own" in capsys.readouterr().err
 
 
 def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(script, tmp_path):
@@ -172,7 +171,7 @@ def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(s
     (tmp_path / "gpu-out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 0.01}]}))
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 9.0}]}))
-    found = script.recorded_calibrations(tmp_path, tmp_path / "out")
+    found = script.recorded_calibrations([tmp_path], tmp_path / "out")
     assert found == [{"matmul_50x256_s": 0.01, "file": "gpu-out/league.json"}]  # the report's own out left out
 
 
@@ -184,18 +183,31 @@ def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(s
         (["--set", "poison/adam:threads=1"], "poison/adam is not a problem, an optimizer or problem/optimizer"),
         (["--trials", "2,tyo=3"], "--trials tyo=3: no problem tyo (conf/problem/: "),
         (["--seconds", "0"], "--seconds 0: must be positive"),
+        (["--seconds", "inf"], "--seconds inf: must be positive and finite"),
+        (["--seconds", "nan"], "--seconds nan: must be positive and finite"),
+        (["--optimizers", "adma"], "--optimizers adma: no optimizer adma"),
+        (["--problems", "tyo"], "--problems tyo: no problem tyo"),
+        (["--out", "TMP/a-file"], "a-file: an existing file; --out names a folder"),
+        (["--report-only"], "no league runs or tables there"),
     ],
 )
-def test_a_bad_protocol_flag_is_one_line_before_any_run(script, tmp_path, monkeypatch, flags, line):
+def test_a_bad_protocol_flag_is_one_line_before_any_run(script, tmp_path, monkeypatch, capsys, flags, line):
     """A typo in a --set scope trained on the wrong device without a word; a bad --set value made
-    every optimizer 'left out' and ended in a KeyError; --seconds 0 fell back to the default."""
-    launched = []
+    every optimizer 'left out' and ended in a KeyError; --seconds 0 fell back to the default;
+    an unknown optimizer or problem, --seconds inf or nan, an --out naming a file, --report-only of
+    an empty root gave tracebacks; a refused --set first created the root and ran the calibration."""
+    launched, calibrated = [], []
     monkeypatch.setattr(script, "run_missing", lambda jobs, root, **kw: launched.append(jobs) or [])
-    monkeypatch.setattr(script, "calibration", lambda: {})
+    monkeypatch.setattr(script, "calibration", lambda: calibrated.append(1) or {})
+    (tmp_path / "a-file").write_text("mine\n")
+    flags = [f.replace("TMP", str(tmp_path)) for f in flags]
     argv = ["--problems", "toy", "--optimizers", "adam", "--trials", "1", "--seeds", "1", "--seconds", "1", *flags]
-    with pytest.raises(SystemExit) as stop:
-        script.main([*argv, "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
-    assert line in str(stop.value) and not launched
+    out = [] if "--out" in flags else ["--out", str(tmp_path / "out")]
+    assert script.main([*argv, "--root", str(tmp_path / "runs"), *out]) == 2
+    err = capsys.readouterr().err.strip()
+    assert line in err and len(err.splitlines()) == 1, err
+    assert not launched and not calibrated and not (tmp_path / "runs").exists()
+    assert (tmp_path / "a-file").read_text() == "mine\n"
 
 
 # -- --league on synthetic run files ---------------------------------------------------------
