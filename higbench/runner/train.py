@@ -633,7 +633,7 @@ def train(plan: Plan) -> RunSummary:
         cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
     )
     run = TrainingRun(
-        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
+        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, ProgressSink(progress), side=extra)
     )
     clock.resume()
     signals = StopSignals(parent=plan.stop_with_parent).install()
