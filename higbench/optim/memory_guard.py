@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from higbench.errors import ConfigError
-from higbench.optim.solver_choice import choose_solver
+from higbench.optim.solver_choice import choose_solver, lanczos_steps
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
 
@@ -67,7 +67,8 @@ def estimate_bytes(
     then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
-    krylov_steps: the Lanczos basis of the krylov route (rows x steps; no K, no J formed).
+    krylov_steps: the Lanczos basis of the krylov route (rows x steps, steps capped at rows:
+        ``solver_choice.lanczos_steps``; no K, no J formed).
     factor_values: values per row of J's per-layer factors where the structured route holds
         those instead of J (MLPs, ``structured.mlp_factor_values``); counted on the krylov
         route, which never forms J (the others do, or K, which dominates).
@@ -86,8 +87,10 @@ def estimate_bytes(
             "jacobian_cast": rows * p * e2 if e2 != e else 0,
         }
     if solver == "krylov":
-        # the Lanczos basis, its T_m eigenvectors (steps^2) and a few vectors of rows
-        parts["krylov_basis"] = (rows * (krylov_steps + 4) + krylov_steps * krylov_steps) * e2
+        # the Lanczos basis, its T_m eigenvectors (steps^2) and a few vectors of rows; Lanczos
+        # stops at J's rows, so a larger krylov_steps costs no more
+        steps = lanczos_steps(krylov_steps, rows)
+        parts["krylov_basis"] = (rows * (steps + 4) + steps * steps) * e2
     elif solver == "gram":
         # K = J J^T, eigenvectors of K, LAPACK syevd workspace (~1 + 6n + 2n^2 doubles)
         parts["gram"] = rows * rows * e2

@@ -72,3 +72,27 @@ def test_the_retry_path_ends_even_when_the_same_key_is_refused_again(tmp_path, m
     assert preflight.composition_error is not always_addable
     line = refused(["problem.held_out={a:1}", *TINY], capsys)
     assert "problem.held_out=" in line and runs["n"] == 2
+
+
+# -- the Krylov route's memory: Lanczos stops at J's rows -------------------------------------
+
+
+def test_the_krylov_estimate_uses_the_steps_lanczos_takes():
+    from higbench.optim.memory_guard import estimate_bytes
+
+    def basis(steps):
+        return estimate_bytes(64, 2, 30, solver="krylov", krylov_steps=steps).parts["krylov_basis"]
+
+    rows = 64 * 2
+    assert basis(10**12) == basis(100_000) == basis(rows) > basis(rows - 1)
+
+
+def test_a_krylov_run_with_more_steps_than_rows_is_not_refused(tmp_path, monkeypatch):
+    """Before: krylov_steps=100000 was refused ('not even batch_size=1 fits', 76,685 MB on the
+    toy) though the route uses at most rows x rows."""
+    from higbench.runfile.reader import read_head
+
+    monkeypatch.chdir(tmp_path)
+    route = ["optimizer=hig", "optimizer.solver=krylov", "+optimizer.krylov_steps=100000", "batch_size=64"]
+    cli.main([*route, *TINY, "memory_limit_mb=1000", "hydra.run.dir=run"])
+    assert read_head(tmp_path / "run" / "run.h5").status == "completed"
