@@ -96,3 +96,25 @@ def test_a_krylov_run_with_more_steps_than_rows_is_not_refused(tmp_path, monkeyp
     route = ["optimizer=hig", "optimizer.solver=krylov", "+optimizer.krylov_steps=100000", "batch_size=64"]
     cli.main([*route, *TINY, "memory_limit_mb=1000", "hydra.run.dir=run"])
     assert read_head(tmp_path / "run" / "run.h5").status == "completed"
+
+
+# -- optimizers taking **kwargs: their keys against the documented signature -----------------
+
+
+@pytest.mark.parametrize("optimizer,typo", [("soap", "precondition_frequncy"), ("shampoo", "matrix_epsilon")])
+def test_a_misspelt_argument_of_a_kwargs_optimizer_is_one_line(optimizer, typo, tmp_path, monkeypatch, capsys):
+    """Before: SOAP and Shampoo swallowed it (``**kwargs``) and trained with the default."""
+    pytest.importorskip("pytorch_optimizer")
+    monkeypatch.chdir(tmp_path)
+    line = refused([f"optimizer={optimizer}", f"+optimizer.{typo}=5", *TINY], capsys)
+    assert f"optimizer.{typo}=5: not an argument of pytorch_optimizer." in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_arguments_of_a_kwargs_optimizer_are_its_own_signature():
+    """SOAP's own named arguments, not its base class's ``defaults``, which **kwargs never reaches."""
+    pytorch_optimizer = pytest.importorskip("pytorch_optimizer")
+    from higbench.config import constructor_args
+
+    assert "defaults" not in constructor_args(pytorch_optimizer.SOAP)
+    assert {"lr", "betas", "precondition_frequency", "eps"} <= set(constructor_args(pytorch_optimizer.SOAP))
