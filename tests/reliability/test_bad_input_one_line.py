@@ -118,3 +118,51 @@ def test_the_arguments_of_a_kwargs_optimizer_are_its_own_signature():
 
     assert "defaults" not in constructor_args(pytorch_optimizer.SOAP)
     assert {"lr", "betas", "precondition_frequency", "eps"} <= set(constructor_args(pytorch_optimizer.SOAP))
+
+
+# -- the validation and fresh test sets: bounded, and checked against memory before any work --
+
+
+@pytest.mark.parametrize("key", ["val_size", "fresh_test_size"])
+def test_a_set_beyond_memory_is_one_line_before_any_work(key, tmp_path, monkeypatch, capsys):
+    """Before: the validation set was drawn as the problem was built (a traceback when it did
+    not fit), the fresh test set at the end of the run (a traceback and a failed run file after
+    all the training). Both are now checked first, against memory_limit_mb here."""
+    monkeypatch.chdir(tmp_path)
+    line = refused(["optimizer=adam", f"problem.{key}=100000", "memory_limit_mb=1", *TINY], capsys)
+    assert f"problem.{key}=100000: 100,000 samples of" in line and "(memory_limit_mb); at most" in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("key", ["val_size", "fresh_test_size"])
+def test_a_set_size_is_bounded_by_the_schema(key):
+    """10**10 samples is refused by its bound (before: 160 GB asked of the allocator)."""
+    from hydra import compose, initialize_config_dir
+
+    from higbench.config import config_dir, to_plain, validate
+
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        cfg = to_plain(compose("config", overrides=["optimizer=adam", f"++problem.{key}={10**10}"]))
+    with pytest.raises(ConfigError, match=rf"problem.{key}=10000000000: must be an integer in \[0, 1000000000\]"):
+        validate(cfg)
+
+
+def test_the_later_sets_are_the_same_samples_drawn_when_first_asked_for():
+    """Drawn when first asked for (after the memory check), they are the draws of before:
+    the validation set right after the test set, the fresh test set right after it."""
+    import torch
+    from hydra import compose, initialize_config_dir
+
+    from higbench.config import config_dir
+    from higbench.problems.base import build_problem
+
+    sizes = ["problem.train_size=64", "problem.test_size=32", "problem.data_seed=3", "problem.val_size=16"]
+    with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
+        cfg = compose("config", overrides=[*sizes, "++problem.fresh_test_size=8"])
+    problem = build_problem(cfg.problem, torch.float32, torch.device("cpu"), 0)
+    gen = torch.Generator().manual_seed(3)
+    train, test = problem._sample(64, gen), problem._sample(32, gen)
+    val, fresh = problem._sample(16, gen), problem._sample(8, gen)
+    assert torch.equal(problem.train.net_inputs, train.net_inputs) and torch.equal(problem.test.targets, test.targets)
+    assert torch.equal(problem.fresh_test_set().net_inputs, fresh.net_inputs)  # asks for the validation set first
+    assert torch.equal(problem.val_set().net_inputs, val.net_inputs)
