@@ -70,7 +70,7 @@ class ProblemConfig:
     # The keys below change neither training nor the test loss (identity=False: a run keeps its
     # identity, results.index.config_id). The validation set is drawn after train and test, so
     # those draws stay what every earlier run had; 0: no validation curve.
-    # Both are drawn only after the runner checked them against memory (``check_later_draws``).
+    # Both are drawn when first used, after the runner checked them against memory (runner.train.check_data_memory).
     val_size: int = value(0, ge=0, le=MAX_SAMPLES, identity=False)
     # A second, large test draw (after every other set) evaluated once, at the end of a run
     # (the file's /final/fresh_test_losses): a mean over one finite test set can rest on a few
@@ -190,7 +190,7 @@ class Problem(abc.ABC):
     def val(self) -> Batch | None:
         """The validation set (``problem.val_size``; None: none). Drawn at first use where the
         problem kept its generator after the test set (``keep_later_draws``): the runner has
-        checked its size against memory by then (``LATER_DRAWS``)."""
+        checked its size against memory by then (``runner.train.check_data_memory``)."""
         if "_val" not in vars(self):
             state = getattr(self, "_state_after_test", None)
             if state is None:
@@ -226,7 +226,7 @@ class Problem(abc.ABC):
     def keep_later_draws(self, gen: torch.Generator) -> None:
         """Remember ``gen`` after the test set was drawn: the validation set and then the fresh
         test set are drawn from there when first asked for (``val_set``, ``fresh_test_set``),
-        after the runner has checked their sizes against memory (``LATER_DRAWS``)."""
+        after the runner has checked their sizes against memory (``runner.train.check_data_memory``)."""
         self._state_after_test = gen.get_state()
 
     def keep_fresh_draw(self, gen: torch.Generator) -> None:
