@@ -309,7 +309,7 @@ def registered_targets() -> dict[str, set[str]]:
     """Where a config may name a class, and which: ``{key: {target, ...}}`` for every ``_target_``
     that a config file in Hydra's search path (conf/, and ``hydra.searchpath`` given on the
     command line) sets, at the key it sets it (``optimizer._target_``, the nested
-    ``optimizer.parts.matrices._target_`` of muon.yaml, ``sink.tensorboard._target_``), and
+    ``optimizer.parts.PART._target_`` of muon.yaml, ``sink.tensorboard._target_``), and
     every registered Problem class at ``problem._target_``."""
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.object_type import ObjectType
