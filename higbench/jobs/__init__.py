@@ -323,12 +323,15 @@ def training_text(jobs: Sequence[Job]) -> str:
 POLL_S = 2.0  # how often a driver looks at the ledger while its jobs run, or while it waits for others'
 
 
-def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print) -> list[Path]:
+def launch(
+    jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print, progress: bool = True
+) -> list[Path]:
     """Run the jobs once, longest first: those no live worker holds as one ``higbench -m``
     multirun over their list on a Hydra launcher, or as one submitit job array (``Launcher``, or
     the name of one), each job claimed in the ledger of ``runs_root`` first; then wait for the
     jobs other workers hold. Returns the run files written. With joblib at most ``n_jobs``
-    training processes at once. Jobs the ledger says are final are not run."""
+    training processes at once. Jobs the ledger says are final are not run. progress=False: no
+    'N of M runs done' line (a caller that counts a larger whole, the league, prints its own)."""
     launcher = as_launcher(launcher)
     runs_root = Path(runs_root)
     ledger = Ledger(runs_root)
@@ -338,13 +341,18 @@ def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Lau
     if final:
         log(f"[jobs] {len(final)} run(s) not run again: the ledger records them refused or failed repeatedly ({ledger.dir})")
     jobs = [j for j in jobs if j not in held and j not in final]
-    new = _launch(jobs, runs_root, ledger if claimed else None, n_jobs=n_jobs, launcher=launcher, log=log) if jobs else []
+    watched = ledger if claimed and progress else None
+    new = (
+        _launch(jobs, runs_root, ledger if claimed else None, watched, n_jobs=n_jobs, launcher=launcher, log=log) if jobs else []
+    )
     if claimed:
         wait_for_holders([j for j in [*jobs, *held] if not j.done], ledger, log)
     return new
 
 
-def _launch(jobs: list[Job], runs_root: Path, ledger: Ledger | None, *, n_jobs: int, launcher: Launcher, log) -> list[Path]:
+def _launch(
+    jobs: list[Job], runs_root: Path, ledger: Ledger | None, watched: Ledger | None, *, n_jobs: int, launcher: Launcher, log
+) -> list[Path]:
     jobs = sorted(jobs, key=job_seconds, reverse=True)  # the longest start first: no idle core at the end
     sweep_dir = (runs_root / FIGURE_RUNS_DIR / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}-{os.getpid()}").resolve()
     sweep_dir.mkdir(parents=True, exist_ok=False)
@@ -359,7 +367,7 @@ def _launch(jobs: list[Job], runs_root: Path, ledger: Ledger | None, *, n_jobs: 
     again = f", {len(resumed)} resumed in place" if resumed else ""
     log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}{again}, {training_text(jobs)}) -> {sweep_dir}")
     t0 = time.perf_counter()
-    with watching(jobs, ledger, launcher.workers(len(jobs), n_jobs)):
+    with watching(jobs, watched, launcher.workers(len(jobs), n_jobs)):
         if launcher.array:
             status = _run_array(jobs_file, sweep_dir, len(jobs), launcher, extra)
         else:
@@ -501,6 +509,7 @@ def run_missing(
     launcher: str | Launcher = "joblib",  # with n_jobs=1 the same as basic
     launcher_overrides: Sequence[str] = (),
     log=print,
+    progress: bool = True,
 ) -> list[Job]:
     """The one reuse rule for a set of jobs (the figures' rounds, the league, the bench scripts):
     resolve them against the runs root's index, launch those not done (a stopped run with a
@@ -523,7 +532,7 @@ def run_missing(
     log(f"[jobs] {sum(j.done for j in jobs)} of {len(jobs)} run(s) already done under {runs_root}")
     while todo:  # a job once per call; again only if it was another worker's, and that worker died
         held = {j.identity for j in todo if j.identity and ledger.live_holder(j.identity) is not None}
-        launch(todo, runs_root, n_jobs=n_jobs, launcher=launcher, log=log)
+        launch(todo, runs_root, n_jobs=n_jobs, launcher=launcher, log=log, progress=progress)
         launched.update(j.identity for j in todo if j.identity not in held)
         resolve(jobs, run_index(runs_root))
         mark_final(jobs, ledger)
