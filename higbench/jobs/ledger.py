@@ -252,16 +252,15 @@ class Ledger:
 
 
 def is_memory_refusal(exc: BaseException | None) -> bool:
-    """Whether a job's failure is the memory guard's refusal (``higbench.optim.memory_guard``,
-    or the network-size check): a ``ConfigError`` about what fits, anywhere in its chain. The
-    same config is refused again on the same machine, so it is a result, not a retry."""
-    from higbench.errors import ConfigError
+    """Whether a job's failure is a refusal for memory (``errors.MemoryRefusal``: the memory
+    guard, the network-size check), anywhere in its chain. The same config is refused again on
+    the same machine, so it is a result, not a retry."""
+    from higbench.errors import MemoryRefusal
 
     seen = set()
     while exc is not None and id(exc) not in seen:
         seen.add(id(exc))
-        why = exc.requirement if isinstance(exc, ConfigError) else ""
-        if "fit" in why and ("memory" in why or "available" in why):
+        if isinstance(exc, MemoryRefusal):
             return True
         exc = exc.__cause__ or exc.__context__
     return False

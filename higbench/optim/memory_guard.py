@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from higbench.errors import ConfigError
+from higbench.errors import MemoryRefusal
 from higbench.optim.solver_choice import choose_solver, lanczos_steps
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
@@ -163,7 +163,7 @@ def check_samples(sizes: dict[str, int], sample_bytes: int, device: str = "cpu",
         if held + need > avail:
             fits = max(0, (avail - held) // (DRAW_COPIES * per_sample))
             beside = f" beside {mb(held)} of the sets before it" if held else ""
-            raise ConfigError(
+            raise MemoryRefusal(
                 key,
                 n,
                 f"{n:,} samples of {per_sample:,} bytes need about {mb(need)} while drawn{beside}, "
@@ -234,7 +234,7 @@ def check(
     if est.total > avail:
         best = largest_batch(avail, output_size, n_params, dtype, solver, precision, upper=batch_size, **route)
         advice = f"largest batch size that fits: {best}" if best else "not even batch_size=1 fits"
-        raise ConfigError(
+        raise MemoryRefusal(
             "batch_size",
             batch_size,
             f"the {est.solver.upper()} Jacobian-power step needs about {mb(est.total)} "

@@ -48,7 +48,7 @@ from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.dtypes import DTYPES
-from higbench.errors import ConfigError, show
+from higbench.errors import ConfigError, MemoryRefusal, show
 from higbench.optim import memory_guard
 from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
@@ -195,7 +195,7 @@ def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
         key = "problem.hidden" if "hidden" in cfg.problem else "problem"
         first = " ".join(str(exc).split())[:200]
         hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
-        raise ConfigError(key, hidden, f"the network does not fit in memory ({first})") from None
+        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({first})") from None
 
 
 SMALL_NETWORK_BYTES = 64 << 20  # below this a network is not what exhausts memory
@@ -219,7 +219,7 @@ def check_network_size(cfg: DictConfig, problem: Problem) -> None:
         hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
         need_mb, have_mb = memory_guard.mb(need), memory_guard.mb(available)
         why = f"{need_mb} for {n:,} parameters (weights, gradients, optimizer state), {have_mb} is {where}"
-        raise ConfigError(key, hidden, f"the network does not fit in memory ({why})")
+        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({why})")
 
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:

@@ -113,18 +113,23 @@ def test_a_memory_refusal_is_final_and_repeated_failures_are(tmp_path):
 
 
 def test_the_worker_skips_a_held_job_and_records_a_memory_refusal(tmp_path):
-    from higbench.errors import ConfigError
+    from higbench.errors import ConfigError, MemoryRefusal
 
     called = []
     live_other_process(tmp_path, ID)
     assert run_claimed(lambda cfg: called.append(cfg), {}, tmp_path, ID, tmp_path / "a" / "run.h5") is None
     assert called == []  # another worker runs it
 
-    def refused(cfg):
+    def refused(cfg, error=MemoryRefusal):
         try:
-            raise ConfigError("batch_size", 512, "the HIG step needs about 9 GB but 10 MB is available; fits: 8")
+            raise error("batch_size", 512, "the HIG step needs about 9 GB but 10 MB is available; fits: 8")
         except ConfigError as exc:
             raise RuntimeError("job failed") from exc  # as the CLI hands it on (JobFailed)
+
+    # a user's value whose message happens to speak of memory is a failure, not a refusal for good
+    with pytest.raises(RuntimeError):
+        run_claimed(lambda cfg: refused(cfg, ConfigError), {}, tmp_path, "00000000feedbeef", tmp_path / "c" / "run.h5")
+    assert Ledger(tmp_path).final("00000000feedbeef") is None
 
     other = "fedcba9876543210"
     with pytest.raises(RuntimeError):
