@@ -117,7 +117,7 @@ def test_a_resume_reads_its_run_file_and_checkpoint_once(counted, monkeypatch):
     assert counts["networks"] == 1 and counts["optimizers"] == 1, counts
 
 
-FRONT_DOOR = ["cli.py", "preflight.py", "config.py", "schema.py", "errors.py", "jobs.py", "runner"]
+FRONT_DOOR = ["cli.py", "preflight.py", "config.py", "schema.py", "errors.py", "jobs", "runner"]
 MUTABLE = (ast.List, ast.Dict, ast.Set, ast.ListComp, ast.DictComp, ast.SetComp)
 
 

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
-SUBMITIT = {"submitit_local": "local", "submitit_slurm": "slurm"}
+SUBMITIT = MappingProxyType({"submitit_local": "local", "submitit_slurm": "slurm"})  # read-only: no state
 # submitit's own names for the settings every cluster has (AutoExecutor's shared parameters)
 SHARED = ("timeout_min", "mem_gb", "nodes", "cpus_per_task", "gpus_per_node", "tasks_per_node", "name", "stderr_to_stdout")
 # Hydra's submitit launcher keys for SLURM-only settings: submitit's slurm_<key>

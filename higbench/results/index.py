@@ -33,7 +33,6 @@ import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 
@@ -48,7 +47,7 @@ from higbench.runfile.reader import (
     RunFileOpenForWrite,
     RunTables,
     UnreadableRunFile,
-    read_meta,
+    load_run,
     read_tables,
     run_file_path,
 )
@@ -655,8 +654,7 @@ def cpu_uses(paths: Iterable[str | Path]) -> list[tuple[float, str]]:
     uses = []
     for path in paths:
         try:
-            with h5py.File(run_file_path(path), "r", locking=False) as f:
-                env = read_meta(f)["env"]
+            env = load_run(path)[0]["env"]
         except Exception:  # noqa: BLE001 - a failed job's missing or half-written file: nothing to say
             continue
         if "cpu_share" in env:
