@@ -417,9 +417,10 @@ def finish(c: Claim, row: dict) -> dict:
     elif verdict in (REPRODUCED, NOT) and (note := seed_gate(row)) is not None:
         why = f"{note} {would(verdict)}{why}"
         cause = ("seeds", f"{seeds} seed(s) per setting at this preset; on them the rule says '{verdict}'")
-        if verdict == NOT and c.cause is not None:  # what the claim's own cause says of that one seed
+        if c.cause is not None:  # what the claim's own cause says of that seed: for a `not`, and where it holds
             category, text = c.cause.render(evidence(row, c.cause))
-            cause = (cause[0], f"{cause[1]}, and the claim's cause for it ({category}) reads: {text}")
+            if verdict == NOT or category != "open":
+                cause = (cause[0], f"{cause[1]}, and the claim's cause for it ({category}) reads: {text}")
         verdict = PARTLY
     if row.get("smoke") and verdict != NA:
         why = f"smoke preset ({row['preset']}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
@@ -614,6 +615,7 @@ def _update_s(problem: str, optimizer: str, b: int) -> float:
 
 PAPER = {
     "paper_toy_plateau": 0.2,  # figure 1b
+    "paper_osc_hig_level": 1e-7,  # section 3.1: HIG's final loss on the oscillators
     "paper_osc_hig_update_s": _update_s("oscillator", "hig", 128),
     "paper_osc_adam_update_s": _update_s("oscillator", "adam", 512),
     "paper_poisson_hig_update_s": _update_s("poisson", "hig", 64),
