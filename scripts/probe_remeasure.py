@@ -30,7 +30,22 @@ RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 # Claims whose measurement changed and which the plotted data hold entirely.
 REMEASURE = ("toy-6", "poi-1", "poi-1a", "poi-3", "poi-3a", "poi-4", "poi-4a", "poi-5", "spd-2")
 # Claims this revision adds (the paper's statements no row tested before), measured on the same data.
-ADDED = ("toy-7", "osc-7", "poi-6", "dip-9", "cnn-3", "abl-5", "spd-6")
+ADDED = (
+    "toy-7",
+    "osc-7",
+    "poi-6",
+    "dip-9",
+    "cnn-3",
+    "abl-5",
+    "spd-6",
+    "osc-9",
+    "osc-10",
+    "poi-7",
+    "dip-10",
+    "cnn-4",
+    "spd-7",
+    "spd-8",
+)
 # Claims measured on the update axis of runs that were evaluated by time: (figure, optimizer sweeps) whose update
 # counts the stored row holds, by batch size (value names of the row).
 BY_UPDATES = {"osc-5": ("fig2c", {("hig", "b_lo"): "hig_lo_updates", ("hig", "b_hi"): "hig_hi_updates"} | {
