@@ -17,10 +17,14 @@ PYTEST_ARGS ?=
 # A virtual environment with torch pinned first (TORCH_INDEX above), then higbench (editable) with
 # only what `make run` needs. Re-runs when pyproject.toml changes.
 $(STAMP): pyproject.toml
+	@echo "[install] a virtual environment in $(VENV), then torch $(TORCH_VERSION) and higbench into it: this takes minutes, quietly"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip "setuptools>=77" wheel
+	@echo "[install] 1 of 2: torch $(TORCH_VERSION) from $(if $(TORCH_INDEX),$(TORCH_INDEX),pip's default index (on Linux the CUDA build: several GB))"
 	$(BIN)/python -m pip install --quiet "torch==$(TORCH_VERSION)" $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
+	@echo "[install] 2 of 2: higbench (editable) and its dependencies (hydra-core, h5py, pandas, matplotlib, scipy, numba)"
 	$(BIN)/python -m pip install -qq -e .
+	@echo "[install] done"
 	rm -f $(DEV_STAMP) $(OPTUNA_STAMP)
 	touch $(STAMP)
 

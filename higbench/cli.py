@@ -328,6 +328,7 @@ def sweep_resume_command(sweep_dir: str) -> str:
 
 def summary_lines(summary, cfg: DictConfig) -> list[str]:
     """The end-of-run lines, read back from the closed run file (the numbers the index shows)."""
+    from higbench.display import busy_note
     from higbench.results.index import read_run_summary, threshold_column
     from higbench.results.targets import for_problem
     from higbench.runner.progress import job_label
@@ -351,6 +352,9 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
         lines.append(f"{label}time to test loss " + ", ".join(times))
     else:  # a problem of one's own may set none
         lines.append(f"{label}time to test loss: the problem sets no targets (give some with problem.targets=[1e-2,1e-3])")
+    busy = busy_note(row.get("env.cpu_share"), row.get("env.load_at_finish"))
+    if busy:  # a busy machine: the numbers above are not an idle machine's (the README's)
+        lines.append(f"{label}{busy}")
     lines.append(f"{label}run file: {summary.path}")
     return lines
 

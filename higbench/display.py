@@ -96,3 +96,58 @@ def num(v: Any) -> str:
     if 1e-2 <= abs(v) < 1e3:
         return f"{v:g}"
     return sci(v, 0)
+
+
+# A run that had less than this share of its cores (its CPU seconds over wall seconds times its
+# threads, the run file's env/cpu_share) ran on a busy machine: its update count and its loss
+# at the end of the budget are not what an idle machine gives. The one threshold of the
+# closing lines of runs, sweeps and figure builds and of the results tables' marker.
+BUSY_SHARE = 0.7
+
+
+def busy_load(load_at_finish: Any) -> float | None:
+    """The 1-minute load from a run file's ``load_at_finish`` ("12.1 11.0 9.8"); None without one."""
+    try:
+        return float(str(load_at_finish).split()[0])
+    except (ValueError, IndexError):
+        return None
+
+
+def busy_note(share: Any, load: Any = None, what: str = "this run") -> str | None:
+    """``this run had 0.33 of a core (load 12): ...`` when ``share`` is under BUSY_SHARE, else None.
+
+    share: CPU share (per thread) of one run, or the least of several; load: the 1-minute load
+    average (a number, or the run file's "1m 5m 15m" text)."""
+    try:
+        share = float(share)
+    except (TypeError, ValueError):
+        return None
+    if not math.isfinite(share) or share >= BUSY_SHARE:
+        return None
+    load = load if isinstance(load, int | float) else busy_load(load)
+    at = f" (load {load:.0f})" if load is not None and math.isfinite(load) else ""
+    return f"{what} had {share:.2f} of a core{at}: its update count and loss are not what an idle machine gives"
+
+
+def busy_summary(uses: Iterable[tuple[Any, Any]], noun: str = "runs") -> str | None:
+    """For work of many runs (a sweep, a figure build): ``2 of 6 runs had under 0.7 of a core
+    (least 0.33, load up to 12): ...`` when some did, else None. ``uses``: (cpu_share, load)
+    per run, load as a number or a run file's "1m 5m 15m" text; runs without a share are left out."""
+    known = []
+    for share, load in uses:
+        try:
+            share = float(share)
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(share):
+            known.append((share, load if isinstance(load, int | float) else busy_load(load)))
+    busy = [(s, x) for s, x in known if s < BUSY_SHARE]
+    if not busy:
+        return None
+    loads = [x for _, x in busy if x is not None and math.isfinite(x)]
+    at = f", load up to {max(loads):.0f}" if loads else ""
+    least = min(s for s, _ in busy)
+    return (
+        f"{len(busy)} of {len(known)} {noun} had under {BUSY_SHARE} of a core (least {least:.2f}{at}):"
+        " their update counts and losses are not what an idle machine gives"
+    )

@@ -25,18 +25,19 @@ nbclient = pytest.importorskip("nbclient", reason="needs the dev extra (nbformat
 NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "hig_in_your_code.ipynb"
 
 
-def test_notebook_runs_and_hig_reaches_the_target_loss_long_before_adam():
+def test_notebook_runs_and_hig_reaches_the_target_loss_long_before_adam(tmp_path):
     nb = nbformat.read(NOTEBOOK, as_version=4)
     for cell in nb.cells:  # run from scratch, not from the stored outputs
         if cell.cell_type == "code":
             cell.outputs = []
     # raises CellExecutionError, with the cell and its traceback, if any cell fails
-    where = {"metadata": {"path": str(NOTEBOOK.parent)}}
+    where = {"metadata": {"path": str(tmp_path)}}  # run where a copy would be (README: outputs/): it saves its plot there
     client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3", resources=where)
     client.execute()
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert all(c.execution_count for c in code), "a code cell did not run"
     assert any("image/png" in o.get("data", {}) for c in code for o in c.outputs), "no plot drawn"
+    assert (tmp_path / "hig_in_your_code.png").read_bytes()[:4] == b"\x89PNG", "the plot was not saved next to the notebook"
     reached = json.loads(code[-1].outputs[-1]["text"].splitlines()[-1])
     hig, tuned, default = reached["HIG (lr=1)"], reached["Adam (lr=1e-2)"], reached["Adam (lr=1e-3)"]
     assert hig["updates"] is not None, f"HIG never reached the target: {reached}"

@@ -59,9 +59,21 @@ def check_overrides(words: list[str]) -> None:
 
 
 def check(command: str) -> None:
+    if " && " in command:
+        for part in command.split(" && "):
+            check(part)
+        return
     words = shlex.split(command)
     head, rest = words[0], words[1:]
-    if head == "make":
+    if head == "mkdir":
+        assert rest == ["-p", "outputs"], f"{command}: only outputs/ is made"
+    elif head == "cp":
+        assert (ROOT / rest[0]).is_file(), f"cp {rest[0]}: no such file"
+    elif head == "jupyter":  # a copy of a shipped notebook, executed in outputs/
+        assert rest[0] == "execute" and (ROOT / "examples" / Path(rest[-1]).name).is_file(), f"{command}: no such notebook"
+    elif head == "python" and rest[0] == "-c":
+        compile(rest[1], "<README>", "exec")
+    elif head == "make":
         for target in (w for w in rest if "=" not in w):
             assert target in make_targets(), f"make {target}: no such target"
     elif head in SCRIPTS:

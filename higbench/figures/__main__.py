@@ -1,7 +1,8 @@
 """`python -m higbench.figures` (`higbench-figures`): the paper's figures and tables from run files.
 
     python -m higbench.figures all --preset quick            # what `make figures` runs
-    python -m higbench.figures fig1 fig2b --preset smoke
+    python -m higbench.figures fig1 --preset quick           # one figure, its claims judged and printed (~8 min)
+    python -m higbench.figures fig1 fig2b --preset smoke     # the plumbing check: no verdicts
     python -m higbench.figures all --preset paper --plan     # runs needed/missing, cost; runs nothing
     python -m higbench.figures all --no-run                  # draw from the runs that exist
     python -m higbench.figures --report-only --out docs/results   # REPORT.md from the data there, no runs
@@ -18,6 +19,7 @@ runs), tables as <id>.md/.csv, and REPORT.md (the paper's claims against these r
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -117,9 +119,28 @@ def main(argv: list[str] | None = None) -> int:
     return run_build(args, launcher)
 
 
+def claim_lines(out: Path, drawn: list[str]) -> list[str]:
+    """The claims of the figures drawn, one line each (``toy-3 reproduced: HIG 5.4e-4, ...``),
+    read back from their ``<id>.json``: what a build showed, without opening REPORT.md."""
+    lines = []
+    for fid in drawn:
+        try:
+            claims = json.loads((out / f"{fid}.json").read_text()).get("claims", [])
+        except (OSError, ValueError):
+            continue
+        if claims and all(str(c["verdict"]).startswith("n/a") for c in claims):  # the smoke preset, missing runs
+            lines.append(f"[figures] {fid}: its {len(claims)} claims n/a at these runs (why: {out}/REPORT.md)")
+        elif claims:
+            lines.append(f"[figures] {fid}: {len(claims)} claims of the paper, as these runs judge them (all: {out}/REPORT.md)")
+            lines += [f"  {c['id']} {c['verdict']}: {c.get('paper', '')} | measured: {c.get('measured', '')}" for c in claims]
+    return lines
+
+
 def run_build(args: argparse.Namespace, launcher) -> int:
     from higbench.claims.rules import ResultsFileError
+    from higbench.display import busy_summary
     from higbench.figures.build import build
+    from higbench.results.index import cpu_uses
 
     try:
         result = build(
@@ -140,6 +161,11 @@ def run_build(args: argparse.Namespace, launcher) -> int:
         f"[figures] preset {args.preset}: {len(result.drawn)} drawn, {result.launched} run(s) launched, "
         f"{result.seconds:.1f} s; outputs in {args.out}/"
     )
+    for line in claim_lines(Path(args.out), result.drawn):
+        print(line)
+    busy = busy_summary(cpu_uses(result.run_files), noun="runs of this build")
+    if busy:  # a busy machine: the figures' curves and verdicts are not an idle machine's
+        print(f"[figures] {busy}")
     if result.missing:
         print("[figures] runs still missing (failed or not run): " + ", ".join(f"{k}: {v}" for k, v in result.missing.items()))
     for k, v in result.errors.items():

@@ -2,7 +2,8 @@
 
 higbench-results outputs                          # every run, one line each
 higbench-results outputs/sweeps --problem oscillator --status completed
-higbench-results outputs --best                   # best run per setup, lr and batch size selected (table 2)
+higbench-results outputs --best                   # best setting per setup (lr and batch size selected), median over seeds
+higbench-results outputs --best-seed              # the best single run per setup instead (table 2's selection)
 higbench-results outputs --csv runs.csv           # the full table (all columns)
 higbench-results outputs/sweeps/X --plot curves.png   # median and band over seeds per setting
 higbench-results outputs/sweeps/X --profile profile.png --targets poisson=10,1 toy=1e-3
@@ -19,11 +20,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from higbench.display import BUSY_SHARE, busy_load
 from higbench.errors import quiet_broken_pipe
 from higbench.results import targets as problem_targets
 from higbench.results.index import (
     DONE_STATUSES,
     best_runs,
+    best_settings,
     find_run_files,
     load_runs,
     one_per_config,
@@ -85,7 +88,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--optimizer", action="append", help="keep these optimizers (comma-separated or repeated)")
     p.add_argument("--status", action="append", help="keep these statuses: completed, diverged, running, corrupt, ...")
     p.add_argument(
-        "--best", action="store_true", help="only the best completed run per (problem, setup, budget) by --metric (see --by)"
+        "--best",
+        action="store_true",
+        help="the best setting per (problem, setup, budget): the lowest median --metric over its seeds, with the"
+        " number of seeds and their range (see --by)",
+    )
+    p.add_argument(
+        "--best-seed",
+        action="store_true",
+        help="with or without --best: the best single completed run per (problem, setup, budget) instead",
     )
     p.add_argument("--metric", default="final_test_loss", help="what --best and the sort minimise (default: final_test_loss)")
     p.add_argument(
@@ -218,11 +229,13 @@ def _filter(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
 
 
 def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
-    """The best run per setup, at equal budget: a setup is every key that changes a result
-    except those --best selects over (``BEST_OVER``: the learning rate and the batch size), so
-    GN at gamma=0.01 never sits beside HIG at gamma=1, nor an amsgrad run beside plain Adam
-    (column ``setup``). The budget is always one of the group keys, so a 30 s run never
-    competes with a 5 s one (a note says when budgets were mixed). --by: the whole grouping."""
+    """The best setting per setup, at equal budget, judged by the median over its seeds
+    (``index.best_settings``; --best-seed: the best single run, ``index.best_runs``). A setup
+    is every key that changes a result except those --best selects over (``BEST_OVER``: the
+    learning rate and the batch size), so GN at gamma=0.01 never sits beside HIG at gamma=1,
+    nor an amsgrad run beside plain Adam (column ``setup``). The budget is always one of the
+    group keys, so a 30 s run never competes with a 5 s one (a note says when budgets were
+    mixed). --by: the whole grouping."""
     if args.by:
         by = [k for k in args.by.split(",") if k]
     else:
@@ -231,8 +244,11 @@ def _best(df: pd.DataFrame, args: argparse.Namespace) -> pd.DataFrame:
     if "budget" not in by:
         by.append("budget")
     if len(df) and df.groupby("problem.name")["budget"].nunique().max() > 1:
-        print("note: runs with different budgets: the best run is chosen per budget (column budget)", file=sys.stderr)
-    return best_runs(df, by=by, metric=args.metric, per_problem=not args.by) if len(df) else df  # --by: the whole grouping
+        print("note: runs with different budgets: the best is chosen per budget (column budget)", file=sys.stderr)
+    if not len(df):
+        return df
+    choose = best_runs if args.best_seed else best_settings
+    return choose(df, by=by, metric=args.metric, per_problem=not args.by)  # --by: the whole grouping
 
 
 def _targets(args: argparse.Namespace, df: pd.DataFrame) -> dict[str, list[float]]:
@@ -367,8 +383,8 @@ def _main(argv: list[str] | None = None) -> int:
             if not args.spectrum:
                 _summary_line(df, total, roots, args)
             return _plots(args, roots, df)
-        if args.best:
-            df = _best(df, args)
+        if args.best or args.best_seed:
+            runs, df = df, _best(df, args)
         elif args.metric in df:
             df = df.sort_values(["problem.name", "optimizer.name", "budget", args.metric], na_position="last")
     except (FileNotFoundError, KeyError, ValueError) as exc:
@@ -376,6 +392,12 @@ def _main(argv: list[str] | None = None) -> int:
         return 2
     if args.csv:
         df.to_csv(args.csv, index=False)
+    if args.best and not args.best_seed:
+        _summary_line(runs, total, roots, args)
+        print(f"{len(df)} best setting(s), one per (problem, setup, budget): the lowest median {args.metric} over its seeds")
+        if len(df):
+            _print_settings(df, args)
+        return 0
     _summary_line(df, total, roots, args)
     if not len(df):
         return 0
@@ -393,6 +415,85 @@ def _summary_line(df: pd.DataFrame, total: int, roots: list[Path], args: argpars
     )
 
 
+FIRST_LINE = (
+    "the first line, 'N of M runs under ROOT': the runs kept by --problem/--optimizer/--status of the M run files"
+    " found, by status"
+)
+# What each column of the tables means: printed under a table for the columns it shows.
+LEGEND = {
+    "status": "completed (its budget ran out), diverged (loss NaN/inf), interrupted, failed, running or corrupt",
+    "setup": "every key that changes a result except the learning rate and the batch size, which --best selects over",
+    "setting": "the setup with the chosen learning rate and batch size: the runs of one setting are its seeds",
+    "budget": "the run's budget: training-clock seconds and/or updates",
+    "steps": "updates made within the budget",
+    "train_time_s": "training clock at the end, seconds (evaluations left out)",
+    "final_test_loss": "test loss at the last evaluation",
+    "best_test_loss": "lowest test loss at any evaluation",
+    "overrides": "the command-line overrides of the run",
+    "seeds": "completed and diverged runs of the setting: the median and range are over these (a diverged seed as inf)",
+    "diverged_seeds": "seeds whose loss turned NaN/inf: counted in the median as the worst value (inf)",
+    "runs_not_completed": "the setting's other runs (interrupted, failed, running): not in the median",
+    "busy": f"under {BUSY_SHARE} of a core (the run's CPU share, with the load at its end): its update count and loss"
+    " are not what an idle machine gives",
+    "busy_seeds": f"seeds that had under {BUSY_SHARE} of a core: their update counts and losses are not an idle machine's",
+    "cond_kept_median": "median over updates of the condition number of the part of J the step inverts"
+    " (largest over smallest kept singular value)",
+    "cond_kept_max": "largest over updates of that condition number",
+    "sv_dropped_mean": "mean over updates of the singular values the truncation dropped",
+}
+
+
+def _legend(columns: list[str], metric: str) -> list[str]:
+    """One line per column shown that does not explain itself."""
+    lines = []
+    for column in columns:
+        base, _, stat = column.rpartition("_")
+        if column in LEGEND:
+            text = LEGEND[column]
+        elif column.startswith("time_to_"):
+            text = f"training clock (s) when the test loss first fell to {column[len('time_to_') :]} or below (NaN: never)"
+        elif base == metric and stat in ("median", "min", "max"):
+            what = {"median": "median", "min": "least", "max": "greatest"}[stat]
+            text = f"{what} {metric} over the seeds ({LEGEND.get(metric, metric)})"
+        else:
+            continue
+        lines.append(f"  {column}: {text}")
+    return lines
+
+
+def _print_settings(df: pd.DataFrame, args: argparse.Namespace) -> None:
+    """--best: one row per best setting, then the legend of its columns."""
+    m = args.metric
+    shown = ["problem.name", "optimizer.name", "setup", "setting", "optimizer.lr", "batch_size", "budget", "seeds"]
+    shown += [f"{m}_median", f"{m}_min", f"{m}_max"]
+    optional = ["diverged_seeds", "runs_not_completed", "busy_seeds"]  # shown where some row has one
+    shown += [c for c in optional if c in df and pd.to_numeric(df[c], errors="coerce").fillna(0).gt(0).any()]
+    times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
+    conditioning = [c for c in CONDITIONING_SHOWN if c in df and pd.to_numeric(df[c], errors="coerce").notna().any()]
+    shown += ["steps", "train_time_s", *times, *conditioning, *[c for c in (args.columns or "").split(",") if c]]
+    table = df[[c for c in dict.fromkeys(shown) if c in df.columns]]
+    with pd.option_context(
+        "display.max_rows", None, "display.max_columns", None, "display.width", 250, "display.float_format", "{:.4g}".format
+    ):
+        print(table.to_string(index=False))
+    print("columns (steps, train_time_s and the times: medians over the seeds):")
+    print("\n".join(_legend(list(table.columns), m)))
+    print(f"  ({FIRST_LINE})")
+
+
+def _busy_marker(df: pd.DataFrame) -> pd.Series | None:
+    """'0.33 (load 12)' for runs that had under BUSY_SHARE of a core, '' for the rest; None when none did."""
+    if "env.cpu_share" not in df:
+        return None
+    share = pd.to_numeric(df["env.cpu_share"], errors="coerce")
+    busy = share < BUSY_SHARE
+    if not busy.any():
+        return None
+    load = df["env.load_at_finish"].map(busy_load) if "env.load_at_finish" in df else pd.Series(None, index=df.index)
+    text = [f"{s:.2f}" + (f" (load {x:.0f})" if x is not None and x == x else "") for s, x in zip(share, load)]
+    return pd.Series(text, index=df.index).where(busy, "")
+
+
 def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) -> None:
     times = [threshold_column(t) for t in args.threshold] if args.threshold else _time_columns(df)
     # GN/HIG/LM runs: how ill-conditioned their steps were (shown when some run recorded it)
@@ -407,6 +508,9 @@ def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) 
     if args.columns and any(c in missing for c in args.columns.split(",")):
         print(f"higbench-results: note: no column(s) {[c for c in args.columns.split(',') if c in missing]}", file=sys.stderr)
     table = df[[c for c in dict.fromkeys(shown) if c in df.columns]].copy()
+    busy = _busy_marker(df)
+    if busy is not None:  # a marker on runs of a busy machine
+        table.insert(table.columns.get_loc("status") + 1 if "status" in table else len(table.columns), "busy", busy)
     table["path"] = _relative(table["path"].astype(str), roots)
     if args.width and "overrides" in table:
         table["overrides"] = (
@@ -416,6 +520,10 @@ def _print_table(df: pd.DataFrame, roots: list[Path], args: argparse.Namespace) 
         "display.max_rows", None, "display.max_columns", None, "display.width", 250, "display.float_format", "{:.4g}".format
     ):
         print(table.to_string(index=False))
+    legend = _legend(list(table.columns), args.metric)
+    if legend:
+        print("columns:\n" + "\n".join(legend))
+        print(f"  ({FIRST_LINE})")
     errors = df[df["error"].fillna("") != ""] if "error" in df else df.iloc[0:0]
     for _, row in errors.iterrows():
         print(f"note: {row['path']}: {row['status']}: {row['error']}", file=sys.stderr)

@@ -33,10 +33,12 @@ import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pandas as pd
 
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
+from higbench.display import BUSY_SHARE
 from higbench.problems.base import ProblemConfig
 from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLUMNS, conditioning
 from higbench.results.targets import for_problem, reach_index
@@ -46,6 +48,7 @@ from higbench.runfile.reader import (
     RunFileOpenForWrite,
     RunTables,
     UnreadableRunFile,
+    read_meta,
     read_tables,
     run_file_path,
 )
@@ -573,3 +576,89 @@ def best_runs(
         return df.iloc[0:0]
     best = candidates.sort_values([*keys, "_metric", "path"]).groupby(keys, sort=True, dropna=False).head(1)
     return best.drop(columns="_metric").sort_values(keys).reset_index(drop=True)
+
+
+def best_settings(
+    df: pd.DataFrame,
+    by: str | Sequence[str] = "optimizer.name",
+    metric: str = "final_test_loss",
+    per_problem: bool = True,
+    setting: str = "setting",
+) -> pd.DataFrame:
+    """The best setting per group, judged by its seeds: one row per group.
+
+    A setting is the runs that share the ``setting`` column (their seeds). Its completed runs
+    with a ``metric``, and its diverged runs (counted as inf: the worst), are its seeds: their
+    median (``<metric>_median``), count (``seeds``), least and greatest (``<metric>_min``,
+    ``<metric>_max``), and ``diverged_seeds``; its other runs (interrupted, failed, ...) are
+    counted in ``runs_not_completed``. The setting with the
+    lowest median wins its group (ties: more seeds, then the label). Groups as in
+    ``best_runs``. Other numeric columns (steps, times, conditioning) are medians over the
+    seeds; ``busy_seeds`` counts seeds that had under ``display.BUSY_SHARE`` of their cores.
+    """
+    keys = [by] if isinstance(by, str) else list(by)
+    if per_problem:
+        keys = [k for k in ("problem.name", "problem.model") if k in df.columns and k not in keys] + keys
+    missing = [k for k in [*keys, metric, "status", setting] if k not in df.columns]
+    if missing:
+        raise KeyError(f"best_settings: no column(s) {missing} in the runs table")
+    values = pd.to_numeric(df[metric], errors="coerce")
+    # A diverged seed is a seed that ended worst, not one to leave out: otherwise a setting whose
+    # seeds mostly diverge would win on its one survivor.
+    values = values.where(df["status"] != "diverged", math.inf)
+    ok = df["status"].isin(DONE_STATUSES) & ~np.isnan(values.to_numpy(dtype=float, na_value=np.nan))
+    seeds = df[ok].assign(_metric=values[ok])
+    if seeds.empty:
+        return df.iloc[0:0]
+    group = [*dict.fromkeys([*keys, setting])]
+    grouped = seeds.groupby(group, sort=True, dropna=False)
+    rows = grouped["_metric"].agg(["median", "count", "min", "max"])
+    rows.columns = [f"{metric}_median", "seeds", f"{metric}_min", f"{metric}_max"]
+    firsts = [c for c in ("optimizer.name", "optimizer.lr", "batch_size", "budget") if c in seeds and c not in group]
+    rows = rows.join(grouped[firsts].first()) if firsts else rows
+    medians = [c for c in ("steps", "train_time_s", *_time_and_conditioning(seeds)) if c in seeds and c != metric]
+    if medians:
+        rows = rows.join(grouped[medians].agg(_median_over_seeds))
+    if "env.cpu_share" in seeds:
+        share = pd.to_numeric(seeds["env.cpu_share"], errors="coerce")
+        rows = rows.join((share < BUSY_SHARE).groupby([seeds[k] for k in group], dropna=False).sum().rename("busy_seeds"))
+    rows = rows.join(
+        (seeds["status"] == "diverged").groupby([seeds[k] for k in group], dropna=False).sum().rename("diverged_seeds")
+    )
+    all_runs = df.groupby(group, sort=True, dropna=False).size().rename("_runs")
+    rows = rows.join(all_runs)
+    rows["runs_not_completed"] = rows.pop("_runs") - rows["seeds"]
+    rows = rows.reset_index()
+    rows["_label"] = rows[setting].astype(str)
+    rows = rows.sort_values([*keys, f"{metric}_median", "seeds", "_label"], ascending=[*[True] * len(keys), True, False, True])
+    best = rows.groupby(keys, sort=True, dropna=False).head(1).drop(columns="_label")
+    return best.sort_values(keys).reset_index(drop=True)
+
+
+def _median_over_seeds(values: pd.Series) -> float:
+    """The median of one column over a setting's seeds; a time_to_<t> that a seed never
+    reached counts as never (so 2 of 3 seeds never reaching it make the median never: NaN)."""
+    numbers = pd.to_numeric(values, errors="coerce")
+    if str(values.name).startswith("time_to_"):
+        numbers = numbers.fillna(math.inf)
+    median = float(numbers.median())
+    return median if math.isfinite(median) else math.nan
+
+
+def _time_and_conditioning(df: pd.DataFrame) -> list[str]:
+    return [c for c in df.columns if c.startswith("time_to_") or c in CONDITIONING_COLUMNS]
+
+
+def cpu_uses(paths: Iterable[str | Path]) -> list[tuple[float, str]]:
+    """(CPU share, load at the end) of each readable run file that records them (env/cpu_share):
+    what the closing lines of sweeps and figure builds judge the machine's load from."""
+    uses = []
+    for path in paths:
+        try:
+            with h5py.File(run_file_path(path), "r", locking=False) as f:
+                env = read_meta(f)["env"]
+        except Exception:  # noqa: BLE001 - a failed job's missing or half-written file: nothing to say
+            continue
+        if "cpu_share" in env:
+            uses.append((float(env["cpu_share"]), str(env.get("load_at_finish", ""))))
+    return uses

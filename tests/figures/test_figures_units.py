@@ -198,10 +198,13 @@ def test_a_stopped_figure_run_is_resumed_in_place_for_the_rest_of_its_budget(tmp
     from higbench import jobs as runs
     from higbench.runfile.reader import read_head
 
+    # Only an update budget: with the toy's default 30 s beside it, a loaded machine ran out of
+    # seconds first (914 of 1,000 updates) and the run completed short.
     overrides = {"problem": "toy", "optimizer": "adam", "budget.max_updates": 1000, "eval_unit": "updates", "eval_every": 5}
+    overrides["budget.seconds"] = None
     run = tmp_path / "figures-runs" / "earlier" / "0" / "run.h5"
     run.parent.mkdir(parents=True)
-    stopped_run(run, monkeypatch, after=25)  # the same config, stopped after 25 loop turns
+    stopped_run(run, monkeypatch, overrides=["budget.seconds=null"], after=25)  # the same config, stopped after 25 loop turns
     job = Job("f", "s", dict(overrides), seed=0)
     runs.resolve([job], runs.run_index(tmp_path))
     assert job.status == "interrupted" and not job.done and job.resume_from == run.resolve()
@@ -575,3 +578,21 @@ def test_long_curves_are_thinned_to_what_a_panel_can_show_keeping_the_start_end_
     assert len(idx) <= 2 * CURVE_POINTS + 3 and (np.diff(idx) > 0).all()
     assert {0, n - 1, 31_337} <= set(idx.tolist()) and set(range(20)) <= set(idx.tolist())  # dense at the start
     assert np.diff(idx).max() <= n / (CURVE_POINTS - 1) + 1  # no gap wider than the even spacing
+
+
+def test_a_build_prints_the_claims_of_its_figures(tmp_path):
+    """The paper door's short report: each drawn figure's claims, one line each, from its
+    <id>.json; a figure whose claims are all n/a (the smoke preset) gets one line."""
+    from higbench.figures.__main__ import claim_lines
+
+    judged = [
+        {"id": "toy-3", "verdict": "reproduced", "paper": "HIG lowest", "measured": "HIG 5e-4, Adam 4e-3"},
+        {"id": "toy-1", "verdict": "partly", "paper": "~3 decades", "measured": "HIG 4.5 decades"},
+    ]
+    (tmp_path / "fig1.json").write_text(json.dumps({"claims": judged}))
+    (tmp_path / "fig2b.json").write_text(json.dumps({"claims": [{"id": "osc-1", "verdict": "n/a"}] * 3}))
+    lines = claim_lines(tmp_path, ["fig1", "fig2b", "table9"])  # table9: no json, nothing said
+    assert lines[0].startswith("[figures] fig1: 2 claims of the paper, as these runs judge them")
+    assert lines[1] == "  toy-3 reproduced: HIG lowest | measured: HIG 5e-4, Adam 4e-3"
+    assert lines[2].startswith("  toy-1 partly: ")
+    assert lines[3].startswith("[figures] fig2b: its 3 claims n/a at these runs") and len(lines) == 4

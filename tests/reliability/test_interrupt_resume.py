@@ -85,6 +85,24 @@ def sigterm_self_after_rows(n, monkeypatch):
     return rows
 
 
+def freeze_with_rows_beyond_its_checkpoint(proc, run_file, tries: int = 50) -> None:
+    """Leave ``proc`` stopped (SIGSTOP) at a moment when its run file holds curve rows beyond
+    its last checkpoint's, judged from the files while it is stopped, so no checkpoint can land
+    between the check and the kill (under load one did: the kill then found none beyond it).
+    A checkpoint is replaced atomically, so reading it while the writer is stopped is safe."""
+    for _ in range(tries):
+        t_end = time.monotonic() + 60
+        while not checkpoint_path(run_file).exists() and time.monotonic() < t_end and proc.poll() is None:
+            time.sleep(0.05)
+        assert checkpoint_path(run_file).exists(), "no checkpoint was written"
+        wait_for_rows(run_file, ckpt_state(run_file)["rows"]["curves"]["step"] + 3, proc, timeout=60)
+        proc.send_signal(signal.SIGSTOP)
+        if table_rows(run_file) > ckpt_state(run_file)["rows"]["curves"]["step"]:
+            return
+        proc.send_signal(signal.SIGCONT)  # a checkpoint caught up meanwhile: wait for rows beyond it
+    pytest.fail(f"{run_file}: never caught with rows beyond its checkpoint in {tries} tries")
+
+
 @pytest.fixture(scope="module")
 def stopped(tmp_path_factory):
     """The three victims, each stopped by its signal mid-run."""
@@ -106,13 +124,8 @@ def stopped(tmp_path_factory):
         for name in ("sigint", "sigkill"):
             run_file = root / name / "run.h5"
             wait_for_rows(run_file, 4, procs[name], timeout=90)
-            if name == "sigkill":
-                # kill after a checkpoint, with rows written after it (resume must cut them)
-                t_end = time.monotonic() + 60
-                while not checkpoint_path(run_file).exists() and time.monotonic() < t_end and procs[name].poll() is None:
-                    time.sleep(0.05)
-                assert checkpoint_path(run_file).exists(), "no checkpoint was written"
-                wait_for_rows(run_file, ckpt_state(run_file)["rows"]["curves"]["step"] + 3, procs[name], timeout=60)
+            if name == "sigkill":  # kill after a checkpoint, with rows written after it (resume must cut them)
+                freeze_with_rows_beyond_its_checkpoint(procs[name], run_file)
             if name == "sigkill":  # resuming a run that is still going is refused
                 try:
                     cli.precheck([f"resume={root / name}"])

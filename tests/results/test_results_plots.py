@@ -66,12 +66,12 @@ def test_best_compares_only_runs_of_equal_budget(tmp_path, capsys):
     write_run(root / "hig30/run.h5", optimizer="hig", test_loss=[1.0, 1e-4], config_extra={"budget": {"seconds": 30.0}})
     write_run(root / "adam5/run.h5", optimizer="adam", test_loss=[1.0, 1e-2], config_extra={"budget": {"seconds": 5.0}})
     write_run(root / "adam30/run.h5", optimizer="adam", test_loss=[1.0, 1e-3], config_extra={"budget": {"seconds": 30.0}})
-    assert results_main([str(root), "--best"]) == 0
+    assert results_main([str(root), "--best-seed"]) == 0
     captured = capsys.readouterr()
     assert "different budgets" in captured.err
     lines = captured.out.splitlines()
     assert "budget" in lines[1]
-    rows = [line.split() for line in lines[2:]]
+    rows = [line.split() for line in lines[2 : lines.index("columns:")]]
     assert sorted((r[0], r[5]) for r in rows) == [("adam30/run.h5", "30s"), ("adam5/run.h5", "5s"), ("hig30/run.h5", "30s")]
 
 
@@ -146,8 +146,9 @@ def test_best_keeps_setups_apart(tmp_path, capsys):
     write_run(root / "adam2/run.h5", optimizer="adam", lr=0.01, test_loss=[1.0, 2e-3])
     amsgrad = {"optimizer": {"name": "adam", "lr": 0.1, "amsgrad": True}}
     write_run(root / "ams/run.h5", optimizer="adam", test_loss=[1.0, 1e-6], config_extra=amsgrad)
-    assert results_main([str(root), "--best"]) == 0
-    rows = [line.split()[0] for line in capsys.readouterr().out.splitlines()[2:]]
+    assert results_main([str(root), "--best-seed"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = [line.split()[0] for line in lines[2 : lines.index("columns:")]]
     assert sorted(rows) == ["adam1/run.h5", "ams/run.h5", "gn/run.h5", "gn1/run.h5", "hig/run.h5"]
 
 
@@ -184,3 +185,58 @@ def test_problem_dipole_cnn_finds_the_dipole_runs_with_the_cnn(tmp_path, capsys)
     assert out.startswith("1 of 2 runs") and "cnn/run.h5" in out and "mlp/run.h5" not in out
     assert results_main([str(root), "--problem", "dipole"]) == 0
     assert capsys.readouterr().out.startswith("2 of 2 runs")
+
+
+def test_best_reports_the_setting_by_its_median_over_seeds(tmp_path, capsys):
+    """Three seeds per setting. HIG lr=1 has the single best seed (1e-6) but a median of 1e-2;
+    HIG lr=0.1 has median 1e-4 over 3 seeds (range 5e-5 to 2e-3): --best names lr=0.1 with
+    3 seeds and that range. --best-seed names the lucky lr=1 seed instead. Adam's lr=0.01
+    has a diverged seed, counted as the worst value: median 3e-3 over 3 seeds, 1 diverged;
+    Adam's lr=0.1 has one good seed (1e-5) and two diverged: its median is inf, so it loses."""
+    import pandas as pd
+
+    from higbench.results.index import best_settings, load_runs
+    from higbench.results.profile import setting_labels
+
+    root = tmp_path / "sweep"
+    finals = {
+        ("hig", 1.0): [1e-6, 1e-2, 5e-2],
+        ("hig", 0.1): [2e-3, 1e-4, 5e-5],
+        ("adam", 0.01): [3e-3, 1e-3, None],
+        ("adam", 0.1): [1e-5, None, None],
+    }
+    for (opt, lr), losses in finals.items():
+        for seed, final in enumerate(losses):
+            write_run(
+                root / f"{opt}_{lr}_{seed}/run.h5",
+                optimizer=opt,
+                lr=lr,
+                test_loss=[1.0, 0.5, final if final is not None else float("nan")],
+                status="completed" if final is not None else "diverged",
+                config_extra={"seed": seed},
+            )
+    runs = load_runs(root)
+    best = best_settings(runs.assign(setting=setting_labels(runs)), by="optimizer.name").set_index("optimizer.name")
+    assert best.loc["hig", "optimizer.lr"] == 0.1 and best.loc["hig", "seeds"] == 3
+    assert best.loc["hig", "final_test_loss_median"] == pytest.approx(1e-4)
+    assert (best.loc["hig", "final_test_loss_min"], best.loc["hig", "final_test_loss_max"]) == pytest.approx((5e-5, 2e-3))
+    assert best.loc["adam", "optimizer.lr"] == 0.01 and best.loc["adam", "seeds"] == 3
+    assert best.loc["adam", "diverged_seeds"] == 1 and best.loc["adam", "runs_not_completed"] == 0
+    assert best.loc["adam", "final_test_loss_median"] == pytest.approx(3e-3)
+
+    assert results_main([str(root), "--best"]) == 0
+    out = capsys.readouterr().out
+    table = out.split("columns")[0].splitlines()
+    header = table[2].split()
+    assert header[:3] == ["problem.name", "optimizer.name", "setup"] and "final_test_loss_median" in header
+    hig = next(line for line in table if " hig " in f" {line} ")
+    assert "lr=0.1" in hig and "0.0001" in hig and "5e-05" in hig and "0.002" in hig
+    legend = out.split("columns", 1)[1]
+    for column in header:  # every column that does not explain itself has its line
+        if column not in ("problem.name", "optimizer.name", "optimizer.lr", "batch_size"):  # names that explain themselves
+            assert f"  {column}: " in legend, column
+
+    assert results_main([str(root), "--best-seed"]) == 0
+    out = capsys.readouterr().out
+    assert any("hig_1.0_0/run.h5" in line for line in out.splitlines())
+    assert isinstance(best, pd.DataFrame)

@@ -19,8 +19,9 @@ def config(optimizer):
     with initialize_config_dir(config_dir=cli.config_dir(), version_base="1.3"):
         return compose(
             "config",
-            overrides=["problem=toy", f"optimizer={optimizer}", "batch_size=64", "budget.max_updates=8", "eval_unit=updates",
-                       "eval_every=2", "threads=1", "progress=false", "checkpoint_every=null"],
+            overrides=["problem=toy", f"optimizer={optimizer}", "batch_size=64", "budget.max_updates=8",
+                       "budget.seconds=null", "eval_unit=updates", "eval_every=2", "threads=1", "progress=false",
+                       "checkpoint_every=null"],
         )  # fmt: skip
 
 
