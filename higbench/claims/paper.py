@@ -409,7 +409,7 @@ def draws_probe(table) -> dict:
     over (data draw, seed) pairs, each for the updates of the authors' documented hour on the paper's GPU at
     its b. HIG at b=128 (osc-3): the range over pairs of the paper's metric (the mean over the 4,096 test
     samples), of the per-sample median, of the mean over 32,768 fresh samples, and the share of the mean
-    the worst samples carry. Per optimizer and b (osc-5, osc-8): the median over pairs of the mean test
+    the worst samples carry. Per optimizer and b (osc-5): the median over pairs of the mean test
     loss, and how many pairs diverged."""
     done = table[table["status"] == "completed"]
     head = done[(done["optimizer"] == "hig") & (done["batch_size"] == 128)]
@@ -2219,7 +2219,8 @@ UNTESTED: list[tuple[str, str]] = [
     (
         "Tables 3-5's other entries: HIG's memory per b on a GPU, table 4's memory and Jacobian time, table 5's b=8 against b=16",
         "GPU memory is only measured in the committed GPU benchmark run (spd-2 quotes it); this CPU's resident memory is "
-        "not the paper's quantity; the b=8/16 and Jacobian-time comparisons are not added yet",
+        "not the paper's quantity; the b=8/16 and table 4's Jacobian-time comparisons are not added yet (table 3's "
+        "Jacobian time over b is spd-7, table 5's Adam time over b spd-8)",
     ),
 ]
 

@@ -602,7 +602,7 @@ def seed_gate(row: dict) -> str | None:
     if not isinstance(seeds, int) or seeds >= REQUIRED_SEEDS or seeds >= NO_RUNS:
         return None
     need = f"a verdict needs the median of {REQUIRED_SEEDS}"
-    return f"{seeds} seed(s) per setting of the runs the rule reads ({need}): at most partly, at least partly."
+    return f"{seeds} seed(s) per setting of the runs the rule reads ({need}), so partly whichever way the rule goes;"
 
 
 # -- the numbers a cause may quote besides its runs', and budgets sized by them ---------------

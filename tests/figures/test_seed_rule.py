@@ -131,3 +131,13 @@ def test_a_searched_seed_counts_as_settled():
     assert sidecar_seeds([{"id": "f", "runs": runs + search}]) == NO_RUNS
     hig = {"sweep": "best", "seed": 0, "overrides": ["optimizer=hig", "seed=0"]}
     assert sidecar_seeds([{"id": "f", "runs": runs + search + [hig]}]) == 1
+
+
+def test_reads_name_the_claims_own_figures_and_sweeps():
+    """A selector that names no figure of its claim (a typo) would count no run, and the row would escape the gate."""
+    figs = registry.figures()
+    for c in registry.claims().values():
+        for selector in c.reads:
+            fid, _, sweep = selector.split()[0].partition(":")
+            assert fid in c.figures and fid in figs, (c.id, selector)
+            assert not sweep or any(s.name == sweep for s in figs[fid].sweeps), (c.id, selector)
