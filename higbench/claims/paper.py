@@ -253,6 +253,19 @@ def _paths(runs: dict, opt: str) -> list:
     return found
 
 
+def toy_trajectories_probe(table) -> dict:
+    """The toy trajectories probe (scripts/probe_toy_trajectories.py): toy-6's quantities per seed, their medians,
+    and on how many seeds each half of the rule holds."""
+    ill, well = table[table["gamma"] == 0.01].set_index(["optimizer", "seed"]), table[table["gamma"] == 1.0]
+    well = well.set_index(["optimizer", "seed"])
+    seeds = sorted(set(table["seed"]))
+    behind = sum(ill.loc[("adam", s), "y2_left"] > ill.loc[("hig", s), "y2_left"] for s in seeds)
+    aims = sum(well.loc[("gn", s), "aim"] > well.loc[("adam", s), "aim"] for s in seeds)
+    out = {"seeds": len(seeds), "updates": int(table["updates"].min()), "behind": int(behind), "aims": int(aims)}
+    out |= {f"{o}_y2_left": float(ill.loc[o]["y2_left"].median()) for o in ("adam", "hig")}
+    return out | {f"{o}_aim": float(well.loc[o]["aim"].median()) for o in ("adam", "gn")}
+
+
 def toy6_rule(v: dict) -> tuple:
     """toy-6's rule on its measured values: both of the paper's sentences as comparisons, no threshold of ours."""
     behind, aims = v["adam_y2_left"] > v["hig_y2_left"], v["gn_aim"] > v["adam_aim"]
@@ -280,6 +293,22 @@ def toy6_rule(v: dict) -> tuple:
                 not (v["adam_y2_left"] > v["hig_y2_left"] and v["gn_aim"] > v["adam_aim"])
             ),
         },
+        otherwise=Cause(
+            "seeds",
+            "the figure's plotted data keep the first seed's trajectories only; over {probe_seeds} seeds at "
+            "{probe_updates} updates each (the toy trajectories probe, an update budget) Adam leaves "
+            "{probe_adam_y2_left:.2f} of its distance to the target along y_2 against HIG's {probe_hig_y2_left:.2f}, and "
+            "GN's steps after its initial phase aim at the target {probe_gn_aim:.2f} against Adam's {probe_adam_aim:.2f} "
+            "(medians over seeds): Adam is behind on {probe_behind} of {probe_seeds} seeds, GN aims better on "
+            "{probe_aims} of them",
+            {
+                "the rule holds on the figure's seed": lambda v: (
+                    v["adam_y2_left"] > v["hig_y2_left"] and v["gn_aim"] > v["adam_aim"]
+                ),
+                "three seeds in the probe": lambda v: v["probe_seeds"] >= 3,
+            },
+            probe=probe_values("toy_trajectories.csv", toy_trajectories_probe),
+        ),
     ),
 )
 def trajectories(datas):

@@ -832,3 +832,27 @@ def test_rows_added_for_statements_without_one_on_synthetic_runs():
     upd = "Update duration (s)"
     assert _measure("spd-8", {"table5": table({("Adam", 256, upd): 0.4, ("Adam", 1024, upd): 1.33})})[1] == "partly"
     assert _measure("spd-8", {"table5": table({("Adam", 256, upd): 0.4, ("Adam", 1024, upd): 0.41})})[1] == "not"
+
+
+def test_toy6_quotes_the_three_seed_trajectory_probe(monkeypatch, tmp_path):
+    """The figure keeps one seed's trajectories; the toy trajectories probe's three seeds are quoted beside the seed gate,
+    with on how many seeds each half of the rule holds (here Adam behind on 2 of 3, GN aiming better on 3)."""
+    import pandas as pd
+
+    from higbench.claims import rules
+    from higbench.claims.paper import toy_trajectories_probe
+
+    rows = []
+    for seed, (adam_left, hig_left) in enumerate([(0.4, 0.1), (0.3, 0.05), (0.02, 0.08)]):
+        rows += [dict(gamma=0.01, optimizer="adam", seed=seed, y2_left=adam_left, aim=math.nan, updates=10000)]
+        rows += [dict(gamma=0.01, optimizer="hig", seed=seed, y2_left=hig_left, aim=math.nan, updates=10000)]
+        rows += [dict(gamma=1.0, optimizer="adam", seed=seed, y2_left=0.5, aim=0.6, updates=10000)]
+        rows += [dict(gamma=1.0, optimizer="gn", seed=seed, y2_left=0.1, aim=0.9, updates=10000)]
+    table = pd.DataFrame(rows)
+    got = toy_trajectories_probe(table)
+    assert (got["seeds"], got["behind"], got["aims"]) == (3, 2, 3) and got["adam_y2_left"] == pytest.approx(0.3)
+    table.to_csv(tmp_path / "toy_trajectories.csv", index=False)
+    monkeypatch.setattr(rules, "PROBES_DIR", tmp_path)
+    values = dict(adam_y2_left=0.36, hig_y2_left=0.08, gn_aim=0.85, adam_aim=0.66, seeds_read=1, seeds=1)
+    kind, text = finish(registry.claims()["toy-6"], _row("toy-6", "reproduced", values))["cause"]
+    assert kind == "seeds" and "(seeds) reads" in text and "behind on 2 of 3 seeds" in text, text
