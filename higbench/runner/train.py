@@ -52,7 +52,7 @@ from higbench.errors import ConfigError, show
 from higbench.optim import memory_guard
 from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
-from higbench.problems.base import Batch, Problem, build_problem
+from higbench.problems.base import LATER_DRAWS, Batch, Problem, build_problem
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
@@ -248,6 +248,14 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
     )
 
 
+def check_data_memory(cfg: DictConfig, problem: Problem) -> None:
+    """The validation and fresh test sets (drawn when first asked for, after this) fit in memory."""
+    sizes = {f"problem.{key}": int(cfg.problem.get(key) or 0) for key in LATER_DRAWS}
+    memory_guard.check_samples(
+        {k: n for k, n in sizes.items() if n}, problem.sample_bytes(), str(problem.device), cfg.get("memory_limit_mb")
+    )
+
+
 def _setup(cfg: DictConfig, device: torch.device | None = None):
     device = resolve_device(cfg.device) if device is None else device
     dtype = DTYPES[cfg.dtype]
@@ -326,6 +334,7 @@ def check_build(cfg: DictConfig, initial_weights=None) -> None:
     check_sinks(cfg)
     if resolve_device(cfg.device).type == "cpu":
         check_memory(cfg, problem, model, update)
+        check_data_memory(cfg, problem)
 
 
 # -- the loop --------------------------------------------------------------------------------
@@ -617,6 +626,7 @@ def train(plan: Plan) -> RunSummary:
     if state is not None:  # all of it fits this network and optimizer, before the run file is touched
         check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
+    check_data_memory(cfg, problem)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
     check_sinks(cfg)
@@ -633,7 +643,7 @@ def train(plan: Plan) -> RunSummary:
         cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
     )
     run = TrainingRun(
-        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
+        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, ProgressSink(progress), side=extra)
     )
     clock.resume()
     signals = StopSignals(parent=plan.stop_with_parent).install()
