@@ -1,5 +1,5 @@
 """Probe: the oscillator's table-2 levels over data draws and seeds, at the paper's run length
-(claims osc-3, osc-5 and osc-8: what one test draw's mean is worth, and whether a larger batch
+(claims osc-3 and osc-5: what one test draw's mean is worth, and whether a larger batch
 ends lower).
 
 HIG and GN at table 2's settings (eta = 1, tau = 1e-6) at b = 32, 64, 128, each for the updates

@@ -14,6 +14,7 @@ import dataclasses
 import math
 
 import numpy as np
+import torch
 
 from higbench.bench.paper import PAPER_COSTS
 from higbench.bench.tables import PAPER_TIMINGS, PROBLEMS, cell, timing_frame
@@ -51,6 +52,7 @@ from higbench.claims.rules import (
     updates_of,
 )
 from higbench.display import OPTIMIZER_NAMES, num, sci
+from higbench.problems.toy import target_function
 
 # -- toy (figure 1) -------------------------------------------------------------------------
 # Paper 2.1, appendix B.1. fig1's sweeps: "toy" (γ x Adam, GN, HIG) and "adam_tuned".
@@ -208,31 +210,71 @@ def toy_alike(datas):
     return measured, ratio <= 10, ratio <= 100, {"adam_final": fa, "gn_final": fg, "ratio": ratio}
 
 
-INITIAL_PHASE = 0.1  # GN's initial phase (appendix A.2): the first tenth of its path length in y-space
+def probe_target(run) -> np.ndarray:
+    """The y-space target of the toy's probe sample: the run's logged one, else the target function at
+    the probe's x (the committed plotted data keep the trajectory, not the target)."""
+    if "probe_target" in run.logs:
+        return np.asarray(run.logs["probe_target"], dtype=float).reshape(-1, 2)[-1]
+    x = torch.tensor([[float(run.cfg("problem.probe_x", 0.5))]], dtype=torch.float64)
+    return target_function(x)[0].numpy()
 
 
-def net_along_y2(y: np.ndarray) -> float:
-    """|y_2 at the end - y_2 at the start| of a y-space trajectory: the progress made along y_2 (a
-    path that jumps back and forth along y_2 makes none by jumping)."""
-    return float(abs(y[-1, 1] - y[0, 1]))
+def y2_gap_left(y: np.ndarray, target: np.ndarray) -> float:
+    """Share of the initial distance to the target along y_2 still left at the end of a y-space
+    trajectory (0: reached; 1: no progress; above 1: farther than at the start). Progress to the
+    target, not displacement: a path that overshoots the target along y_2 has moved, not arrived."""
+    start = abs(y[0, 1] - target[1])
+    return float(abs(y[-1, 1] - target[1]) / start) if start > 0 else float("nan")
 
 
-def straightness_after(y: np.ndarray, phase: float = INITIAL_PHASE) -> float:
-    """|end - start| / path length of a y-space trajectory, from the evaluation at which it has
-    covered ``phase`` of its length on (its initial phase left out)."""
-    lengths = np.linalg.norm(np.diff(y[:, :2], axis=0), axis=1)
-    if lengths.sum() == 0:
+def initial_phase_end(y: np.ndarray, target: np.ndarray) -> int:
+    """Where GN's initial phase (appendix A.2: "several steps in varying directions") ends: the
+    evaluation at which the trajectory is farthest from the target; from there on it heads back."""
+    return int(np.argmax(np.linalg.norm(y[:, :2] - target, axis=1)))
+
+
+def aim_at_target(y: np.ndarray, target: np.ndarray, start: int = 0) -> float:
+    """How directly a y-space trajectory heads for the target from evaluation ``start`` on: the mean
+    cosine between each step and the direction from its start to the target, weighted by the step's
+    length (1: a straight line to the target, as gradient descent in y on a uniform L2 loss moves)."""
+    steps, to = np.diff(y[start:, :2], axis=0), target - y[start:-1, :2]
+    size, dist = np.linalg.norm(steps, axis=1), np.linalg.norm(to, axis=1)
+    keep = (size > 0) & (dist > 0)
+    if not keep.any():
         return float("nan")
-    i = int(np.searchsorted(np.cumsum(lengths) / lengths.sum(), phase)) + 1 if phase > 0 else 0  # the first point past it
-    rest = y[i:, :2]
-    length = float(np.linalg.norm(np.diff(rest, axis=0), axis=1).sum())
-    return float(np.linalg.norm(rest[-1] - rest[0]) / length) if length > 0 else float("nan")
+    cos = (steps[keep] * to[keep]).sum(axis=1) / (size[keep] * dist[keep])
+    return float(np.sum(cos * size[keep]) / np.sum(size[keep]))
 
 
-def _probe_path(runs: dict, opt: str) -> np.ndarray:
-    rs = runs[opt]
-    require(rs and "probe_output" in rs[0].logs, what=f"fig1 {opt} probe trajectory")
-    return rs[0].logs["probe_output"]
+def _paths(runs: dict, opt: str) -> list:
+    """(trajectory, target) of each seed of ``opt`` whose y-space trajectory is there."""
+    found = [(r.logs["probe_output"], probe_target(r)) for r in runs[opt] if "probe_output" in r.logs]
+    require(found, what=f"fig1 {opt} probe trajectory")
+    return found
+
+
+def toy_trajectories_probe(table) -> dict:
+    """The toy trajectories probe (scripts/probe_toy_trajectories.py): toy-6's quantities per seed, their medians,
+    and on how many seeds each half of the rule holds."""
+    ill, well = table[table["gamma"] == 0.01].set_index(["optimizer", "seed"]), table[table["gamma"] == 1.0]
+    well = well.set_index(["optimizer", "seed"])
+    seeds = sorted(set(table["seed"]))
+    behind = sum(ill.loc[("adam", s), "y2_left"] > ill.loc[("hig", s), "y2_left"] for s in seeds)
+    aims = sum(well.loc[("gn", s), "aim"] > well.loc[("adam", s), "aim"] for s in seeds)
+    out = {"seeds": len(seeds), "updates": int(table["updates"].min()), "behind": int(behind), "aims": int(aims)}
+    out |= {f"{o}_y2_left": float(ill.loc[o]["y2_left"].median()) for o in ("adam", "hig")}
+    return out | {f"{o}_aim": float(well.loc[o]["aim"].median()) for o in ("adam", "gn")}
+
+
+def toy6_rule(v: dict) -> tuple:
+    """toy-6's rule on its measured values: both of the paper's sentences as comparisons, no threshold of ours."""
+    behind, aims = v["adam_y2_left"] > v["hig_y2_left"], v["gn_aim"] > v["adam_aim"]
+    measured = (
+        f"γ=0.01, share of the initial distance to the target along y_2 left at the end: Adam {v['adam_y2_left']:.2f}, HIG "
+        f"{v['hig_y2_left']:.2f}; γ=1, steps' aim at the target after GN's initial phase (mean cosine): GN "
+        f"{v['gn_aim']:.2f}, Adam {v['adam_aim']:.2f} (medians over the {v['seeds_read']} seed(s) with a trajectory)"
+    )
+    return measured, behind and aims, behind or aims
 
 
 @claim(
@@ -240,33 +282,52 @@ def _probe_path(runs: dict, opt: str) -> np.ndarray:
     "fig1",
     "Adam makes no progress along y_2 at γ=0.01; GN's path straight at γ=1 after its initial phase",
     min_seconds=20,
+    decide=toy6_rule,
     cause=Cause(
         "disagreement",
-        "in the ill-conditioned case Adam, at the paper's η, moves {adam_y2_net:.2f} along y_2 from start to end against "
-        "HIG's {hig_y2_net:.2f}: it neglects y_2 no more than HIG does; in the well-conditioned case GN's path after its "
-        "first tenth has a "
-        "straightness of {gn_straight_after:.2f}, under the rule's threshold (the y-space trajectories are logged for one "
-        "seed)",
+        "in the ill-conditioned case Adam, at the paper's η, leaves {adam_y2_left:.2f} of its distance to the target along "
+        "y_2 against HIG's {hig_y2_left:.2f}; in the well-conditioned case GN's steps after its initial phase aim at the "
+        "target {gn_aim:.2f} against Adam's {adam_aim:.2f} (mean cosines)",
         {
-            "Adam not below half of HIG along y_2": lambda v: v["adam_y2_net"] >= v["hig_y2_net"] / 2,
-            "GN not straight after its initial phase": lambda v: v["gn_straight_after"] < 0.9,
+            "Adam not behind HIG along y_2, or GN aiming no better than Adam": lambda v: (
+                not (v["adam_y2_left"] > v["hig_y2_left"] and v["gn_aim"] > v["adam_aim"])
+            ),
         },
+        otherwise=Cause(
+            "seeds",
+            "the figure's plotted data keep the first seed's trajectories only; over {probe_seeds} seeds at "
+            "{probe_updates} updates each (the toy trajectories probe, an update budget) Adam leaves "
+            "{probe_adam_y2_left:.2f} of its distance to the target along y_2 against HIG's {probe_hig_y2_left:.2f}, and "
+            "GN's steps after its initial phase aim at the target {probe_gn_aim:.2f} against Adam's {probe_adam_aim:.2f} "
+            "(medians over seeds): Adam is behind on {probe_behind} of {probe_seeds} seeds, GN aims better on "
+            "{probe_aims} of them",
+            {
+                "the rule holds on the figure's seed": lambda v: (
+                    v["adam_y2_left"] > v["hig_y2_left"] and v["gn_aim"] > v["adam_aim"]
+                ),
+                "three seeds in the probe": lambda v: v["probe_seeds"] >= 3,
+            },
+            probe=probe_values("toy_trajectories.csv", toy_trajectories_probe),
+        ),
     ),
 )
 def trajectories(datas):
-    """Toy (appendix A.2): in y-space Adam makes no progress along y_2 in the ill-conditioned case (γ=0.01), where HIG
-    moves along it; in the well-conditioned case (γ=1) GN's path is straight after its initial phase. Rule: on the
-    probe's trajectories (seed 0), Adam's net displacement along y_2 at γ=0.01 below half of HIG's, and GN's
-    straightness (|end - start| / length) at γ=1 after the first tenth of its path >= 0.9 (partly: one of the two)"""
-    ill, well = _by_opt(datas, 0.01, "adam", "hig"), _by_opt(datas, 1.0, "gn")
-    adam, hig = net_along_y2(_probe_path(ill, "adam")), net_along_y2(_probe_path(ill, "hig"))
-    straight = straightness_after(_probe_path(well, "gn"))
-    measured = (
-        f"γ=0.01, net displacement along y_2: Adam {adam:.2f}, HIG {hig:.2f}; γ=1, GN's straightness after its first "
-        f"tenth {straight:.2f}"
-    )
-    values = {"adam_y2_net": adam, "hig_y2_net": hig, "gn_straight_after": straight}
-    return measured, adam < hig / 2 and straight >= 0.9, adam < hig / 2 or straight >= 0.9, values
+    """Toy (§2.1, appendix A.2): in y-space the updates neglect y_2 and keep Adam from moving efficiently along it in the
+    ill-conditioned case (γ=0.01), where HIG progresses along it; in the well-conditioned case (γ=1) GN's path is a
+    straight line to the target after its initial phase (gradient descent in y). Rule: on the probe sample's
+    trajectories (median over the seeds that have one), Adam leaves a larger share of its initial distance to the target
+    along y_2 than HIG at the end (γ=0.01), and GN's steps after its initial phase (up to its farthest point from the
+    target) aim at the target more directly than Adam's (γ=1; length-weighted mean cosine to the target), as gradient
+    descent in y does and Adam, a descent in θ, need not (partly: one of the two)"""
+    ill, well = _by_opt(datas, 0.01, "adam", "hig"), _by_opt(datas, 1.0, "adam", "gn")
+    paths = {("ill", o): _paths(ill, o) for o in ("adam", "hig")} | {("well", o): _paths(well, o) for o in ("adam", "gn")}
+    values = {f"{o}_y2_left": median(y2_gap_left(y, t) for y, t in paths[("ill", o)]) for o in ("adam", "hig")}
+    # Adam's aim from GN's initial phase's end on, the same stretch of training; each seed its own.
+    for o in ("adam", "gn"):
+        starts = [initial_phase_end(y, t) for y, t in paths[("well", "gn")]]
+        values[f"{o}_aim"] = median(aim_at_target(y, t, s) for (y, t), s in zip(paths[("well", o)], starts))
+    values["seeds_read"] = min(len(p) for p in paths.values())
+    return values
 
 
 # -- oscillators (figures 2b, 2c, 5, 6) -----------------------------------------------------
@@ -344,6 +405,7 @@ def adam_best(datas):
         "({osc_hig_run_updates})",
         {"GN above the paper's level": lambda v: v["gn"] > 1e-5, "fewer updates": below("gn_updates", "osc_hig_run_updates")},
     ),
+    reads=("fig2b:best optimizer=gn",),  # GN's searched seed: settled (its "partly" compares with Adam)
 )
 def gn_level(datas):
     """Oscillators: GN's best stable run reaches ~1e-6. Rule: GN's best stable run (best seed of the search) ends in
@@ -376,7 +438,7 @@ def draws_probe(table) -> dict:
     over (data draw, seed) pairs, each for the updates of the authors' documented hour on the paper's GPU at
     its b. HIG at b=128 (osc-3): the range over pairs of the paper's metric (the mean over the 4,096 test
     samples), of the per-sample median, of the mean over 32,768 fresh samples, and the share of the mean
-    the worst samples carry. Per optimizer and b (osc-5, osc-8): the median over pairs of the mean test
+    the worst samples carry. Per optimizer and b (osc-5): the median over pairs of the mean test
     loss, and how many pairs diverged."""
     done = table[table["status"] == "completed"]
     head = done[(done["optimizer"] == "hig") & (done["batch_size"] == 128)]
@@ -390,6 +452,8 @@ def draws_probe(table) -> dict:
         "worst": WORST_SAMPLES,
         "mean_min": float(head["mean"].min()),
         "mean_max": float(head["mean"].max()),
+        "mean_median": float(head["mean"].median()),
+        "gap": float(head["mean"].median()) / PAPER["paper_osc_hig_level"],
         "median_min": float(head["median"].min()),
         "median_max": float(head["median"].max()),
         "fresh_min": float(head["fresh_mean"].min()),
@@ -423,35 +487,25 @@ WORST_SAMPLES = 10  # scripts/probe_oscillator_draws.py's WORST
     "HIG ~1e-7",
     min_seconds=OSC_HIG_RUN,
     cause=Cause(
-        "seeds",
-        "one data draw, one initialisation and one batch order per run here, and the paper's level is the mean over one "
-        "finite test draw: in the committed authors' probe our HIG follows the authors' code per update (after "
-        "{probe_first_updates} updates {probe_same_first:e} against their {probe_authors_first:e}), and after the updates "
-        "the paper's GPU makes in the oscillators' documented run ({probe_hour_updates}) it ends at {probe_same_hour:e} "
-        "from the authors' data and initial weights, {probe_reshuffled_hour:e} with the batches reshuffled and "
-        "{probe_ours_hour:e} from our draw and initialisation, at training losses alike ({probe_ours_hour_train:e} against "
-        "{probe_same_hour_train:e}): the spread of one draw and seed, not a missing setting; here HIG {hig:e} after "
-        "{hig_updates} updates, the lowest run {lowest_name} at {lowest:e} ({seeds} seed each). Over {probe_pairs} "
-        "(data draw, seed) pairs ({probe_draws} draws, {probe_seeds} seeds; the draws probe) after the same "
-        "{probe_updates} updates, the paper's metric, the mean over the {probe_samples} test samples, spans "
-        "{probe_mean_min:e} to {probe_mean_max:e}; the per-sample median {probe_median_min:e} to {probe_median_max:e}; "
-        "the mean over {probe_fresh_samples} fresh samples {probe_fresh_min:e} to {probe_fresh_max:e}. The mean sits at "
-        "least {probe_decades:.1f} decades above the median in every run, and the {probe_worst} worst test samples carry "
-        "{probe_share_min}-{probe_share_max}% of it: the typical sample ends below the paper's level and every mean above "
-        "it, a larger draw's higher still (it holds more of the rare hard samples): where a mean lands is decided by the few "
-        "hardest samples a draw happens to hold",
+        "disagreement",
+        "the level: here HIG ends at {hig:e} after {hig_updates} updates (one seed); over {probe_pairs} (data draw, seed) "
+        "pairs ({probe_draws} draws, {probe_seeds} seeds; the draws probe) after the {probe_updates} updates the paper's "
+        "GPU makes in the oscillators' documented run, the paper's metric (the mean over {probe_samples} test samples) "
+        "has a median of {probe_mean_median:e} and spans {probe_mean_min:e} to {probe_mean_max:e}: more seeds reproduce "
+        "this level, about {probe_gap:.0f}x the paper's {paper_osc_hig_level:e}, not the paper's, a systematic gap rather "
+        "than a seed's; the mean over {probe_fresh_samples} fresh samples lies higher still ({probe_fresh_min:e} to "
+        "{probe_fresh_max:e}). Its cause is the draw and initialisation: in the committed authors' probe our HIG follows "
+        "the authors' code per update ({probe_same_first:e} against their {probe_authors_first:e} after "
+        "{probe_first_updates} updates) and, from the authors' data draw and initial weights, ends at {probe_same_hour:e} "
+        "after {probe_hour_updates} updates ({probe_reshuffled_hour:e} with the batches reshuffled), against "
+        "{probe_ours_hour:e} from ours at training losses alike ({probe_ours_hour_train:e} against "
+        "{probe_same_hour_train:e}): the paper's level is that of the authors' draw, below every draw of ours",
         {
+            "more seeds reproduce the gap": lambda v: v["probe_gap"] >= 3 and v["probe_pairs"] >= 3,
+            "HIG here within the spread of draws and seeds": lambda v: v["probe_mean_min"] <= v["hig"] <= v["probe_mean_max"],
             "ours follows the authors' code per update": lambda v: 0.5 < v["probe_same_first"] / v["probe_authors_first"] < 2,
-            "the authors' draw near the paper's level": lambda v: v["probe_same_hour"] < 3e-7,
+            "the authors' draw below every draw of ours": lambda v: v["probe_same_hour"] < v["probe_mean_min"],
             "training losses alike": lambda v: v["probe_ours_hour_train"] < 2 * v["probe_same_hour_train"],
-            "HIG here within the spread of draws and seeds": lambda v: v["hig"] <= v["probe_mean_max"],
-            "one seed": lambda v: v["seeds"] < 3,
-            "at least 3 pairs": lambda v: v["probe_pairs"] >= 3,
-            "the median below the paper's level, every mean above it": lambda v: (
-                v["probe_median_max"] < 1e-7 < v["probe_mean_min"]
-            ),
-            "the fresh draw's mean higher": lambda v: v["probe_fresh_min"] > v["probe_mean_min"],
-            "a few samples carry the mean": lambda v: v["probe_share_max"] > 50 and v["probe_decades"] >= 1,
         },
         probe=lambda: {
             **probe_values("oscillator_authors_summary.csv", authors_probe)(),
@@ -460,10 +514,16 @@ WORST_SAMPLES = 10  # scripts/probe_oscillator_draws.py's WORST
     ),
 )
 def osc_hig_best(datas):
-    """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6] and the lowest of the seven
-    and of re-tuned Adam (partly: one of the two)"""
+    """Oscillators: HIG gives the best result, ~1e-7. Rule: HIG's final loss in [1e-8, 1e-6], and the lowest of the seven
+    and of re-tuned Adam compared like with like: each optimizer's run at a fixed seed, as HIG's; GN's seed-searched run
+    (the best of its search) stands in for GN only where its typical seed does not diverge, since most searched seeds
+    diverging makes GN's typical run a diverged one (partly: one of the two)"""
     d, f = datas["fig2b"], _finals(datas["fig2b"])
     require("hig" in f, what="fig2b HIG")
+    search = d.runs("best/search")
+    gn_typical_diverges = bool(search) and 2 * sum(r.status == "diverged" for r in search) > len(search)
+    if gn_typical_diverges:
+        f["gn"] = math.inf  # the typical GN run: diverged (its searched seed is the best of the search, not typical)
     ft, tlabel = tuned_adam(d)
     if ft < float("inf"):
         f["adam (re-tuned)"] = ft
@@ -472,11 +532,15 @@ def osc_hig_best(datas):
     adv = f"HIG's advantage: {f['adam'] / f['hig']:.1f}x over Adam (paper setting)" if "adam" in f else ""
     if ft < float("inf"):
         adv += f", {ft / f['hig']:.1f}x over re-tuned Adam ({tlabel}: {sci(ft)})"
+    elif d.runs("adam_tuned"):
+        adv += "; re-tuned Adam: no curve in the data read (the committed plotted data keep fig. 2b's best runs)"
+    diverged = sum(r.status == "diverged" for r in search)
+    gn_text = f"; GN's typical run diverges ({diverged} of {len(search)} searched seeds)" if gn_typical_diverges else ""
     hig = d.runs("best", optimizer__name="hig")
     values = {"hig": f["hig"], "hig_half": half_way(hig), "hig_updates": min(map(updates_of, hig))}
-    values |= {"lowest": f[best], "lowest_name": OPTIMIZER_NAMES.get(best, best)}
+    values |= {"lowest": f[best], "lowest_name": OPTIMIZER_NAMES.get(best, best), "gn_typical_diverges": gn_typical_diverges}
     return (
-        f"HIG {sci(f['hig'])}; lowest of all: {OPTIMIZER_NAMES.get(best, best)} ({sci(f[best])}); {adv}",
+        f"HIG {sci(f['hig'])}; lowest at a fixed seed: {OPTIMIZER_NAMES.get(best, best)} ({sci(f[best])}){gn_text}; {adv}",
         level and best == "hig",
         level or best == "hig",
         values,
@@ -540,20 +604,6 @@ def gn_crossing(datas):
     return f"GN below Adam (paper setting) from t = {t:.0f} s on", 60 <= t <= 540, True, {"t_cross": t}
 
 
-@claim("osc-8", "fig2c", "too large a b destabilises HIG", min_seconds=120)
-def hig_large_batch(datas):
-    """Oscillators (§2.3, fig. 2c): overly large batches make J ill-conditioned and destabilise HIG. Rule: of fig. 2c's
-    HIG batch sizes, the largest does not end lowest, and a smaller one ends at least 2x lower (partly: some smaller b
-    ends lower)"""
-    d = datas["fig2c"]
-    fin = {b: final(rs) for b in FIG2C_BATCHES["hig"] if (rs := d.runs("hig", batch_size=b))}
-    require(len(fin) >= 2, what="fig2c HIG over b")
-    largest, best_b = max(fin), min(fin, key=fin.get)
-    measured = "HIG final over b: " + ", ".join(f"b={b} {sci(v)}" for b, v in fin.items())
-    ratio = fin[largest] / fin[best_b]
-    return measured, ratio >= 2, best_b != largest, {"ratio": ratio, "margin": ratio / 2}
-
-
 # osc-5: the paper compares batch sizes at equal time on its GPU, where an update's cost grows less with b than here.
 LEVEL = 2.0  # a ratio of final losses within this is a level one seed and test draw can move (osc-3's authors' probe)
 
@@ -563,47 +613,35 @@ def paper_cost_ratio(b_lo: int, b_hi: int) -> float:
     return PAPER_COSTS[("oscillator", "hig", b_hi)][1] / PAPER_COSTS[("oscillator", "hig", b_lo)][1]
 
 
-DRAWS = (
-    "over {probe_hig_large_pairs} (data draw, seed) pairs, each for the updates of the paper's hour at its b (the draws "
-    "probe: the paper's cost ratio between batch sizes), HIG's mean test loss, median over pairs, is {probe_hig_small:e} "
-    "at b={probe_b_small}, {probe_hig_mid:e} at b={probe_b_mid} and {probe_hig_large:e} at b={probe_b_large}; GN "
-    "diverged at b={probe_b_small} in {probe_gn_small_diverged} of {probe_gn_small_pairs} pairs and at "
-    "b={probe_b_large} in {probe_gn_large_diverged} of {probe_gn_large_pairs}, so its levels in the figure are those of the "
-    "seed that survived a seed search, not a median over draws: "
-)
-DRAWS_FACTS = {
-    "3 pairs or more per setting": lambda v: min(v[f"probe_{k}_pairs"] for k in ("hig_small", "hig_large", "gn_large")) >= 3,
-    "GN diverges in most pairs at both b": lambda v: all(
-        2 * v[f"probe_gn_{k}_diverged"] > v[f"probe_gn_{k}_pairs"] for k in ("small", "large")
-    ),
-}
-
-
 @claim(
     "osc-5",
     "fig2c",
     "Adam ~b-independent; HIG/GN better at larger b",
     min_seconds=120,
     cause=Cause(
-        "disagreement",
-        DRAWS + "HIG's largest batch is not the lowest beyond the factor {probe_level:g} a draw and seed move, so more "
-        "seeds do not bring the paper's ordering for HIG",
+        "hardware",
+        "the cost ratio between batch sizes: in the same training time HIG made {hig_lo_updates} updates at b={b_lo} and "
+        "{hig_hi_updates} at b={b_hi} here, where the paper's GPU makes {paper_ratio:.2f} times as many at b={b_lo} (its "
+        "update times); read at the paper's ratio, the same runs show the paper's ordering: HIG {hig_lo_paper:e} at "
+        "b={b_lo} against {hig_hi:e} at b={b_hi}, GN {gn_lo_paper:e} against {gn_hi:e}. Over {probe_hig_large_pairs} "
+        "(data draw, seed) pairs at the paper's update counts (the draws probe) HIG's mean test loss falls with b "
+        "({probe_hig_small:e}, {probe_hig_mid:e}, {probe_hig_large:e} at b={probe_b_small}, {probe_b_mid}, "
+        "{probe_b_large}), but on {probe_fresh_samples} fresh samples the ordering shrinks to {probe_hig_small_fresh:e} "
+        "against {probe_hig_large_fresh:e}, within the factor {probe_level:g} a draw moves; GN diverged in "
+        "{probe_gn_large_diverged} of {probe_gn_large_pairs} pairs at b={probe_b_large}, so its levels are the searched "
+        "seed's",
         {
-            **DRAWS_FACTS,
-            "HIG's largest b not lower beyond the level": lambda v: v["probe_hig_large"] > v["probe_hig_small"] / LEVEL,
+            "this CPU's update ratio far from the paper's": lambda v: (
+                v["hig_lo_updates"] / v["hig_hi_updates"] > 2 * v["paper_ratio"]
+            ),
+            "the paper's ordering at the paper's ratio": lambda v: (
+                v["hig_lo_paper"] > v["hig_hi"] and v["gn_lo_paper"] > v["gn_hi"]
+            ),
+            "the fresh-sample ordering within a draw's factor": lambda v: (
+                v["probe_hig_small_fresh"] / v["probe_hig_large_fresh"] < LEVEL
+            ),
         },
         probe=probe_values("oscillator_draws.csv", draws_probe),
-        otherwise=Cause(
-            "seeds",
-            DRAWS + "over draws and seeds HIG's larger batch ends lower, as the paper says; the figure's one seed per b "
-            "(HIG b={b_lo}->{b_hi}: {hig_lo:e}->{hig_hi:e}) cannot show it",
-            {
-                **DRAWS_FACTS,
-                "HIG's largest b lower beyond the level": lambda v: v["probe_hig_large"] <= v["probe_hig_small"] / LEVEL,
-                "one seed": lambda v: v["seeds"] < 3,
-            },
-            probe=probe_values("oscillator_draws.csv", draws_probe),
-        ),
     ),
 )
 def batch_sizes(datas):
@@ -730,6 +768,68 @@ def _largest_oscillates_most(wobble: list) -> bool:
     return bool(np.isfinite(wobble).any() and wobble[-1] >= np.nanmax(wobble))  # a plain bool: values are JSON
 
 
+@claim(
+    "osc-9",
+    "fig2b",
+    "the GD family stagnates early",
+    min_seconds=OSC_ADAM_RUN,
+    cause=Cause(
+        "budget",
+        "the closest of the family to HIG is {closest} at {closest_ratio:.0f}x HIG's final, and {falling} of {family} "
+        "are still falling over the second half of their {budget:g} s (a fitted fall beyond twice its noise), where the "
+        "paper's run is an hour of its GPU's updates",
+        {"all still falling": lambda v: v["falling"] == v["family"], "short of the contrast": lambda v: v["closest_ratio"] < 100},
+    ),
+)
+def gd_family_stagnates(datas):
+    """Oscillators (§3.1): the state-of-the-art optimizers (the gradient-descent family) stagnate early, orders of magnitude
+    above HIG and GN. Rule: each of SGD, Adagrad, Adadelta, RMSprop and Adam (table 2's settings) ends at least 100x
+    above HIG's final loss, the paper's contrast (Adam's 1e-4 against HIG's 1e-7) (partly: at least 10x)"""
+    d, f = datas["fig2b"], _finals(datas["fig2b"])
+    require("hig" in f and all(o in f for o in GD_FAMILY), what="fig2b HIG and the GD family")
+    ratios = {o: f[o] / f["hig"] for o in GD_FAMILY}
+    closest = min(ratios, key=ratios.get)
+    trends = [last_half_trend(r) for o in GD_FAMILY for r in d.runs("best", optimizer__name=o)]
+    measured = "final over HIG's: " + ", ".join(f"{OPTIMIZER_NAMES[o]} {v:.0f}x" for o, v in ratios.items())
+    values = {"closest": OPTIMIZER_NAMES[closest], "closest_ratio": ratios[closest], "family": len(GD_FAMILY)}
+    values |= {"falling": sum(falling(*t) for t in trends), "margin": ratios[closest] / 100}
+    return measured, ratios[closest] >= 100, ratios[closest] >= 10, values
+
+
+@claim(
+    "osc-10",
+    "fig2b fig5 fig6",
+    "table 2: each the best of its search",
+    min_seconds=12,
+    cause=Cause(
+        "seeds",
+        "{misses} of {family} miss: {missed}; the largest miss is {worst_ratio:.2f}x, within the factor {level:g} a data "
+        "draw and seed move (osc-5), on one seed per setting",
+        {"the misses within a draw's factor": lambda v: v["worst_ratio"] < v["level"], "one seed": lambda v: v["seeds"] < 3},
+    ),
+)
+def table2_best(datas):
+    """Oscillators (table 2, appendix B.2): each optimizer's setting in table 2 is the best run of its hyperparameter
+    search. Rule: at table 2's batch size, table 2's η ends lowest of figs. 5-6's η grid for each of the five
+    gradient-descent optimizers (partly: for most of them)"""
+    table2 = {r.cfg("optimizer.name"): r for r in datas["fig2b"].runs("best")}
+    misses, ratios, text = [], [], []
+    for fid, opts in GD_GRIDS.items():
+        for o in opts:
+            require(o in table2, what=f"fig2b {o}")
+            lr, b = table2[o].cfg("optimizer.lr"), table2[o].cfg("batch_size")
+            grid = {r.cfg("optimizer.lr"): final([r]) for r in datas[fid].runs(o) if r.cfg("batch_size") == b}
+            require(lr in grid, what=f"{fid} {o} η={num(lr)} b={b}")
+            best_lr = min(grid, key=grid.get)
+            text.append(f"{OPTIMIZER_NAMES[o]} b={b}: table 2 η={num(lr)}, best η={num(best_lr)}")
+            if best_lr != lr:
+                misses.append(f"{OPTIMIZER_NAMES[o]} (η={num(lr)} ends {grid[lr] / grid[best_lr]:.2f}x above η={num(best_lr)})")
+                ratios.append(grid[lr] / grid[best_lr])
+    values = {"misses": len(misses), "family": len(text), "missed": "; ".join(misses) or "none"}
+    values |= {"worst_ratio": max(ratios, default=1.0), "level": LEVEL}
+    return "; ".join(text), not misses, 2 * len(misses) < len(text), values
+
+
 # -- Poisson (figures 3b, 3c, 7) ------------------------------------------------------------
 POISSON_ADAM_LR = 1e-4  # figure 3c's Adam: pre-training and continued
 AUTHORS_SETUP = "_authors"  # suffix of the sweeps of the authors' setup, beside ours in figures 3b, 3c and 7
@@ -770,28 +870,30 @@ def per_update_trend(run) -> dict:
     }
 
 
-def poisson_gpu_update_s(table) -> dict:
-    """HIG's seconds per update at the paper's b=64 in the benchmark run on a GPU (gpu/paper_tables.csv)."""
-    rows = table[(table["problem"] == "poisson") & (table["optimizer"] == "hig") & (table["batch_size"] == 64)]
-    rows = rows[rows["jacobian"] == "structured"]
-    return {"update_s": float(rows["update_s"].iloc[0])} if len(rows) else {}
-
-
-POISSON_GPU = probe_values("gpu/paper_tables.csv", poisson_gpu_update_s)
-RUN_LENGTH_TEXT = (
+RUN_LENGTH_HEAD = (
     "the run length, which the paper does not give for Poisson (the oscillators' and the dipole's come from the authors' "
     "scripts; their Poisson script runs until stopped): at the paper's b={hig_b} HIG made {hig_updates} updates and fell "
     "{hig_decades:.1f} decades, still falling {hig_per_doubling:.2f} decades per doubling of updates over its last half "
-    "({hig_per_doubling_before:.2f} over the quarter before; should the rate slow, what follows is a lower bound); at that "
-    "rate "
-    "{target_decades} decades take about {hig_updates_needed:.0f} updates, {gpu_hours_needed:.1f} h at {gpu_update_s:.3g} "
-    "s per update on a GPU (the benchmark's) and {cpu_hours_needed:.0f} h at this CPU's {hig_update_s:.1f} s"
+    "({hig_per_doubling_before:.2f} over the quarter before); at that rate {target_decades} decades take about "
+    "{hig_updates_needed:.0f} updates, {paper_hours_needed:.1f} h at the paper's {paper_poisson_hig_update_s:g} s per "
+    "update (its table) and {cpu_hours_needed:.0f} h at this CPU's {hig_update_s:.1f} s"
 )
 RUN_LENGTH_FACTS = AT_PAPERS_BATCH | {
     "HIG short of the paper's decades": lambda v: v["hig_decades"] < 2.5,
     "HIG still falling per update": lambda v: v["hig_per_doubling"] > 0,
     "the trend reaching them beyond the updates made": lambda v: v["hig_updates"] < v["hig_updates_needed"] < math.inf,
 }
+POISSON_RUN_LENGTH = Cause(
+    "unspecified",
+    RUN_LENGTH_HEAD + "; the fall per doubling is slowing, so these are lower bounds: optimistic",
+    RUN_LENGTH_FACTS | {"slowing": lambda v: v["hig_per_doubling"] < v["hig_per_doubling_before"]},
+    otherwise=Cause(
+        "unspecified",
+        RUN_LENGTH_HEAD + "; the fall per doubling is not slowing over the last half (should it slow later, these are "
+        "lower bounds)",
+        RUN_LENGTH_FACTS | {"not slowing": lambda v: v["hig_per_doubling"] >= v["hig_per_doubling_before"]},
+    ),
+)
 
 
 @claim(
@@ -803,7 +905,7 @@ RUN_LENGTH_FACTS = AT_PAPERS_BATCH | {
         "HIG ran at b={hig_b} (the paper: {paper_poisson_b}) and made {hig_updates} updates to {hig_decades:.1f} decades: "
         "a smaller batch than the paper's (the long preset runs HIG at the paper's)",
         {"a smaller batch than the paper's": lambda v: v["hig_b"] < v["paper_poisson_b"]},
-        otherwise=Cause("unspecified", RUN_LENGTH_TEXT, RUN_LENGTH_FACTS),
+        otherwise=POISSON_RUN_LENGTH,
     ),
 )
 def both_decrease(datas, setup=""):
@@ -821,9 +923,8 @@ def both_decrease(datas, setup=""):
     values["hig_update_s"] = end_time(best_hig) / max(updates_of(best_hig), 1)
     values |= {f"hig_{k}" if k != "target_decades" else k: v for k, v in per_update_trend(best_hig).items()}
     if "hig_per_doubling" in values:
-        gpu = POISSON_GPU().get("probe_update_s", math.nan)  # the benchmark's GPU run (committed probe)
         need = values["hig_updates_needed"]
-        values |= {"gpu_update_s": gpu, "gpu_hours_needed": need * gpu / 3600}
+        values["paper_hours_needed"] = need * PAPER["paper_poisson_hig_update_s"] / 3600  # the paper's GPU's time
         values["cpu_hours_needed"] = need * values["hig_update_s"] / 3600
         measured += (
             f"; HIG still falling {values['hig_per_doubling']:.2f} decades per doubling of its {n} updates (last half), "
@@ -1048,19 +1149,24 @@ def log_time_slope(run, start: float = 0.5) -> float:
 
 
 # Slopes on a log-time axis need a run long enough for a last half (the paper gives no Poisson run length).
-@claim("poi-5", "fig3b", "smallest-η Adam best; HIG steeper on log time", min_seconds=600)
+@claim("poi-5", "fig3b", "smallest-η Adam ahead per time; HIG steeper on log time", min_seconds=600)
 def adam_lr_and_slope(datas):
-    """Poisson (fig. 3b): the smallest-η Adam run is the best Adam per unit time, and on a log-time axis HIG's slope
-    stays steeper. Rule: the smallest-η Adam run ends lowest of the Adam grid, and the best HIG run's log-log slope
-    over the last half is steeper than the best Adam run's (partly: one of the two)"""
+    """Poisson (fig. 3b): in absolute convergence per time the Adam curve with the smallest η shows advantages over HIG,
+    but on a log-time axis HIG's slope stays steeper than Adam's. Rule: the smallest-η Adam run ends below the best HIG
+    run at the same training time, and that HIG run's log-log slope over the last half is steeper than the smallest-η
+    Adam run's (partly: one of the two)"""
     adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
     require(adam, hig, what="fig3b")
-    small = min(adam, key=lambda r: r.cfg("optimizer.lr"))
-    best_adam, best_hig = min(adam, key=lambda r: final([r])), min(hig, key=lambda r: final([r]))
-    sa, sh = log_time_slope(best_adam), log_time_slope(best_hig)
-    measured = f"best Adam: {best_adam.label()}; log-time slope over the last half: HIG {sh:.2f}, Adam {sa:.2f}"
-    values = {"adam_slope": sa, "hig_slope": sh}
-    return measured, small is best_adam and sh < sa, small is best_adam or sh < sa, values
+    small, best_hig = min(adam, key=lambda r: r.cfg("optimizer.lr")), min(hig, key=lambda r: final([r]))
+    t = min(end_time(small), end_time(best_hig))
+    la, lh = loss_at(small, t), loss_at(best_hig, t)
+    sa, sh = log_time_slope(small), log_time_slope(best_hig)
+    measured = (
+        f"at {t:.0f} s: Adam η={num(small.cfg('optimizer.lr'))} {sci(la)}, best HIG (η={num(best_hig.cfg('optimizer.lr'))}) "
+        f"{sci(lh)}; log-time slope over the last half: HIG {sh:.2f}, Adam {sa:.2f}"
+    )
+    values = {"adam_slope": sa, "hig_slope": sh, "adam_at": la, "hig_at": lh}
+    return measured, la < lh and sh < sa, la < lh or sh < sa, values
 
 
 @claim("poi-6", "fig3b", "larger-η Adam runs quickly slow down", min_seconds=600)
@@ -1079,6 +1185,23 @@ def adam_slows(datas):
     return measured, all(flatter) and all(above), all(flatter), {"runs": len(adam)}
 
 
+@claim("poi-7", "fig3b", "neither has fully converged", min_seconds=600)
+def not_converged(datas):
+    """Poisson (fig. 3b, §3.2): on a log-time axis both methods have not fully converged. Rule: the smallest-η Adam run
+    and the best HIG run are both still falling over the last half of their run (a least-squares fall in log10 loss
+    beyond twice its standard error) (partly: one of them)"""
+    adam, hig = datas["fig3b"].runs("adam"), datas["fig3b"].runs("hig")
+    require(adam, hig, what="fig3b")
+    small, best_hig = min(adam, key=lambda r: r.cfg("optimizer.lr")), min(hig, key=lambda r: final([r]))
+    (ca, na), (ch, nh) = last_half_trend(small), last_half_trend(best_hig)
+    measured = (
+        f"last half: Adam η={num(small.cfg('optimizer.lr'))} {ca:+.2f} decades (noise {na:.2f}), HIG "
+        f"η={num(best_hig.cfg('optimizer.lr'))} {ch:+.2f} decades (noise {nh:.2f})"
+    )
+    values = {"adam_change": ca, "adam_noise": na, "hig_change": ch, "hig_noise": nh}
+    return measured, falling(ca, na) and falling(ch, nh), falling(ca, na) or falling(ch, nh), values
+
+
 def on_authors_setup(c: Claim, cause: Cause | None = None) -> Claim:
     """Claim ``c`` judged on the authors' script's setup (PhiFlow noise potentials, network [64, 128, 64], b=64): the
     same rule on the sweeps ``<sweep>_authors``, with a cause of its own (stated from their runs)."""
@@ -1093,6 +1216,7 @@ def on_authors_setup(c: Claim, cause: Cause | None = None) -> Claim:
     return dataclasses.replace(c, id=f"{c.id}a", statement=statement, measure=measure, cause=cause)
 
 
+AUTHORS_DATA = "on the authors' data and network, "
 # The causes on the authors' setup: nothing of ours differs from their script there (data, network, batch).
 AUTHORS_CAUSES = {
     "poi-2": Cause(
@@ -1102,7 +1226,13 @@ AUTHORS_CAUSES = {
         probe=GPU_DATA,
         otherwise=DEEP_START,
     ),
-    "poi-1": Cause("unspecified", "on the authors' data and network, " + RUN_LENGTH_TEXT, RUN_LENGTH_FACTS),
+    "poi-1": dataclasses.replace(
+        POISSON_RUN_LENGTH,
+        text="on the authors' data and network, " + POISSON_RUN_LENGTH.text,
+        otherwise=dataclasses.replace(
+            POISSON_RUN_LENGTH.otherwise, text="on the authors' data and network, " + POISSON_RUN_LENGTH.otherwise.text
+        ),
+    ),
 }
 
 
@@ -1184,6 +1314,19 @@ def plateau(datas):
     values["hig_plateau_updates"] = median(plateau_seconds(r, x="step") for r in hig)
     values["adam_update_ms"] = 1e3 * median(end_time(r) / max(updates_of(r), 1) for r in adam)
     return values
+
+
+@claim("dip-10", "fig4b", "the 0.5 plateau most pronounced at η=1e-4", min_seconds=60)
+def plateau_by_lr(datas):
+    """Dipole (§3.3, fig. 4b): Adam's plateau at 0.5 is most pronounced for η=1e-4 of its η grid. Rule: the η=1e-4 Adam run
+    spends the most training time with the test loss in [0.4, 0.6] of fig. 4b's Adam runs, and more than any other
+    (partly: at least as much as any other)"""
+    adam = datas["fig4b"].runs("adam")
+    require(len(adam) >= 2 and any(r.cfg("optimizer.lr") == 1e-4 for r in adam), what="fig4b Adam η=1e-4 and others")
+    band = {r.cfg("optimizer.lr"): plateau_seconds(r) for r in adam}
+    others = max(v for lr, v in band.items() if lr != 1e-4)
+    measured = "seconds with the test loss in [0.4, 0.6]: " + ", ".join(f"η={num(lr)} {v:.1f}" for lr, v in sorted(band.items()))
+    return measured, band[1e-4] > others, band[1e-4] >= others, {"plateau_1e-4": band[1e-4], "others": others}
 
 
 @claim(
@@ -1360,36 +1503,64 @@ def cnn(datas):
     return measured + vs_paper + seeds, fh <= 0.5 * fa, fh < fa, values
 
 
+def time_to_reach(run, level: float) -> float:
+    """Training seconds from which on the run stays at or below ``level`` (its first such evaluation;
+    inf if it ends above it)."""
+    t, y = run.curves["wall_time"].to_numpy(dtype=float), _loss_of(run)
+    above = np.flatnonzero(~(y <= level))
+    if len(above) and above[-1] == len(y) - 1:
+        return math.inf
+    return float(t[above[-1] + 1]) if len(above) else float(t[0])
+
+
+def _loss_of(run) -> np.ndarray:
+    return run.curves["test_loss"].to_numpy(dtype=float)
+
+
+CNN_LEVELS = (0.5, 1.0)  # Adam's levels at these shares of its run: past the first tenth, where B.4 puts start-up plateaus
+
+
+def cnn3_rule(v: dict) -> tuple:
+    """cnn-3's rule on its measured values: the time each takes to the same loss, at Adam's levels past the start-up."""
+    sooner = [v[f"hig_t_{n}"] < v[f"adam_t_{n}"] for n in ("50", "100")]
+    measured = "; ".join(
+        f"to Adam's level at {n}% of its run ({sci(v[f'level_{n}'])}): HIG {v[f'hig_t_{n}']:.0f} s, Adam {v[f'adam_t_{n}']:.0f} s"
+        for n in ("50", "100")
+    )
+    measured += f" (medians of {v['seeds_read']} seeds; at a tenth of the run HIG {sci(v['hig_10'])}, Adam {sci(v['adam_10'])})"
+    return measured, all(sooner), any(sooner)
+
+
 @claim(
     "cnn-3",
     "fig10 fig11",
     "HIG faster than Adam (CNN)",
     min_seconds=60,
+    decide=cnn3_rule,
     cause=Cause(
         "disagreement",
-        "HIG is behind at a tenth of the budget ({hig_10:e} against Adam's {adam_10:e}) and ahead by half of it "
-        "({hig_50:e} against {adam_50:e}; medians of {seeds} seeds): it reaches a lower level sooner, but does not start "
-        "faster on this training clock",
-        {"HIG behind at first": lambda v: v["hig_10"] > v["adam_10"], "ahead by half": below("hig_50", "adam_50")},
+        "HIG takes {hig_t_50:.0f} s to the level Adam reaches at half of its run ({adam_t_50:.0f} s) and {hig_t_100:.0f} s "
+        "to Adam's final level ({adam_t_100:.0f} s; medians of {seeds_read} seeds): not faster to those levels",
+        {"HIG not sooner at one level": lambda v: v["hig_t_50"] >= v["adam_t_50"] or v["hig_t_100"] >= v["adam_t_100"]},
     ),
 )
 def cnn_faster(datas):
-    """Dipole CNN (appendix B.4): HIG minimises the loss faster than Adam. Rule: the best HIG CNN setting is below the
-    best Adam setting at a tenth of the budget and at half of it (medians over seeds; partly: at one of the two)"""
+    """Dipole CNN (appendix B.4): HIG minimises the loss faster than Adam. Rule: the best HIG CNN setting reaches the
+    levels the best Adam setting reaches at half of its run and at its end sooner than Adam does (time to stay at or
+    below each level; medians over seeds; partly: one of the two). The first tenth is left out: B.4 puts HIG's early
+    plateaus down to the framework's start-up, not the method"""
     adam, hig = by_setting(datas["fig10"].runs("adam")), by_setting(datas["fig11"].runs("hig"))
     require(adam, hig, what="fig10/fig11")
     a, h = min(adam, key=final), min(hig, key=final)
     t_end = min(end_time(r) for r in a + h)
-    values = {}
-    for f, name in ((0.1, "10"), (0.5, "50")):
-        values[f"hig_{name}"] = median(loss_at(r, f * t_end) for r in h)
-        values[f"adam_{name}"] = median(loss_at(r, f * t_end) for r in a)
-    below_at = [values[f"hig_{n}"] < values[f"adam_{n}"] for n in ("10", "50")]
-    measured = "; ".join(
-        f"at {n}% of the budget HIG {sci(values[f'hig_{n}'])} vs Adam {sci(values[f'adam_{n}'])}" for n in ("10", "50")
-    )
-    values["margin"] = min(values[f"adam_{n}"] / values[f"hig_{n}"] for n in ("10", "50"))
-    return measured + f" ({h[0].label()}; {a[0].label()})", all(below_at), any(below_at), values
+    values = {"hig_10": median(loss_at(r, 0.1 * t_end) for r in h), "adam_10": median(loss_at(r, 0.1 * t_end) for r in a)}
+    for share in CNN_LEVELS:
+        n = f"{share * 100:.0f}"
+        level = median(loss_at(r, share * t_end) for r in a)
+        values[f"level_{n}"] = level
+        values[f"adam_t_{n}"] = median(time_to_reach(r, level) for r in a)
+        values[f"hig_t_{n}"] = median(time_to_reach(r, level) for r in h)
+    return values | {"seeds_read": min(len(a), len(h))}
 
 
 @claim(
@@ -1494,6 +1665,49 @@ def cnn_tau(datas):
     return f"{len(runs) - len(bad)}/{len(runs)} stable" + (f"; unstable: {', '.join(bad)}" if bad else ""), not bad, len(bad) <= 1
 
 
+CNN_BEST = {
+    "hig": {"optimizer.lr": 0.7, "batch_size": 16, "optimizer.tau": 1e-4},
+    "adam": {"optimizer.lr": 2e-4, "batch_size": 256},
+}
+
+
+@claim(
+    "cnn-4",
+    "fig10 fig11",
+    "best: HIG η=0.7 b=16 τ=1e-4; Adam η=2e-4 b=256",
+    min_seconds=60,
+    cause=Cause(
+        "hardware",
+        "the best HIG setting here is τ={hig_best_tau:e} ({hig_best:e} against {hig_paper:e} at the paper's τ; medians of "
+        "{seeds} seeds): with our double-precision inversion a τ below the paper's trains as well as or better than the "
+        "paper's, as dip-8's precision probe shows for the MLP (no precision probe of the CNN is committed)",
+        {"a smaller τ best here": lambda v: v["hig_best_tau"] < CNN_BEST["hig"]["optimizer.tau"]},
+    ),
+)
+def cnn_best_settings(datas):
+    """Dipole CNN (appendix B.4): the best HIG run has η=0.7, b=16, τ=1e-4 and the best Adam run η=2e-4, b=256. Rule: of
+    fig. 11's HIG settings and fig. 10's Adam settings, those are the lowest by their median over seeds (partly: one of
+    the two)"""
+    found = {}
+    for opt, fid in (("hig", "fig11"), ("adam", "fig10")):
+        groups = by_setting(datas[fid].runs(opt))
+        require(groups, what=f"{fid} {opt}")
+        best_group = min(groups, key=final)
+        paper = [g for g in groups if all(g[0].cfg(k) == v for k, v in CNN_BEST[opt].items())]
+        found[opt] = (best_group, paper[0] if paper else None)
+    values = {"hig_best": final(found["hig"][0]), "adam_best": final(found["adam"][0])}
+    values |= {"hig_best_tau": found["hig"][0][0].cfg("optimizer.tau")}
+    is_paper = {o: found[o][1] is found[o][0] for o in found}
+    for o in found:
+        values[f"{o}_paper"] = final(found[o][1]) if found[o][1] else math.nan
+    measured = "; ".join(
+        f"best {OPTIMIZER_NAMES[o]}: {found[o][0][0].label()} {sci(values[f'{o}_best'])} (the paper's setting "
+        f"{sci(values[f'{o}_paper'])})"
+        for o in found
+    )
+    return measured, all(is_paper.values()), any(is_paper.values()), values
+
+
 # -- ablations (figures 12, 13) -------------------------------------------------------------
 # Paper appendix C. fig12: sweeps "beta" and "kappa"; fig13: "hig" and "gn" over τ.
 
@@ -1550,18 +1764,21 @@ def gn_small_tau_by_time(datas) -> dict:
     "GN diverges, HIG stable",
     min_seconds=120,
     cause=Cause(
-        "budget",
-        "GN's best stable seed ({gn_seed}) has not diverged at small τ after {n} updates, a small share of the "
-        "{osc_hig_run_updates} the paper's GPU makes in the oscillators' documented run, and at τ={tau_small:e} it is "
-        "still falling steeply ({gn_small_half:e} at {gn_small_half_s:.0f} s, {gn_small_end:e} at the end): a divergence "
-        "later in the run is not ruled out; {search_diverged} of {search_seeds} seeds already diverge at the paper's τ "
-        "(the seed search); with the inversion in the authors' single precision it has not diverged either within "
-        "{probe_updates} updates (precision probe: τ={probe_tau_small:e} {probe_small_float32_status} at "
-        "{probe_small_float32:e}); HIG ends lower ({hig_best:e} against GN's {gn_best:e})",
+        "seeds",
+        "GN is tried at small τ with one seed only ({gn_seed}), the one of the {search_seeds} searched that survived the "
+        "paper's τ ({search_diverged} diverged there): GN's instability shows over seeds at the paper's τ already, and the "
+        "one stable seed does not diverge at small τ within {n} updates; its trend points away from the paper's "
+        "divergence, not towards it: at equal updates its smallest τ ({tau_small:e}, {gn_small:e}) is its best "
+        "({gn_best:e}), still falling ({gn_small_half:e} at {gn_small_half_s:.0f} s, {gn_small_end:e} at the end), and with "
+        "the inversion in the authors' single precision it does not diverge either within {probe_updates} updates "
+        "(precision probe: τ={probe_tau_small:e} {probe_small_float32_status} at {probe_small_float32:e}); so not a "
+        "budget, and whether other seeds diverge at small τ cannot be told from one seed that survives the paper's τ; HIG "
+        "ends lower ({hig_best:e})",
         {
             "GN completes at the smallest τ": lambda v: v["gn_small_status"] == "completed",
-            "a tenth of the documented run or less": lambda v: 10 * v["n"] <= v["osc_hig_run_updates"],
-            "GN still falling steeply": lambda v: v["gn_small_end"] < v["gn_small_half"] / 3,
+            "its smallest τ its best": lambda v: v["gn_small"] <= v["gn_best"] * (1 + 1e-9),
+            "most searched seeds diverge at the paper's τ": lambda v: 2 * v["search_diverged"] > v["search_seeds"],
+            "single precision completes too": lambda v: v["probe_small_float32_status"] == "completed",
             "HIG below GN": below("hig_best", "gn_best"),
         },
         probe=probe_values("precision.csv", precision_probe("oscillator")),
@@ -1600,36 +1817,60 @@ def ablation_tau(datas):
     return measured, gn_part and hig_part, gn_part or hig_part, values
 
 
+SEVERAL_DECADES = 100  # "several orders of magnitude" (appendix C): two at least
+
+
+def abl5_rule(v: dict) -> tuple:
+    """abl-5's rule on its measured values: "stagnate early" as the paper's contrast, not a flat curve of its own."""
+    stuck = [k for k in v["positive"].split(",") if k]
+    above = all(v[f"above_{k}"] >= SEVERAL_DECADES for k in stuck)
+    completed = not v["diverged_positive"]
+    strong = v["gain"] >= SEVERAL_DECADES
+    measured = "; ".join(f"κ={k} ends {v[f'above_{k}']:.0f}x above the best κ<0" for k in stuck)
+    if v["diverged_positive"]:
+        measured += f"; κ={v['diverged_positive']} diverged"
+    measured += f"; κ=0 {sci(v['zero'])}, best κ<0 {sci(v['best_negative'])} ({v['gain']:.0f}x)"
+    if v.get("diverged_negative"):
+        measured += f"; κ={v['diverged_negative']} (Gauss-Newton's end of the family) diverged"
+    return measured, above and completed and strong, above and strong
+
+
 @claim(
     "abl-5",
     "fig12",
     "κ>0 stagnates early; κ<0 a strong improvement",
     min_seconds=120,
+    decide=abl5_rule,
     cause=Cause(
-        "budget",
-        "a negative κ improves on zero {gain:.0f}x, but κ={falling_kappa} is still falling over the second half of its "
-        "{budget:g} s ({falling_change:+.2f} decades, noise {falling_noise:.2f}): it has not stagnated yet, where the "
-        "authors' oscillator scripts run an hour",
-        {"the κ>0 run still falling": lambda v: falling(v["falling_change"], v["falling_noise"])},
+        "disagreement",
+        "κ={diverged_positive} diverges here (one seed; the largest κ is gradient descent's end of the family), where "
+        "the paper's curve for it stagnates; the completed positive-κ runs end orders of magnitude above the best "
+        "negative κ ({gain:.0f}x from zero κ), as the paper says",
+        {
+            "a positive-κ run diverged": lambda v: bool(v["diverged_positive"]),
+            "negative κ far below": lambda v: v["gain"] >= SEVERAL_DECADES,
+        },
     ),
 )
 def kappa_stagnates(datas):
-    """Ablation (fig. 12b): κ > 0 stagnates early, and the improvement is strong as soon as κ becomes negative. Rule:
-    every completed κ>0 run no longer falling over its last half (its fitted fall within twice its noise), and the best
-    κ<0 run >= 10x below κ=0 (partly: one of the two)"""
+    """Ablation (fig. 12b): for κ > 0 the curves stagnate early, while for negative κ the final losses are several orders
+    of magnitude better, a strong improvement as soon as κ becomes negative. Rule: every κ>0 run completes and ends at
+    least 100x ("several orders of magnitude") above the best κ<0 run, and that run is at least 100x below κ=0; a
+    diverged run counts, as diverged (partly: the completed κ>0 runs and κ=0 are that far above)"""
     runs = datas["fig12"].runs("kappa")
     fin = {r.cfg("optimizer.kappa"): final([r]) for r in runs}
-    pos = [r for r in runs if r.cfg("optimizer.kappa") > 0 and r.status == "completed"]
     neg = [v for k, v in fin.items() if k < 0 and math.isfinite(v)]
-    require(pos, neg, 0.0 in fin, what="fig12b (κ>0 completed, κ=0, κ<0)")
-    trends = {r.cfg("optimizer.kappa"): last_half_trend(r) for r in pos}
-    stalled = all(not falling(*t) for t in trends.values())
-    gain = fin[0.0] / min(neg)
-    measured = "; ".join(f"κ={num(k)} last half {c:+.2f} decades (noise {n:.2f})" for k, (c, n) in trends.items())
-    measured += f"; κ=0 {sci(fin[0.0])}, best κ<0 {sci(min(neg))} ({gain:.0f}x)"
-    k_most, (change, noise) = min(trends.items(), key=lambda kv: kv[1][0] + 2 * kv[1][1])  # the most clearly falling
-    values = {"gain": gain, "falling_kappa": num(k_most), "falling_change": change, "falling_noise": noise}
-    return measured, stalled and gain >= 10, stalled or gain >= 10, values
+    pos = [r for r in runs if r.cfg("optimizer.kappa") > 0]
+    require(pos, neg, 0.0 in fin, what="fig12b (κ>0, κ=0, κ<0)")
+    best_negative = min(neg)
+    done = [r for r in pos if r.status == "completed"]
+    values = {f"above_{num(r.cfg('optimizer.kappa'))}": final([r]) / best_negative for r in done}
+    values |= {"positive": ",".join(num(r.cfg("optimizer.kappa")) for r in done), "zero": fin[0.0]}
+    values |= {"diverged_positive": ",".join(num(r.cfg("optimizer.kappa")) for r in pos if r.status != "completed")}
+    values["diverged_negative"] = ",".join(
+        num(r.cfg("optimizer.kappa")) for r in runs if r.cfg("optimizer.kappa") < 0 and r.status != "completed"
+    )
+    return values | {"best_negative": best_negative, "gain": fin[0.0] / best_negative}
 
 
 @claim("abl-4", "fig12", "κ=-0.5 best", min_seconds=120)
@@ -1673,6 +1914,10 @@ def on_a_gpu(table) -> dict:
             out[f"ratio_{tid}"] = float(t[problem, "hig", hig_b, "structured"] / t[problem, "adam", adam_b, "-"])
     for route in ("structured", "naive"):
         out[f"memory_ratio_{route}"] = float(m["oscillator", "hig", 128, route] / m["oscillator", "hig", 32, route])
+        out |= {f"mb_{route}_{b}": float(m["oscillator", "hig", b, route]) for b in (32, 64, 128)}
+    jac = rows["jacobian_s"]
+    out["jacobian_growth"] = float(jac["oscillator", "hig", 128, "structured"] / jac["oscillator", "hig", 32, "structured"])
+    out["dipole_adam_growth"] = float(t["dipole", "adam", 1024, "-"] / t["dipole", "adam", 256, "-"])
     return out
 
 
@@ -1755,21 +2000,37 @@ ratio(
 )
 
 
+def growth_exponent(mb: tuple[float, float, float]) -> float:
+    """The exponent p of memory = c + a b^p through three memories at b, 2b, 4b, net of the constant c
+    (whatever does not grow with b: the network, the framework): 2^p = (m4 - m2) / (m2 - m1). NaN
+    when the memory does not grow at both steps (an allocator's rounding, not a growth)."""
+    first, second = mb[1] - mb[0], mb[2] - mb[1]
+    return math.log2(second / first) if first > 0 and second > 0 else math.nan
+
+
 def memory_rule(v: dict) -> tuple:
-    """spd-2's rule on its measured values: the structured route is appendix B.2's block-diagonal one."""
-    growth, gpu = v["ratio"], ON_A_GPU()
+    """spd-2's rule on its measured values: the growth exponent net of the constant, per route and device."""
+    paper = growth_exponent(PAPER_MEMORY_MB)
+    routes = [(f"{dev} {route}", v.get(f"p_{dev}_{route}")) for dev in ("cpu", "gpu") for route in ("naive", "structured")]
+    shown = ", ".join(f"{name} {p:.2f}" if p is not None and math.isfinite(p) else f"{name} -" for name, p in routes)
     measured = (
-        f"structured (block-diagonal) route: HIG memory b={v['b_hi']} / b={v['b_lo']} = {growth:.1f}x here (host memory"
-        + (f", {v['mb_lo']:.0f} -> {v['mb_hi']:.0f} MB" if "mb_lo" in v else "")
-        + f"); linear in b would be {v['b_hi'] / v['b_lo']:.0f}x, the paper's {PAPER['paper_osc_memory_ratio']:.1f}x"
+        f"memory growth exponent over b=32/64/128 net of the constant: paper {paper:.2f}; here {shown} (CPU host memory "
+        f"{v['cpu_naive_mb']} MB naive, {v['cpu_structured_mb']} MB structured, whose steps of a few MB beside a ~70 MB "
+        "constant make its exponent noise; the structured routes are shown, not judged; '-': no growth at one step)"
     )
-    if "probe_memory_ratio_naive" in gpu:
-        measured += (
-            f"; on a GPU (GPU memory) structured {gpu['probe_memory_ratio_structured']:.1f}x, higbench's naive route, "
-            f"which forms the whole J, {gpu['probe_memory_ratio_naive']:.1f}x"
-        )
-    linear = v["b_hi"] / v["b_lo"]
-    return measured, growth <= linear, growth <= 2 * linear
+    naive = [p for name, p in routes if "naive" in name and p is not None and math.isfinite(p)]
+    require(naive, what="table3 HIG naive-route memory at b=32/64/128")
+    quadratic = all(p >= 1.5 for p in naive)
+    return measured, quadratic, any(p >= 1.5 for p in naive), {"paper_exponent": paper, "naive_max": max(naive)}
+
+
+def route_cell(df, b: int, route: str) -> float:
+    """HIG's memory at b on one Jacobian route of table 3's measured frame (``cell`` reads the structured one)."""
+    m = df[(df["Optimizer"].astype(str) == "HIG") & (df["Batch size"].astype(int) == b) & (df["Jacobian path"] == route)]
+    return float(m["Memory (MB)"].iloc[0]) if len(m) else math.nan
+
+
+PAPER_MEMORY_MB = tuple(PAPER_COSTS[("oscillator", "hig", b)][0] for b in (32, 64, 128))
 
 
 @claim(
@@ -1779,22 +2040,31 @@ def memory_rule(v: dict) -> tuple:
     decide=memory_rule,
     cause=Cause(
         "hardware",
-        "the structured route's memory grows {ratio:.1f}x from b={b_lo} to b={b_hi}, more than linearly in b: the "
-        "implementation's, as the paper's quadratic growth is its dense Jacobian's",
-        {"more than linear": lambda v: v["ratio"] > v["b_hi"] / v["b_lo"]},
+        "net of the memory that does not grow with b, the paper's memory grows as b to the {paper_exponent:.2f}; higbench's "
+        "route that forms the whole Jacobian, as the paper's does, grows as b to at most {naive_max:.2f}: its memory is the "
+        "Jacobian's, linear in b, not a quadratic term's, so the quadratic growth is the paper's implementation's and "
+        "cannot be reproduced with this one (nor a linear route told from it)",
+        {"the naive route grows less than quadratically": lambda v: v["naive_max"] < 1.5},
     ),
 )
 def memory(datas):
     """Oscillators (table 3, appendix B.2): HIG's memory grows about quadratically with the batch size in the paper's
-    implementation, which forms the whole Jacobian; a block-diagonal one would scale linearly. Rule: higbench's
-    structured route is that block-diagonal alternative: its memory grows at most linearly from b=32 to 128 (<= 4x)
-    (partly: <= 8x); the quadratic growth is the paper's implementation's (higbench's naive route forms the whole J
-    too, and is shown beside)"""
-    df = timing_frame(datas["table3"])
-    m32, m128 = cell(df, "HIG", 32, "Memory (MB)"), cell(df, "HIG", 128, "Memory (MB)")
-    if math.isnan(m32) or math.isnan(m128) or m32 <= 0:
-        raise Missing("table3 HIG b=32/128 memory")
-    return {"ratio": m128 / m32, "b_lo": 32, "b_hi": 128, "mb_lo": m32, "mb_hi": m128}
+    implementation, which forms the whole Jacobian; a block-diagonal one would scale linearly. Rule: net of the memory
+    that does not grow with b, the growth exponent p (memory = c + a b^p through b=32, 64, 128) of higbench's route that
+    forms the whole Jacobian, as the paper's, is at least 1.5 (about quadratic) on this CPU and on the committed GPU
+    run (partly: on one); the total-memory ratio cannot tell (a constant of ~70 MB hides the growth)"""
+    df = _table(datas, "table3")
+    values = {}
+    for route in ("naive", "structured"):
+        mb = tuple(route_cell(df, b, route) for b in (32, 64, 128))
+        if any(math.isnan(m) for m in mb):
+            raise Missing(f"table3 HIG {route} memory at b=32/64/128")
+        values[f"p_cpu_{route}"], values[f"cpu_{route}_mb"] = growth_exponent(mb), "/".join(f"{m:.0f}" for m in mb)
+    gpu = ON_A_GPU()
+    for route in ("naive", "structured"):
+        if f"probe_mb_{route}_32" in gpu:
+            values[f"p_gpu_{route}"] = growth_exponent(tuple(gpu[f"probe_mb_{route}_{b}"] for b in (32, 64, 128)))
+    return values
 
 
 ratio(
@@ -1836,6 +2106,61 @@ def adam_time_flat(datas):
     return measured, growth <= 2, growth <= 4, {"growth": growth}
 
 
+@claim(
+    "spd-7",
+    "table3",
+    "0.07 s at b=32, 64, 128",
+    cause=Cause(
+        "hardware",
+        "on this CPU HIG's Jacobian time grows {cpu:.1f}x from b={b_lo} to b={b_hi}, on the committed GPU run "
+        "{probe_jacobian_growth:.2f}x: a CPU's Jacobian cost grows with the work, a GPU's parallel one hardly at these sizes",
+        {"the CPU's grows, the GPU's not": lambda v: v["cpu"] > 2 >= v["probe_jacobian_growth"]},
+        probe=ON_A_GPU,
+    ),
+)
+def jacobian_time_flat(datas):
+    """Oscillators (table 3): HIG's Jacobian time does not depend on the batch size (0.07 s at b=32, 64, 128). Rule: HIG's
+    Jacobian time at b=128 within 2x of b=32's on this CPU and on the committed GPU run (partly: on one)"""
+    df = _table(datas, "table3")
+    t32, t128 = cell(df, "HIG", 32, "Jacobian duration (s)"), cell(df, "HIG", 128, "Jacobian duration (s)")
+    if math.isnan(t32) or math.isnan(t128) or t32 <= 0:
+        raise Missing("table3 HIG b=32/128 Jacobian times")
+    gpu = ON_A_GPU().get("probe_jacobian_growth")
+    cpu = t128 / t32
+    measured = f"HIG Jacobian b=128 / b=32: CPU {cpu:.2f}x" + (f", GPU {gpu:.2f}x" if gpu else ", GPU not run")
+    values = {"cpu": cpu, "b_lo": 32, "b_hi": 128}
+    return measured, cpu <= 2 and (gpu is None or gpu <= 2), cpu <= 2 or (gpu is not None and gpu <= 2), values
+
+
+@claim(
+    "spd-8",
+    "table5",
+    "Adam 0.40 / 0.50 / 1.33 s at b=256/512/1024",
+    cause=Cause(
+        "hardware",
+        "Adam's update time grows {cpu:.1f}x from b={b_lo} to b={b_hi} on this CPU, as the paper's ({paper:.1f}x), and "
+        "{probe_dipole_adam_growth:.2f}x on the committed GPU run: the growth is the device's, a GPU's cost hardly grows at "
+        "these sizes",
+        {"the CPU's grows, the GPU's not": lambda v: v["cpu"] >= 2 > v["probe_dipole_adam_growth"]},
+        probe=ON_A_GPU,
+    ),
+)
+def dipole_adam_time_grows(datas):
+    """Dipole (table 5): Adam's update time grows with the batch size (0.40, 0.50, 1.33 s at b=256, 512, 1024). Rule:
+    Adam's update time at b=1024 at least 2x b=256's on this CPU and on the committed GPU run (partly: on one)"""
+    df = _table(datas, "table5")
+    t = {b: cell(df, "Adam", b, "Update duration (s)") for b in (256, 1024)}
+    if any(math.isnan(v) or v <= 0 for v in t.values()):
+        raise Missing("table5 Adam b=256/1024")
+    cpu, gpu = t[1024] / t[256], ON_A_GPU().get("probe_dipole_adam_growth")
+    paper = PAPER_TIMINGS["table5"][("adam", 1024)][1] / PAPER_TIMINGS["table5"][("adam", 256)][1]
+    measured = (
+        f"Adam b=1024 / b=256: CPU {cpu:.2f}x" + (f", GPU {gpu:.2f}x" if gpu else ", GPU not run") + f"; paper {paper:.2f}x"
+    )
+    values = {"cpu": cpu, "paper": paper, "b_lo": 256, "b_hi": 1024}
+    return measured, cpu >= 2 and (gpu is None or gpu >= 2), cpu >= 2 or (gpu is not None and gpu >= 2), values
+
+
 @claim("spd-5", "table3", "O(|θ| b² |y|²); Jacobian ~ a backward pass")
 def cost_scaling(datas):
     """Oscillators (§2.3, tables 3-5): a HIG update costs O(|θ| b² |y|²) and its Jacobian about a backward pass. Rule:
@@ -1853,6 +2178,38 @@ def cost_scaling(datas):
 
 # The paper's statements no row tests, and why (the report lists them under its table).
 UNTESTED: list[tuple[str, str]] = [
+    (
+        "§2: Gauss-Newton's update steps in y-space are invariant under arbitrary rescaling of the parameters θ",
+        "a property of the update's mathematics, not of a training run; it is checked on a 2-D quadratic whose second "
+        "parameter is rescaled (scripts/scale_invariance.py, docs/scale-invariance.md, tests/test_scale_invariance.py): "
+        "GN's step in y does not change with the scale, gradient descent's does",
+    ),
+    (
+        "§2.3: a HIG update's cost grows quadratically with the dimension of y",
+        "each problem here has one fixed |y|, and the committed benchmark varies the batch size only; no run or benchmark "
+        "varies |y| at a fixed network and batch",
+    ),
+    (
+        "§2.3: memory can be traded against time by parallelising the Jacobian computation only partly",
+        "higbench computes the Jacobian in one vectorised pass per route (structured or whole J); it has no partly "
+        "parallel route whose memory and time could be set against each other",
+    ),
+    (
+        "Appendix B.4: Adam's small-η plateaus (fig. 8) differ in nature from HIG's start-up plateaus (fig. 9)",
+        "a statement on the plateaus' causes (the framework's start-up against the optimizer), not a measurable "
+        "quantity; what runs can show is counted elsewhere: dip-1 counts Adam's plateau in updates against HIG's, and "
+        "cnn-3 leaves HIG's start-up out of its comparison",
+    ),
+    (
+        "Appendix C: too little truncation (small τ) over-saturates neurons",
+        "neuron statistics are logged for the toy problem only; the ablation's oscillator runs (fig. 13) do not log them",
+    ),
+    (
+        "§2.3: overly large batch sizes make the Jacobian ill-conditioned and destabilise HIG's learning",
+        "the paper names no batch size it calls overly large, and over the b=32-128 it runs (fig. 2c) it says HIG "
+        "improves with b (osc-5); no HIG run here goes beyond b=128, so no run of fig. 2c can show the statement (the "
+        "row that tested it read fig. 2c and demanded the opposite ordering to osc-5)",
+    ),
     (
         "Table 1: the HIG update as a steepest descent in its combined metric",
         "a property of the update's mathematics, not of a run: no measurement of a run could contradict it",
@@ -1891,7 +2248,8 @@ UNTESTED: list[tuple[str, str]] = [
     (
         "Tables 3-5's other entries: HIG's memory per b on a GPU, table 4's memory and Jacobian time, table 5's b=8 against b=16",
         "GPU memory is only measured in the committed GPU benchmark run (spd-2 quotes it); this CPU's resident memory is "
-        "not the paper's quantity; the b=8/16 and Jacobian-time comparisons are not added yet",
+        "not the paper's quantity; the b=8/16 and table 4's Jacobian-time comparisons are not added yet (table 3's "
+        "Jacobian time over b is spd-7, table 5's Adam time over b spd-8)",
     ),
 ]
 

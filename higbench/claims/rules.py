@@ -138,6 +138,9 @@ class Claim:
     # decide(values) -> (measured, full, partly[, derived values]): the rule apart from the measurement, which then
     # returns its values only; a committed row is judged again by it from its stored values (``redecide``).
     decide: Callable[[dict], tuple] | None = None
+    # The runs the rule reads, where not every run its figures list ("<figure>:<sweep>[ key=value ...]", ``reads_run``):
+    # the seed gate counts seeds over these.
+    reads: tuple[str, ...] = ()
 
     def check(self, datas: dict) -> tuple[str, str, str, dict]:
         """(measured, verdict, why, values)."""
@@ -179,15 +182,17 @@ def redecide(c: Claim, row: dict) -> dict:
 CLAIMS: list[Claim] = []
 
 
-def claim(cid: str, figures: str, paper: str, *, min_seconds: float | None = None, cause=None, decide=None):
+def claim(cid: str, figures: str, paper: str, *, min_seconds: float | None = None, cause=None, decide=None, reads=()):
     """Declare the decorated measurement a claim: its docstring is the statement, then "Rule: " the
-    rule; ``min_seconds``, ``cause`` and ``decide`` as in ``Claim``. How many seeds a claim needs
-    is not declared: one rule for all (``seed_gate``)."""
+    rule; ``min_seconds``, ``cause``, ``decide`` and ``reads`` as in ``Claim``. How many seeds a
+    claim needs is not declared: one rule for all (``seed_gate``)."""
 
     def declare(measure: Callable) -> Callable:
         statement, _, rule = " ".join(measure.__doc__.split()).partition(" Rule: ")
         figs = tuple(figures.split())
-        CLAIMS.append(Claim(cid, figs, statement.removesuffix("."), paper, rule, measure, min_seconds, cause, decide))
+        CLAIMS.append(
+            Claim(cid, figs, statement.removesuffix("."), paper, rule, measure, min_seconds, cause, decide, tuple(reads))
+        )
         return measure
 
     return declare
@@ -363,7 +368,7 @@ def judge(c: Claim, datas: dict, preset: str, smoke: bool = False) -> dict:
         "why": why,
         "values": {k: v for k, v in values.items() if isinstance(v, (int, float, str, bool))},
         "seconds": claim_budget(datas),
-        "seeds": claim_seeds(datas),
+        "seeds": seeds_read(claim_seeds(datas, c.reads), values),
         "missing": sum(len(d.missing()) for d in datas.values()),
         "smoke": smoke and any(d.jobs for d in datas.values()),
         "preset": preset,
@@ -398,7 +403,7 @@ def finish(c: Claim, row: dict) -> dict:
 
     The budget gate turns a verdict into "n/a (budget)" only where the rule has neither passed
     nor failed decisively (values["decisive"]): a passing rule is evidence at any budget. The seed
-    gate (``seed_gate``) is one rule for every claim read from runs.
+    gate (``seed_gate``) is one rule for every claim read from runs, for a `reproduced` and a `not`.
     """
     row = redecide(c, row)
     verdict, why, seconds, seeds = row["rule_verdict"], row["why"], row.get("seconds"), row.get("seeds", 99)
@@ -409,11 +414,14 @@ def finish(c: Claim, row: dict) -> dict:
     if short and verdict not in (NA, REPRODUCED) and not row.get("values", {}).get("decisive"):
         why = f"budget {seconds:g} s per run is below the {c.min_seconds:g} s this claim needs to show; {would(verdict)}{why}"
         verdict, cause = "n/a (budget)", ("budget", f"needs >= {c.min_seconds:g} s per run")
-    elif verdict == REPRODUCED and (gate := seed_gate(row)) is not None:
-        capped, note = gate
-        why = f"{note} {why}"
-        if capped:
-            verdict, cause = PARTLY, ("seeds", f"{seeds} seed(s) per setting at this preset")
+    elif verdict in (REPRODUCED, NOT) and (note := seed_gate(row)) is not None:
+        why = f"{note} {would(verdict)}{why}"
+        cause = ("seeds", f"{seeds} seed(s) per setting at this preset; on them the rule says '{verdict}'")
+        if c.cause is not None:  # what the claim's own cause says of that seed: for a `not`, and where it holds
+            category, text = c.cause.render(evidence(row, c.cause))
+            if verdict == NOT or category != "open":
+                cause = (cause[0], f"{cause[1]}, and the claim's cause for it ({category}) reads: {text}")
+        verdict = PARTLY
     if row.get("smoke") and verdict != NA:
         why = f"smoke preset ({row['preset']}: a few updates per run) checks code paths only, no verdict; {would(verdict)}{why}"
         verdict = NA
@@ -469,12 +477,44 @@ def fewest_seeds(runs: Iterable[tuple[tuple, int, bool]]) -> int:
     return min(len(s) for s in groups.values()) if groups else NO_RUNS
 
 
-def claim_seeds(datas: dict) -> int:
-    """The fewest seeds of any setting (sweep and overrides but the seed) behind the claim (its figures' runs)."""
-    return fewest_seeds((setting_of(j), j.seed, bool(j.search)) for j in _main_jobs(datas))
+def _fields(overrides: dict, seed) -> dict[str, str]:
+    """A run's overrides as text, keyed as the command line names them (a config group's choice by the
+    group: ``optimizer``, not ``optimizer.name``), its seed among them."""
+    return {str(k).removesuffix(".name"): str(v) for k, v in overrides.items()} | {"seed": str(seed)}
 
 
-def sidecar_seeds(infos: Iterable[dict]) -> int:
+def reads_run(reads: Iterable[str], figure: str, sweep: str, fields: dict[str, str]) -> bool:
+    """Whether a claim whose rule reads ``reads`` (``Claim.reads``: "<figure>:<sweep>[ key=value ...]";
+    none: every run) reads a run of ``figure``'s ``sweep`` with these override ``fields``. A seed
+    search's runs count with the sweep they search for."""
+    reads = list(reads)
+    if not reads:
+        return True
+    for selector in reads:
+        where, *pairs = selector.split()
+        fid, _, want = where.partition(":")
+        if fid != figure or (want and want != sweep.removesuffix("/search")):
+            continue
+        if all(fields.get(k) == v for k, _, v in (p.partition("=") for p in pairs)):
+            return True
+    return False
+
+
+def claim_seeds(datas: dict, reads: Iterable[str] = ()) -> int:
+    """The fewest seeds of any setting (sweep and overrides but the seed) among the runs the claim's
+    rule reads (``reads``; none: every run of its figures)."""
+    jobs = [j for j in _main_jobs(datas) if reads_run(reads, j.figure, j.sweep, _fields(j.overrides, j.seed))]
+    return fewest_seeds((setting_of(j), j.seed, bool(j.search)) for j in jobs)
+
+
+def seeds_read(counted: int, values: dict) -> int:
+    """The seeds behind a row: those counted over the runs its rule reads, or fewer where its
+    measurement read only some of their seeds (values["seeds_read"]: e.g. a log kept for one seed)."""
+    read = values.get("seeds_read")
+    return min(counted, int(read)) if isinstance(read, (int, float)) and read > 0 else counted
+
+
+def sidecar_seeds(infos: Iterable[dict], reads: Iterable[str] = ()) -> int:
     """``claim_seeds`` from the figures' data files (<id>.json, their "runs"): the seeds behind a
     committed row, computed again from the runs it lists rather than read from the row."""
     entries = [(info["id"], r) for info in infos for r in info.get("runs", [])]
@@ -483,6 +523,10 @@ def sidecar_seeds(infos: Iterable[dict]) -> int:
         keep = sorted(o for o in r["overrides"] if not o.startswith(("seed=", "budget.", "init_from=")))
         return fid, r["sweep"].removesuffix("/search"), tuple(keep)
 
+    def fields(r: dict) -> dict[str, str]:
+        return _fields(dict(o.partition("=")[::2] for o in r["overrides"]), r["seed"])
+
+    entries = [(fid, r) for fid, r in entries if reads_run(reads, fid, r["sweep"], fields(r))]
     searched = {setting(fid, r) for fid, r in entries if r["sweep"].endswith("/search")}
     mains = [(fid, r) for fid, r in entries if not r["sweep"].endswith("/search")]
     return fewest_seeds((setting(fid, r), r["seed"], setting(fid, r) in searched) for fid, r in mains)
@@ -491,39 +535,6 @@ def sidecar_seeds(infos: Iterable[dict]) -> int:
 # -- the seed gate: one rule for every claim read from runs ------------------------------------
 
 REQUIRED_SEEDS = 3  # a median needs three
-MARGIN_OVER_SPREAD = 10  # a margin this many times the largest between-seed spread cannot be flipped by a seed
-
-
-def seed_spread(out_dir: Path) -> dict:
-    """The largest between-seed spread of the final test loss (max / min over the seeds of one
-    setting) among the committed multi-seed settings in ``out_dir`` whose every seed completed and
-    ended below its initial loss, read from the figures' plotted data (<id>.csv, every run's first
-    and last evaluation kept); {} when there is none. What the seed gate's exception is sized by."""
-    found = []
-    for info in sidecars_with_runs(out_dir):
-        path = Path(out_dir) / f"{info['id']}.csv"
-        if not os.path.lexists(path):
-            continue
-        status = {r["path"]: r["status"] for r in info["runs"]}
-        table = read_results_csv(path)
-        if not {"panel", "series", "run", "x", "y", "y_name"} <= set(table.columns):
-            continue  # a table, not a figure's plotted data
-        table = table[table["y_name"] == "test_loss"]
-        for (panel, series), g in table.groupby(["panel", "series"]):
-            ends = g.sort_values("x").groupby("run")["y"].agg(["first", "last"])
-            if len(ends) < 2 or any(status.get(run) != "completed" for run in ends.index):
-                continue
-            if (ends["last"] < ends["first"]).all() and np.isfinite(ends["last"]).all() and ends["last"].min() > 0:
-                found.append((float(ends["last"].max() / ends["last"].min()), f"{info['id']} {panel}, {series}"))
-    if not found:
-        return {}
-    spread, where = max(found)
-    return {"seed_spread": spread, "seed_spread_at": where, "seed_spread_settings": len(found)}
-
-
-def sidecars_with_runs(out_dir: Path) -> list[dict]:
-    """The figures' data files (<id>.json) in ``out_dir`` that list runs."""
-    return [info for info in read_sidecars(out_dir).values() if info.get("runs")]
 
 
 # -- reading a results directory -------------------------------------------------------------
@@ -580,25 +591,18 @@ def read_sidecars(out_dir: Path) -> dict[str, dict]:
     return figs
 
 
-def seed_gate(row: dict) -> tuple[bool, str] | None:
-    """The one seed rule, for every claim read from runs: a `reproduced` resting on fewer than
-    ``REQUIRED_SEEDS`` seeds per setting is at most `partly`, unless its margin (values["margin"]:
-    the factor by which the rule's tightest comparison would have to move to flip) exceeds
-    ``MARGIN_OVER_SPREAD`` times the largest between-seed spread measured in the committed
-    multi-seed runs (row["seed_spread"], ``seed_spread``). (capped, note); None: the gate does not
-    apply (enough seeds, or no runs behind the row)."""
+def seed_gate(row: dict) -> str | None:
+    """The one seed rule, for every claim read from runs, both ways: a verdict resting on fewer than
+    ``REQUIRED_SEEDS`` seeds per setting of the runs its rule reads (row["seeds"]) is neither
+    `reproduced` nor `not`: one seed can flip either, so it reads `partly`. No margin excuses it: a
+    between-seed spread measured on other settings (another problem, or a setting the paper calls
+    unstable) says nothing about how far this comparison's seeds move. The gate's note; None: it
+    does not apply (enough seeds, or no runs behind the row)."""
     seeds = row.get("seeds", NO_RUNS)
     if not isinstance(seeds, int) or seeds >= REQUIRED_SEEDS or seeds >= NO_RUNS:
         return None
-    margin, spread = row.get("values", {}).get("margin"), row.get("seed_spread")
-    head = f"{seeds} seed(s) per setting (a comparison needs the median of {REQUIRED_SEEDS})"
-    if spread is None:
-        return True, f"{head}, no between-seed spread measured to size an exception: at most partly."
-    size = f"{MARGIN_OVER_SPREAD}x the largest between-seed spread ({spread:.3g}x, {row.get('seed_spread_at', '?')})"
-    if isinstance(margin, (int, float)) and margin > MARGIN_OVER_SPREAD * spread:
-        return False, f"{head}, but its margin {margin:.3g}x exceeds {size}: no seed can flip it."
-    shown = f"its margin {margin:.3g}x is within" if isinstance(margin, (int, float)) else "no margin recorded against"
-    return True, f"{head}; {shown} {size}: at most partly."
+    need = f"a verdict needs the median of {REQUIRED_SEEDS}"
+    return f"{seeds} seed(s) per setting of the runs the rule reads ({need}), so partly whichever way the rule goes;"
 
 
 # -- the numbers a cause may quote besides its runs', and budgets sized by them ---------------
@@ -611,6 +615,7 @@ def _update_s(problem: str, optimizer: str, b: int) -> float:
 
 PAPER = {
     "paper_toy_plateau": 0.2,  # figure 1b
+    "paper_osc_hig_level": 1e-7,  # section 3.1: HIG's final loss on the oscillators
     "paper_osc_hig_update_s": _update_s("oscillator", "hig", 128),
     "paper_osc_adam_update_s": _update_s("oscillator", "adam", 512),
     "paper_poisson_hig_update_s": _update_s("poisson", "hig", 64),
