@@ -189,3 +189,22 @@ def test_shipping_a_problem_is_a_module_and_a_yaml_file(scratch, higbench, tmp_p
     assert f"  {name:<13}fit u so that u squared matches a target\n" in out
     code, _, err = higbench(f"hydra.searchpath=[file://{scratch}]", f"problem={name}", "optimizer=adam", "threads=1")
     assert code == 0, err
+
+
+def test_an_installed_package_ships_its_problem_through_the_entry_point_group(tmp_path, monkeypatch):
+    import importlib.metadata
+
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    name = f"installed{next(_names)}"
+    (tmp_path / f"{name}_pkg.py").write_text(textwrap.dedent(SQUARE))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    entry = importlib.metadata.EntryPoint(name, f"{name}_pkg:Square", base.ENTRY_POINT_GROUP)
+    seen = []
+
+    def entry_points(group):
+        seen.append(group)
+        return [entry] if group == base.ENTRY_POINT_GROUP else []
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    problems = base.registry()
+    assert seen == [base.ENTRY_POINT_GROUP] and problems[name].__module__ == f"{name}_pkg" and problems[name].name == name
