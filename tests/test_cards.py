@@ -58,6 +58,12 @@ def test_every_league_optimizer_has_a_search_space():
     assert league_without_search_space() == []
 
 
+def test_the_league_runs_the_optimizers_whose_cards_say_so():
+    from higbench.league import driver
+
+    assert set(driver.DEFAULT_OPTIMIZERS) == set(cards.league_optimizers())
+
+
 def test_every_shipped_optimizer_has_a_card():
     for name, card in cards.optimizer_cards().items():
         assert card.name == name and card.display and is_color_like(card.color) and card.help, card

@@ -63,7 +63,10 @@ def test_the_custom_problem_trains_through_the_cli(heat, tmp_path, optimizer):
         ("problem.alpha=0.7", "problem.alpha=0.7: must be a number in (0, 0.5]"),
         ("problem.points=two", "problem.points=two: Value 'two' of type 'str' could not be converted to Integer"),
         ("problem.hidden=[16,0]", "problem.hidden=[16,0]: each item must be an integer >= 1"),
-        ("problem.gamma=1", "problem.gamma=1: unknown key; valid keys under problem: _target_, alpha, data_seed, hidden,"),
+        (
+            "problem.gamma=1",
+            "problem.gamma=1: unknown key; valid keys under problem: _target_, alpha, data_seed, held_out, hidden,",
+        ),
         ("batch_size=512", "batch_size=512: must not exceed problem.train_size=256"),
     ],
 )

@@ -6,8 +6,8 @@ config rather than code in the runner::
 
     _target_: higbench.optim.split.SplitOptimizer
     parts:
-      matrices: {_target_: torch.optim.Muon, lr: 1.0e-3}   # every 2-D parameter
-      rest: {_target_: torch.optim.AdamW, lr: 1.0e-3}      # all the others
+      hidden_matrices: {_target_: torch.optim.Muon, lr: 1.0e-3}  # 2-D weights but the first and last
+      rest: {_target_: torch.optim.AdamW, lr: 1.0e-3}             # all the others
 
 Each key of ``parts`` is a rule (``RULES``); a parameter goes to the first part, in the
 order written, whose rule takes it, and every parameter must go somewhere. Each part's
@@ -25,12 +25,23 @@ import torch
 
 from higbench.schema import locate
 
-# Which parameters a part takes, by its key; with the shape of a parameter each rule takes
-# (a part that gets no parameter is still built once on such a dummy, so its arguments are checked).
-RULES: dict[str, tuple[Callable[[torch.Tensor], bool], tuple[int, ...]]] = {
-    "matrices": (lambda p: p.ndim == 2, (2, 2)),  # Linear weights
-    "vectors": (lambda p: p.ndim <= 1, (2,)),  # biases, scalars
-    "rest": (lambda p: True, (2,)),  # whatever no earlier part took
+# Which parameters a part takes, by its key: a test of one parameter given the model's 2-D
+# parameters in order; with the shape of a parameter each rule takes (a part that gets no
+# parameter is still built once on such a dummy, so its arguments are checked).
+Rule = Callable[[torch.Tensor, list], bool]
+
+
+def _hidden(p: torch.Tensor, matrices: list) -> bool:
+    """A 2-D weight other than the first (the input layer's) and the last (the output layer's):
+    Muon's authors keep those two on AdamW (Jordan et al. 2024, "Muon: An optimizer for hidden layers")."""
+    return p.ndim == 2 and p is not matrices[0] and p is not matrices[-1]
+
+
+RULES: dict[str, tuple[Rule, tuple[int, ...]]] = {
+    "matrices": (lambda p, m: p.ndim == 2, (2, 2)),  # every Linear weight
+    "hidden_matrices": (_hidden, (2, 2)),  # Linear weights of hidden layers (Muon's)
+    "vectors": (lambda p, m: p.ndim <= 1, (2,)),  # biases, scalars
+    "rest": (lambda p, m: True, (2,)),  # whatever no earlier part took
 }
 
 
@@ -68,9 +79,10 @@ class SplitOptimizer(torch.optim.Optimizer):
             raise ValueError(f"parts.{unknown[0]}: unknown rule; valid rules: {', '.join(RULES)}")
         self.parts: dict[str, torch.optim.Optimizer] = {}
         left = list(params)
+        matrices = [p for p in params if p.ndim == 2]  # in the model's order: input layer first
         for name, spec in parts.items():
             takes, dummy_shape = RULES[name]
-            mine, left = [p for p in left if takes(p)], [p for p in left if not takes(p)]
+            mine, left = [p for p in left if takes(p, matrices)], [p for p in left if not takes(p, matrices)]
             built = build_optimizer(f"parts.{name}", spec, mine or [torch.nn.Parameter(torch.zeros(dummy_shape))])
             if mine:
                 self.parts[name] = built

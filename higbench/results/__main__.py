@@ -123,7 +123,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--league",
         action="store_true",
-        help="the league (scripts/league.py): performance profiles in seconds and updates with the integrated score,"
+        help="the league (higbench-league): performance profiles in seconds and updates with the integrated score,"
         " IQMs with 95%% bootstrap intervals per task, P(HIG improves); tuning-seed runs left out",
     )
     p.add_argument(

@@ -1,45 +1,54 @@
-"""The league: which optimizer for which problem, with tuning counted in, and intervals.
+"""The league: which optimizer for which problem, with tuning counted in, and statistics that
+mean what they say at the number of seeds used.
 
-    space = load_space("adam")                        # conf/search/adam.yaml
-    trials = sobol_trials(space, n=6, seed=0)         # [{"optimizer.lr": 3.1e-3, ...}, ...]
-    iqm(values); bootstrap_ci(strata, statistic)       # rliable's interval estimates
-    probability_of_improvement(x, y)                  # P(X < Y), lower is better
-    integrated_score(ratios, tau_max)                 # AlgoPerf: normalised area under rho
+    space = load_space("adam")                          # conf/search/adam.yaml
+    trial_points("adam", space, n=16, study=0)          # this optimizer's own Sobol stream
+    tuning_seed(study=0)                                # 1000: never a confirmation seed
+    choose_trial(trials, curves, target)                # (best trial, the rule it was chosen by)
+    league_frames(runs, curves, spaces)                 # (scored runs, time to targets, targets)
+    format_league(runs, curves, spaces)                 # the report
+    final_loss_table(scored)                            # per task: medians, seeds, intervals, tests
 
-The protocol (``scripts/league.py`` runs it): every optimizer gets the same number of
-quasi-random trials (scrambled Sobol points in its declared search space, log ranges) on the
-tuning seeds; the best trial by *validation* loss at the budget is its setting; that setting
-then runs on fresh confirmation seeds and on the problem's held-out variants
-(``problem.held_out``), and only those runs are scored, on the *test* loss. The scores follow
-rliable (Agarwal et al. 2021: interquartile mean, stratified bootstrap, probability of
-improvement) and AlgoPerf (Dahl et al. 2023: the integrated performance profile). rliable
-itself is not a dependency: its release pins an old ``arch`` (and seaborn) for a few functions,
-which are written here instead, each tested on hand-made frames with known answers
-(tests/results/test_league.py).
+The protocol (docs/results/league/README.md): every optimizer gets the same number of trials,
+scrambled Sobol points of its declared search space (conf/search/), from a stream of its own
+(``trial_points``); the trial that is best on what is scored (time to the validation target when
+validation curves exist, else the final validation loss) is its setting; that setting runs on
+fresh confirmation seeds and the problem's held-out variants, and only those runs are scored, on
+the test loss. The statistics are in ``higbench.results.stats``: per task the median with every
+seed, an order-statistics interval with its exact coverage, P(X < Y) against the leader (lowest
+median) and an exact one-sided Mann-Whitney test, Holm-corrected over the task's comparisons;
+across tasks rliable's IQM and probability of improvement with stratified-bootstrap intervals.
+The time-to-target score follows AlgoPerf (Dahl et al. 2023); ``algoperf_*`` below.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+import zlib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import yaml
-from scipy import stats
+from scipy import stats as scipy_stats
 
+from higbench.results import stats
 from higbench.results.targets import of_runs, reach_index
 
-CONFIDENCE = 0.95
-BOOTSTRAP_REPS = 2000
-TAU_MAX = 4.0  # AlgoPerf's: a setting more than 4x slower than the fastest scores nothing on that pair
+TAU_MAX = 4.0  # AlgoPerf's: a setting more than 4x slower than the fastest scores nothing on that problem
 VALIDATION_METRIC = "final_val_loss"  # what tuning reads; never a test-loss column (tests check it)
 TEST_METRIC = "final_test_loss"  # read once, for the table
+HIG = "hig"
+ROLES = ("tune", "confirm", "paper", "default")  # league_role of a run, where the driver records it
+SCORED_ROLES = ("confirm", "paper", "default")
+TUNING_SEED_BASE = 1000  # tuning seeds are 1000 + study; confirmation seeds stay below
+MAX_STUDIES = 1000
+TUNING_SEEDS = (TUNING_SEED_BASE,)  # study 0's: the driver before studies; scoring leaves out every seed >= 1000
 
 
-# -- search spaces ---------------------------------------------------------------------------
+# -- search spaces and the trials ------------------------------------------------------------
 
 
 def search_dir() -> Path:
@@ -69,6 +78,19 @@ def load_space(optimizer: str, directory: Path | None = None) -> dict[str, dict]
     return space
 
 
+def all_spaces(directory: Path | None = None) -> dict[str, dict]:
+    """Every shipped search space: optimizer name -> space (conf/search/*.yaml)."""
+    d = directory or search_dir()
+    return {p.stem: load_space(p.stem, d) for p in sorted(d.glob("*.yaml"))}
+
+
+def in_space(space: Mapping[str, Mapping], key: str, value: float) -> bool:
+    """Whether ``value`` of ``key`` lies in the space's range (an integer log key: its powers of
+    two in range, as ``sobol_trials`` rounds)."""
+    s = space[key]
+    return s["low"] * (1 - 1e-9) <= float(value) <= s["high"] * (1 + 1e-9)
+
+
 def sobol_trials(space: Mapping[str, Mapping], n: int, seed: int = 0) -> list[dict[str, float | int]]:
     """``n`` scrambled Sobol points of ``space`` (scipy.stats.qmc), mapped to each key's range
     (log-uniform where ``log``; rounded to the nearest power of two for an ``integer`` log key,
@@ -76,7 +98,7 @@ def sobol_trials(space: Mapping[str, Mapping], n: int, seed: int = 0) -> list[di
     keys = list(space)
     with warnings.catch_warnings():  # a count that is not a power of two loses balance, not validity
         warnings.simplefilter("ignore", UserWarning)
-        points = stats.qmc.Sobol(d=len(keys), scramble=True, seed=seed).random(n)
+        points = scipy_stats.qmc.Sobol(d=len(keys), scramble=True, seed=seed).random(n)
     trials = []
     for point in points:
         trial: dict[str, float | int] = {}
@@ -94,6 +116,26 @@ def sobol_trials(space: Mapping[str, Mapping], n: int, seed: int = 0) -> list[di
     return trials
 
 
+def stream_seed(optimizer: str, study: int) -> int:
+    """The Sobol scrambling seed of one optimizer's study: a stable hash (CRC-32) of both, so
+    two optimizers with same-shaped spaces never share points, and a rerun gets the same ones."""
+    return zlib.crc32(f"{optimizer}/study{int(study)}".encode())
+
+
+def trial_points(optimizer: str, space: Mapping[str, Mapping], n: int, study: int = 0) -> list[dict[str, float | int]]:
+    """The ``n`` trials of ``optimizer`` in ``study``: scrambled Sobol points of ``space`` from the
+    optimizer's own stream (``stream_seed``). More trials keep the first ones."""
+    return sobol_trials(space, n, seed=stream_seed(optimizer, study))
+
+
+def tuning_seed(study: int) -> int:
+    """The training seed of every trial of ``study`` (1000 + study): distinct per study, and never
+    a confirmation seed (those stay below 1000)."""
+    if not (0 <= int(study) < MAX_STUDIES):
+        raise ValueError(f"study={study}: must be in [0, {MAX_STUDIES})")
+    return TUNING_SEED_BASE + int(study)
+
+
 def best_trial(trials: pd.DataFrame, metric: str = VALIDATION_METRIC) -> pd.Series | None:
     """The trial with the lowest median ``metric`` over its tuning seeds (a diverged or unfinished
     run counts as inf); ``trials`` has a ``trial`` column. None when no trial finished.
@@ -103,116 +145,42 @@ def best_trial(trials: pd.DataFrame, metric: str = VALIDATION_METRIC) -> pd.Seri
         raise ValueError(f"metric={metric}: tuning reads the validation loss only")
     if trials.empty:
         return None
-    loss = pd.to_numeric(trials[metric], errors="coerce").where(trials["status"] == "completed")
-    per_trial = loss.fillna(math.inf).groupby(trials["trial"]).median()
+    loss = pd.Series(stats.scored_loss(trials[metric], trials["status"]), index=trials.index)
+    per_trial = loss.groupby(trials["trial"]).median()
     if not np.isfinite(per_trial.to_numpy(dtype=float)).any():
         return None
     best = per_trial.idxmin()
     return trials[trials["trial"] == best].iloc[0]
 
 
-# -- interval estimates (rliable) ------------------------------------------------------------
+def choose_trial(
+    trials: pd.DataFrame, curves: pd.DataFrame | None = None, target: float | None = None
+) -> tuple[pd.Series | None, str]:
+    """(best trial, the rule it was chosen by). Tuning selects on what is scored: with validation
+    curves (``curves`` keyed by ``path`` or ``run`` as ``trials``, with ``val_loss``) and a
+    validation ``target``, the lowest median time to that target over the trial's seeds (not
+    reached: inf; ties: the lower median final validation loss); otherwise the lowest median
+    final validation loss (``best_trial``). The rule is said, so the report can state it."""
+    key = "run" if "run" in trials else "path"
+    if target is None or curves is None or curves.empty or "val_loss" not in curves or key not in curves:
+        return best_trial(trials), "final validation loss (median over tuning seeds)"
+    by_run = dict(tuple(curves.groupby(key, observed=True)))
+    seconds = [
+        reach(by_run[r], target, loss="val_loss")[0] if r in by_run else math.inf
+        for r in trials[key]
+    ]  # fmt: skip
+    loss = stats.scored_loss(trials[VALIDATION_METRIC], trials["status"])
+    times = pd.Series(np.where(trials["status"] == "completed", seconds, math.inf), index=trials.index)
+    per_trial = pd.DataFrame({"time": times.groupby(trials["trial"]).median(),
+                              "loss": pd.Series(loss, index=trials.index).groupby(trials["trial"]).median()})  # fmt: skip
+    rule = f"time to the validation target {target:g} (median over tuning seeds; ties: final validation loss)"
+    if not np.isfinite(per_trial["time"]).any():
+        return best_trial(trials), f"final validation loss (no trial reached the validation target {target:g})"
+    best = per_trial.sort_values(["time", "loss"], kind="stable").index[0]
+    return trials[trials["trial"] == best].iloc[0], rule
 
 
-def iqm(values: Sequence[float]) -> float:
-    """Interquartile mean: the mean of the middle 50% (scipy's trim_mean, 25% cut at each end;
-    rliable's definition). inf counts as a value (a run that never reached a target)."""
-    x = np.asarray(values, dtype=float)
-    x = x[~np.isnan(x)]
-    if not len(x):
-        return math.nan
-    if np.isinf(x).any():  # trim_mean would form inf - inf; trim by hand with the same rule
-        x = np.sort(x)
-        cut = int(0.25 * len(x))
-        kept = x[cut : len(x) - cut]
-        return float(np.mean(kept)) if not np.isinf(kept).any() else float(kept[np.isinf(kept)][0])
-    return float(stats.trim_mean(x, 0.25))
-
-
-def _iqm_rows(matrix: np.ndarray) -> np.ndarray:
-    """``iqm`` of every row at once (the bootstrap's replicates)."""
-    m = np.sort(matrix, axis=1)
-    cut = int(0.25 * m.shape[1])
-    kept = m[:, cut : m.shape[1] - cut]
-    with np.errstate(invalid="ignore"):
-        return kept.mean(axis=1)  # inf stays inf (a run that never reached the target)
-
-
-def bootstrap_ci(
-    strata: Sequence[Sequence[float]],
-    statistic: Callable[[np.ndarray], float],
-    reps: int = BOOTSTRAP_REPS,
-    confidence: float = CONFIDENCE,
-    seed: int = 0,
-) -> tuple[float, float, float]:
-    """(point, low, high): ``statistic`` of all values, and the percentile interval of the
-    stratified bootstrap: each replicate resamples every stratum (a problem) with replacement, in
-    its own size, and pools them (rliable's ``StratifiedBootstrap``)."""
-    groups = [g[~np.isnan(g)] for g in (np.asarray(s, dtype=float) for s in strata)]
-    groups = [g for g in groups if len(g)]
-    if not groups:
-        return math.nan, math.nan, math.nan
-    point = statistic(np.concatenate(groups))
-    rng = np.random.default_rng(seed)
-    # reps x n: each row one replicate, every stratum resampled in its own size
-    matrix = np.concatenate([g[rng.integers(0, len(g), (reps, len(g)))] for g in groups], axis=1)
-    draws = _iqm_rows(matrix) if statistic is iqm else np.apply_along_axis(statistic, 1, matrix)
-    # inverted_cdf: an observed replicate at each end, never inf - inf between two of them
-    lo, hi = np.quantile(draws, [(1 - confidence) / 2, (1 + confidence) / 2], method="inverted_cdf")
-    return float(point), float(lo), float(hi)
-
-
-def probability_of_improvement(x: Sequence[float], y: Sequence[float]) -> float:
-    """P(X < Y) + P(X = Y) / 2 for one run X of ``x`` and one run Y of ``y`` (lower is better:
-    a loss or a time), the Mann-Whitney statistic over their sizes (rliable's, for lower scores)."""
-    a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    if not len(a) or not len(b):
-        return math.nan
-    less = (a[:, None] < b[None, :]).mean()
-    ties = (a[:, None] == b[None, :]).mean()
-    return float(less + 0.5 * ties)
-
-
-def probability_of_improvement_ci(
-    pairs: Sequence[tuple[Sequence[float], Sequence[float]]],
-    reps: int = BOOTSTRAP_REPS,
-    confidence: float = CONFIDENCE,
-    seed: int = 0,
-) -> tuple[float, float, float]:
-    """The mean over tasks of P(X < Y) (one (x, y) pair per task), with the stratified bootstrap's
-    interval: x and y resampled apart within each task."""
-    pairs = [(np.asarray(x, dtype=float), np.asarray(y, dtype=float)) for x, y in pairs if len(x) and len(y)]
-    if not pairs:
-        return math.nan, math.nan, math.nan
-    point = float(np.mean([probability_of_improvement(x, y) for x, y in pairs]))
-    rng = np.random.default_rng(seed)
-    draws = [
-        np.mean(
-            [probability_of_improvement(x[rng.integers(0, len(x), len(x))], y[rng.integers(0, len(y), len(y))]) for x, y in pairs]
-        )
-        for _ in range(reps)
-    ]
-    lo, hi = np.quantile(draws, [(1 - confidence) / 2, (1 + confidence) / 2], method="inverted_cdf")
-    return point, float(lo), float(hi)
-
-
-# -- AlgoPerf's integrated score -------------------------------------------------------------
-
-
-def integrated_score(ratios: Sequence[float], tau_max: float = TAU_MAX) -> float:
-    """The area under rho(tau) from 1 to ``tau_max`` over (tau_max - 1), rho being the fraction of
-    pairs with ratio <= tau: 1 for a setting fastest on every pair, 0 for one never within
-    ``tau_max``. Exact for the step function: a pair of ratio r adds (tau_max - max(r, 1)) /
-    (tau_max - 1) when r <= tau_max. NaN ratios (no setting solved the pair) count as unsolved."""
-    r = np.asarray(ratios, dtype=float)
-    if not len(r):
-        return math.nan
-    r = np.where(np.isnan(r), np.inf, r)
-    area = np.where(r <= tau_max, tau_max - np.maximum(r, 1.0), 0.0)
-    return float(area.sum() / (len(r) * (tau_max - 1.0)))
-
-
-# -- time and updates to a target, per run, from the curves ----------------------------------
+# -- time to a target, per run, from the curves ----------------------------------------------
 
 
 def reach(curves: pd.DataFrame, target: float, loss: str = "test_loss") -> tuple[float, float]:
@@ -224,10 +192,7 @@ def reach(curves: pd.DataFrame, target: float, loss: str = "test_loss") -> tuple
     return float(curves["wall_time"].iloc[i]), float(curves["step"].iloc[i])
 
 
-# -- the league from indexed runs ------------------------------------------------------------
-
-TUNING_SEEDS = (1000,)  # seeds of the tuning trials; never a confirmation seed (scores leave them out)
-HIG = "hig"
+# -- the scored runs -------------------------------------------------------------------------
 
 
 def _override_items(overrides: str) -> list[tuple[str, str]]:
@@ -244,27 +209,67 @@ def task_label(row: pd.Series) -> str:
 
 
 def setting_label(row: pd.Series, spaces: Mapping[str, Mapping]) -> str:
-    """'adam' for a tuned setting (its overrides set keys of its search space), 'adam (paper)' for
-    the shipped defaults (conf/problem_optimizer/: the paper's settings where it has them)."""
+    """'adam' for a tuned setting; 'adam (paper)' and 'adam (default)' for the shipped settings.
+    Where the run carries ``league_role`` the role says which (paper: conf/problem_optimizer/,
+    the paper's; default: the optimizer's own defaults); otherwise a run whose overrides set no
+    key of its search space is '(paper)'."""
     name = str(row["optimizer.name"])
+    role = row.get("league_role")
+    if isinstance(role, str) and role in ("paper", "default"):
+        return f"{name} ({role})"
+    if isinstance(role, str) and role == "confirm":
+        return name
     keys = set(spaces.get(name, {}))
     tuned = any(k in keys for k, _ in _override_items(row.get("overrides")))
     return name if tuned else f"{name} (paper)"
 
 
-def league_runs(runs: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds: Sequence[int] = TUNING_SEEDS) -> pd.DataFrame:
-    """The scored runs: done (completed or diverged), not on a tuning seed, with ``task`` and
-    ``league_setting`` columns."""
+def one_run_per_identity(runs: pd.DataFrame) -> pd.DataFrame:
+    """One run per identity (``config_id``, which includes the seed): two leagues into one root
+    trained some jobs twice, and the copies are not extra seeds. Keeps the first by ``path``/``run``."""
+    if "config_id" not in runs or runs.empty:
+        return runs
+    key = "run" if "run" in runs else "path"
+    ordered = runs.sort_values(key, kind="stable") if key in runs else runs
+    return ordered.drop_duplicates("config_id", keep="first").sort_index()
+
+
+def is_tuning_seed(seed) -> pd.Series:
+    """Whether a seed is a tuning seed (``tuning_seed``: 1000 and above)."""
+    return pd.to_numeric(seed, errors="coerce") >= TUNING_SEED_BASE
+
+
+def league_runs(runs: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds: Sequence[int] | None = None) -> pd.DataFrame:
+    """The scored runs: done (completed or diverged), one per identity, with ``task`` and
+    ``league_setting`` columns. With ``league_role``: roles confirm, paper and default; without
+    it: every run not on a tuning seed (``tuning_seeds``, or every seed from 1000)."""
     from higbench.results.index import DONE_STATUSES
 
-    done = runs[runs["status"].isin(DONE_STATUSES) & ~pd.to_numeric(runs["seed"], errors="coerce").isin(tuning_seeds)]
+    done = runs[runs["status"].isin(DONE_STATUSES)]
+    if "league_role" in done:
+        done = done[done["league_role"].isin(SCORED_ROLES)]
+    else:
+        seeds = pd.to_numeric(done["seed"], errors="coerce")
+        done = done[~(is_tuning_seed(seeds) if tuning_seeds is None else seeds.isin(tuning_seeds))]
+    done = one_run_per_identity(done)
     if done.empty:
         return done.assign(task=pd.Series(dtype=object), league_setting=pd.Series(dtype=object))
     labelled = done.assign(
         task=done.apply(task_label, axis=1), league_setting=done.apply(lambda r: setting_label(r, spaces), axis=1)
     )
     check_one_setting_per_label(labelled)
-    return labelled
+    return split_by_hardware(labelled)
+
+
+def split_by_hardware(runs: pd.DataFrame) -> pd.DataFrame:
+    """One hardware class per task: a task whose runs name more than one ``hardware`` becomes one
+    task per hardware ('poisson [NVIDIA H100]'), so no comparison crosses machines. Runs without
+    the column are left as they are (the report says the hardware was not recorded)."""
+    if "hardware" not in runs or runs.empty:
+        return runs
+    kinds = runs.groupby("task")["hardware"].transform("nunique")
+    mixed = kinds > 1
+    return runs.assign(task=runs["task"].where(~mixed, runs["task"] + " [" + runs["hardware"].astype(str) + "]"))
 
 
 def check_one_setting_per_label(runs: pd.DataFrame) -> None:
@@ -289,24 +294,242 @@ def task_targets(runs: pd.DataFrame) -> dict[str, list[float]]:
 
 
 def reach_table(runs: pd.DataFrame, curves: pd.DataFrame, targets: Mapping[str, Sequence[float]]) -> pd.DataFrame:
-    """One row per (scored run, target): seconds and updates to the target on the test loss
-    (inf when not reached; a diverged run reaches what its curve reached before it stopped)."""
+    """One row per (scored run, target): training-clock seconds to the target on the test loss
+    (inf when not reached, diverged runs included)."""
     rows = []
-    by_path = dict(tuple(curves.groupby("path", observed=True))) if len(curves) else {}
+    key = "run" if "run" in curves and "run" in runs else "path"
+    by_run = dict(tuple(curves.groupby(key, observed=True))) if len(curves) else {}
     for _, run in runs.iterrows():
-        curve = by_path.get(run["path"])
+        curve = by_run.get(run[key])
         for target in targets.get(run["task"], []):
-            seconds, updates = reach(curve, target) if curve is not None else (math.inf, math.inf)
-            rows.append(
-                {"task": run["task"], "setting": run["league_setting"], "seed": run["seed"], "target": target,
-                 "seconds": seconds, "updates": updates}
-            )  # fmt: skip
-    return pd.DataFrame(rows, columns=["task", "setting", "seed", "target", "seconds", "updates"])
+            seconds = reach(curve, target)[0] if curve is not None else math.inf
+            rows.append({"task": run["task"], "setting": run["league_setting"], "seed": run["seed"], "target": target,
+                         "seconds": seconds})  # fmt: skip
+    return pd.DataFrame(rows, columns=["task", "setting", "seed", "target", "seconds"])
 
 
-def profile_times(reached: pd.DataFrame, unit: str) -> pd.DataFrame:
-    """Per (task, target, setting) the lower median over seeds of ``unit`` (seconds or updates;
-    unsolved when fewer than half reach it) and the ratio to the fastest setting: the frame
+def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None):
+    """(scored runs, seconds to each target per scored run, targets per task)."""
+    scored = league_runs(runs, spaces, tuning_seeds)
+    targets = task_targets(scored) if len(scored) else {}
+    return scored, reach_table(scored, curves, targets), targets
+
+
+# -- per task: the final loss ----------------------------------------------------------------
+
+
+def final_loss_seeds(scored: pd.DataFrame, metric: str = TEST_METRIC) -> dict[str, dict[str, np.ndarray]]:
+    """{task: {setting: scored losses of its seeds}} (diverged: inf)."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for (task, setting), group in scored.groupby(["task", "league_setting"], sort=True):
+        out.setdefault(task, {})[setting] = stats.scored_loss(group[metric], group["status"])
+    return out
+
+
+def first_losses(scored: pd.DataFrame, curves: pd.DataFrame) -> pd.Series:
+    """Each scored run's first evaluated test loss (NaN without a curve), indexed as ``scored``."""
+    key = "run" if "run" in curves and "run" in scored else "path"
+    if curves.empty or key not in curves or "test_loss" not in curves:
+        return pd.Series(math.nan, index=scored.index)
+    first = curves.groupby(key, observed=True)["test_loss"].first()
+    return scored[key].map(first).astype(float)
+
+
+def final_loss_table(
+    scored: pd.DataFrame,
+    metric: str = TEST_METRIC,
+    constant_loss: Mapping[str, float] | None = None,
+    first: pd.Series | None = None,
+) -> pd.DataFrame:
+    """Per task and setting (sorted by median, the leader first): the median of ``metric``, every
+    seed, the order-statistics interval and its coverage, P(leader < X), the exact one-sided
+    Mann-Whitney p-value, Holm-adjusted over the task's comparisons, the verdict, and a flag
+    (``stats.flag_row``: diverged on every seed, or a constant predictor: at the task's
+    ``constant_loss``, or where ``first`` (``first_losses``) is given, no move from it)."""
+    rows = []
+    for task, by_setting in final_loss_seeds(scored, metric).items():
+        for row in stats.compare_to_leader(by_setting):
+            group = scored[(scored["task"] == task) & (scored["league_setting"] == row["setting"])]
+            moved_from = None if first is None or first[group.index].isna().any() else first[group.index]
+            flag = stats.flag_row(group[metric], group["status"], (constant_loss or {}).get(task), moved_from)
+            interval = row.pop("interval")
+            rows.append({"task": task, **row, "low": interval.low, "high": interval.high,
+                         "coverage": interval.coverage, "n": interval.n, "flag": flag or ""})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _g(v: float) -> str:
+    return "inf" if v == math.inf else f"{v:.2g}"
+
+
+def format_final_loss_table(table: pd.DataFrame, metric: str = TEST_METRIC) -> str:
+    """The per-task table as text: one block per task, the leader first."""
+    out = []
+    for task, group in table.groupby("task", sort=False):
+        lead = group[group["leader"]].iloc[0]
+        ns = sorted(set(group["n"]))
+        coverage = ", ".join(f"{c:.1%} at n={n}" for n, c in sorted(set(zip(group["n"], group["coverage"]))))
+        smallest = stats.smallest_attainable_p(min(ns), min(ns))
+        out += [
+            f"-- {task}: leader (lowest median {metric}) {lead['setting']}; interval: order statistics for the "
+            f"median, coverage {coverage}; test: exact one-sided Mann-Whitney (leader below X), Holm over "
+            f"{len(group) - 1} comparisons; smallest attainable p at n={min(ns)}: {smallest:.3g}",
+        ]
+        lines = [("setting", "median", "seeds", "interval", "P(lead<X)", "p", "p Holm", "verdict")]
+        for _, r in group.iterrows():
+            verdict = "leader" if r["leader"] else ("separated" if r["separated"] else "not separated")
+            if r["flag"]:
+                verdict += f"; FLAGGED: {r['flag']}"
+            lines.append((
+                r["setting"], _g(r["median"]), " ".join(_g(v) for v in r["seeds"]), f"[{_g(r['low'])}, {_g(r['high'])}]",
+                "" if r["leader"] else f"{r['p_leader_below']:.2f}", "" if r["leader"] else f"{r['p_value']:.3g}",
+                "" if r["leader"] else f"{r['p_holm']:.3g}", verdict,
+            ))  # fmt: skip
+        widths = [max(len(line[i]) for line in lines) for i in range(len(lines[0]))]
+        out += ["  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in lines]
+    return "\n".join(out)
+
+
+# -- across tasks (rliable) ------------------------------------------------------------------
+
+
+def aggregate_table(scored: pd.DataFrame, metric: str = TEST_METRIC, reference: str = HIG, seed: int = 0) -> pd.DataFrame:
+    """Across tasks, the rliable way, per setting: the IQM over (task, seed) of normalised scores
+    (``stats.normalised_scores``: 1 at the task leader's median, 0 at the task's worst finite
+    median or worse, diverged 0; a loss <= 0, float rounding, counts as the task's lowest positive
+    loss), with the stratified bootstrap's percentile interval, and
+    P(``reference`` < X) averaged over the tasks both ran. Settings are compared on the tasks
+    they ran ('tasks')."""
+    seeds = final_loss_seeds(scored, metric)
+    for task, by_setting in seeds.items():  # a loss <= 0 is rounding (the dipole's 1 - |<psi, target>|^2 in float32)
+        positive = np.concatenate([v[(v > 0) & np.isfinite(v)] for v in by_setting.values()])
+        floor = positive.min() if len(positive) else 1.0
+        seeds[task] = {name: np.where(v > 0, v, floor) for name, v in by_setting.items()}
+    best, worst = {}, {}
+    for task, by_setting in seeds.items():
+        medians = np.array([np.median(v) for v in by_setting.values()])
+        finite = medians[np.isfinite(medians)]
+        if len(finite) >= 2 and finite.min() > 0 and finite.max() > finite.min():
+            best[task], worst[task] = float(finite.min()), float(finite.max())
+    rows = []
+    settings = sorted({s for by_setting in seeds.values() for s in by_setting})
+    for setting in settings:
+        columns = [
+            stats.normalised_scores(v[:, None], [worst[t]], [best[t]])[:, 0]
+            for t, by_setting in seeds.items() if t in best and len(v := by_setting.get(setting, np.array([])))
+        ]  # fmt: skip
+        point, lo, hi = stats.stratified_bootstrap_ci(columns, stats.iqm, seed=seed)
+        shared = [t for t, by_setting in seeds.items() if setting in by_setting and reference in by_setting]
+        p = (
+            float(np.mean([stats.probability_of_improvement(seeds[t][reference], seeds[t][setting]) for t in shared]))
+            if shared and setting != reference else math.nan
+        )  # fmt: skip
+        rows.append({"setting": setting, "tasks": len(columns), "iqm": point, "low": lo, "high": hi,
+                     f"P({reference} < X)": p, "tasks with both": len(shared) if setting != reference else 0})  # fmt: skip
+    return pd.DataFrame(rows).sort_values("iqm", ascending=False, kind="stable").reset_index(drop=True)
+
+
+# -- AlgoPerf's score: targets from target-setting runs, budgets, time to target ----------------
+
+
+def integrated_score(ratios: Sequence[float], tau_max: float = TAU_MAX) -> float:
+    """The area under rho(tau) from 1 to ``tau_max`` over (tau_max - 1), rho being the fraction of
+    problems with ratio <= tau: 1 for a setting fastest on every problem, 0 for one never within
+    ``tau_max``. Exact for the step function: a problem of ratio r adds (tau_max - max(r, 1)) /
+    (tau_max - 1) when r <= tau_max. NaN ratios (no setting reached the target) count as unsolved."""
+    r = np.asarray(ratios, dtype=float)
+    if not len(r):
+        return math.nan
+    r = np.where(np.isnan(r), np.inf, r)
+    area = np.where(r <= tau_max, tau_max - np.maximum(r, 1.0), 0.0)
+    return float(area.sum() / (len(r) * (tau_max - 1.0)))
+
+
+MIN_TARGET_RERUNS = 5
+
+
+def validation_target(
+    reference_final_val: Mapping[str, Sequence[float]], min_reruns: int = MIN_TARGET_RERUNS
+) -> tuple[str, float]:
+    """(reference optimizer, target) from target-setting runs: each reference optimizer's tuned
+    setting rerun at the budget; its median final validation loss over >= ``min_reruns`` reruns;
+    the target is the lowest such median (AlgoPerf's). ValueError when a reference has fewer reruns."""
+    medians = {}
+    for name, losses in reference_final_val.items():
+        x = np.asarray(losses, dtype=float)
+        if len(x) < min_reruns:
+            raise ValueError(f"target-setting runs: {name} has {len(x)} reruns; need at least {min_reruns}")
+        medians[name] = float(np.median(np.where(np.isfinite(x), x, math.inf)))
+    best = min(medians, key=lambda n: (medians[n], n))
+    if not math.isfinite(medians[best]):
+        raise ValueError("target-setting runs: no reference optimizer has a finite median validation loss")
+    return best, medians[best]
+
+
+def budget_from_target(reference_seconds_to_target: Sequence[float], factor: float = 3.0) -> float:
+    """The problem's budget: ``factor`` (AlgoPerf: 3) times the reference's median training-clock
+    seconds to its own validation target over its reruns; ValueError when the median is not finite."""
+    median = float(np.median(np.asarray(reference_seconds_to_target, dtype=float)))
+    if not math.isfinite(median):
+        raise ValueError("budget: the reference reached its own target on fewer than half its reruns")
+    return factor * median
+
+
+def time_to_target(curve: pd.DataFrame | None, status: str, target: float, budget: float) -> float:
+    """Training-clock seconds at which one run's validation loss first reaches ``target``; inf
+    when it never does within ``budget``, or the run diverged before (scored one way: worst)."""
+    if curve is None or curve.empty:
+        return math.inf
+    seconds = reach(curve, target, loss="val_loss")[0]
+    return seconds if seconds <= budget else math.inf
+
+
+def algoperf_table(
+    scored: pd.DataFrame,
+    curves: pd.DataFrame,
+    targets: Mapping[str, float],
+    budgets: Mapping[str, float],
+    held_out: Mapping[str, Sequence[str]] | None = None,
+    tau_max: float = TAU_MAX,
+) -> pd.DataFrame:
+    """Per setting, AlgoPerf's score: per problem (the keys of ``targets``, each weighing the same)
+    the median over seeds of the seconds to the problem's validation target within its budget
+    (inf when fewer than half reach it), the ratio to the fastest setting, and the integrated
+    score over problems. Held-out variants (``held_out``: problem -> its variant tasks, each with
+    its own target and budget) are gates, not problems: a setting whose median on a variant is
+    inf fails that gate and is marked ('gates failed'), never scored into the area."""
+    key = "run" if "run" in curves and "run" in scored else "path"
+    by_run = dict(tuple(curves.groupby(key, observed=True))) if len(curves) else {}
+
+    def median_time(task: str, setting: str) -> float:
+        group = scored[(scored["task"] == task) & (scored["league_setting"] == setting)]
+        if group.empty:
+            return math.nan
+        t = [time_to_target(by_run.get(r[key]), r["status"], targets[task], budgets[task]) for _, r in group.iterrows()]
+        return float(np.sort(t)[(len(t) - 1) // 2])  # the lower median: inf unless half the seeds reach it
+
+    settings = sorted(set(scored["league_setting"]))
+    problems = sorted(p for p in targets if not any(p in v for v in (held_out or {}).values()))
+    times = pd.DataFrame({p: {s: median_time(p, s) for s in settings} for p in problems})
+    fastest = times.min(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = times / fastest.where(np.isfinite(fastest) & (fastest > 0))
+    rows = []
+    for setting in settings:
+        failed = [v for p in problems for v in (held_out or {}).get(p, []) if v in targets
+                  and not math.isfinite(median_time(v, setting))]  # fmt: skip
+        rows.append({"setting": setting, "score": integrated_score(ratios.loc[setting].to_numpy(dtype=float), tau_max),
+                     **{f"s to target: {p}": times.loc[setting, p] for p in problems},
+                     "gates failed": ", ".join(failed)})  # fmt: skip
+    return pd.DataFrame(rows).sort_values("score", ascending=False, kind="stable").reset_index(drop=True)
+
+
+# -- the decade targets' profile (time to the problem.targets on the test loss) ----------------
+
+
+def profile_times(reached: pd.DataFrame, unit: str = "seconds") -> pd.DataFrame:
+    """Per (task, target, setting) the lower median over seeds of ``unit`` (unsolved when fewer
+    than half reach it) and the ratio to the fastest setting: the frame
     ``results.profile.performance_profile`` reads (task as its problem)."""
     from higbench.results.profile import lower_median
 
@@ -336,237 +559,217 @@ def scores(times: pd.DataFrame, tau_max: float = TAU_MAX) -> pd.DataFrame:
     return rho.assign(score=pd.Series(score)).sort_values("score", ascending=False)
 
 
-def interval_table(runs: pd.DataFrame, reached: pd.DataFrame, seed: int = 0) -> pd.DataFrame:
-    """Per (task, setting): the IQM over seeds, with the bootstrap's 95% interval, of the final
-    test loss, the final validation loss and the seconds and updates to each target."""
+def interval_table(runs: pd.DataFrame, reached: pd.DataFrame) -> pd.DataFrame:
+    """Per (task, setting): (median, low, high) cells, the interval the order statistics' (its
+    coverage in ``coverage``), of the final test and validation loss and the seconds to each target."""
     rows = []
     for (task, setting), group in runs.groupby(["task", "league_setting"]):
         row = {"task": task, "setting": setting, "seeds": len(group)}
         for metric in (TEST_METRIC, VALIDATION_METRIC):
-            values = pd.to_numeric(group.get(metric, pd.Series(dtype=float)), errors="coerce")
-            # a diverged run's loss is what it reached before the NaN: scored as inf (the worst)
-            values = values.where(group["status"] == "completed", math.inf).to_numpy(dtype=float)
-            row[metric] = bootstrap_ci([values], iqm, seed=seed)
+            values = stats.scored_loss(group.get(metric, pd.Series(math.nan, index=group.index)), group["status"])
+            interval = stats.median_interval(values)
+            row[metric] = (float(np.median(values)), interval.low, interval.high)
+            row["coverage"] = interval.coverage
         mine = reached[(reached["task"] == task) & (reached["setting"] == setting)]
         for target, at in mine.groupby("target"):
-            for unit in ("seconds", "updates"):
-                row[f"{unit}_to_{target:g}"] = bootstrap_ci([at[unit].to_numpy(dtype=float)], iqm, seed=seed)
+            values = at["seconds"].to_numpy(dtype=float)
+            interval = stats.median_interval(values)
+            row[f"seconds_to_{target:g}"] = (float(np.median(values)), interval.low, interval.high)
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def improvement_table(runs: pd.DataFrame, reference: str = HIG, metric: str = TEST_METRIC, seed: int = 0) -> pd.DataFrame:
-    """P(``reference`` ends below X) on ``metric`` for every other setting X: per task and the
-    mean over the tasks both ran (stratified bootstrap's 95% interval). Diverged runs count as inf."""
-    loss = pd.to_numeric(runs[metric], errors="coerce").where(runs["status"] == "completed", math.inf)
-    runs = runs.assign(_loss=loss.fillna(math.inf))
-    rows = []
-    for other in sorted(set(runs["league_setting"]) - {reference}):
-        pairs, per_task = [], {}
-        for task, group in runs.groupby("task"):
-            x = group.loc[group["league_setting"] == reference, "_loss"].to_numpy(dtype=float)
-            y = group.loc[group["league_setting"] == other, "_loss"].to_numpy(dtype=float)
-            if len(x) and len(y):
-                pairs.append((x, y))
-                per_task[task] = probability_of_improvement(x, y)
-        point, lo, hi = probability_of_improvement_ci(pairs, seed=seed)
-        rows.append({"versus": other, "tasks": len(pairs), "P": point, "low": lo, "high": hi, **per_task})
-    return pd.DataFrame(rows)
+# -- the report ------------------------------------------------------------------------------
 
 
-def leaders(table: pd.DataFrame, metric: str = TEST_METRIC) -> pd.DataFrame:
-    """Per task (an ``interval_table``): the setting with the lowest IQM ``metric``, the
-    runner-up, whether the runner-up's interval reaches below the leader's upper bound (then
-    the seeds do not separate them), and the rank of HIG tuned and at the paper's settings."""
-    rows = []
-    for task, group in table.groupby("task"):
-        point = group[metric].map(lambda cell: cell[0] if isinstance(cell, tuple) else math.nan)
-        ranked = group.assign(_point=point.fillna(math.inf)).sort_values("_point", kind="stable")
-        first, second = ranked.iloc[0], ranked.iloc[1] if len(ranked) > 1 else None
-        rank = {name: i + 1 for i, name in enumerate(ranked["setting"])}
-        rows.append({
-            "task": task, "best": first["setting"], metric: first[metric],
-            "runner-up": None if second is None else second["setting"],
-            "runner-up " + metric: None if second is None else second[metric],
-            "separated": None if second is None else bool(second[metric][1] > first[metric][2]),
-            "hig rank": rank.get(HIG), "hig (paper) rank": rank.get(f"{HIG} (paper)"), "settings": len(ranked),
-        })  # fmt: skip
-    return pd.DataFrame(rows)
+def seeds_text(scored: pd.DataFrame) -> str:
+    """'3 seeds' or '3-10 seeds' per task and setting."""
+    counts = scored.groupby(["task", "league_setting"]).size()
+    low, high = int(counts.min()), int(counts.max())
+    return f"{low} seeds" if low == high else f"{low}-{high} seeds"
 
 
-def _ci(cell, inf: str = "not reached") -> str:
-    if not isinstance(cell, tuple):
-        return "" if cell is None or (isinstance(cell, float) and math.isnan(cell)) else str(cell)
-    point, lo, hi = cell
-    if not math.isfinite(point):
-        return inf if point == math.inf else "-"
-    return f"{point:.3g} [{lo:.3g}, {hi:.3g}]"
+def hardware_line(scored: pd.DataFrame) -> str:
+    if "hardware" not in scored:
+        return "hardware: not recorded in these runs (one hardware class per task cannot be checked)"
+    per_task = scored.groupby("task")["hardware"].first()
+    return "hardware, one class per task (a task that mixed classes is split, named [hardware]): " + "; ".join(
+        f"{t}: {h}" for t, h in per_task.items()
+    )
 
 
-def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=TUNING_SEEDS):
-    """(scored runs, seconds and updates to each target per scored run, targets per task)."""
-    scored = league_runs(runs, spaces, tuning_seeds)
-    targets = task_targets(scored) if len(scored) else {}
-    return scored, reach_table(scored, curves, targets), targets
-
-
-def _task_table(group: pd.DataFrame) -> pd.DataFrame:
-    """One task's rows as text cells: the final losses, then seconds and updates to each target
-    that some setting reached (highest target first)."""
-    reached = [c for c in group.columns if "_to_" in c and any(isinstance(v, tuple) and math.isfinite(v[0]) for v in group[c])]
-    reached.sort(key=lambda c: (-float(c.split("_to_")[1]), c))
-    cols = ["seeds", TEST_METRIC, VALIDATION_METRIC, *reached]
-    shown = group.set_index("setting")[cols].copy()
-    for c in cols[1:]:
-        shown[c] = shown[c].map(
-            lambda v, c=c: _ci(v, "inf (seeds diverged)" if c in (TEST_METRIC, VALIDATION_METRIC) else "not reached")
-        )
-    return shown.rename(columns=lambda c: c.replace("seconds_to_", "s to ").replace("updates_to_", "updates to "))
-
-
-def format_league(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=TUNING_SEEDS) -> str:
-    """The league as text: both profile views with the integrated score, the IQM table with
-    intervals per task, and the probability that HIG improves on each other setting."""
+def format_league(
+    runs: pd.DataFrame,
+    curves: pd.DataFrame,
+    spaces: Mapping[str, Mapping],
+    tuning_seeds=None,
+    validation_targets: Mapping[str, float] | None = None,
+    budgets: Mapping[str, float] | None = None,
+    held_out: Mapping[str, Sequence[str]] | None = None,
+) -> str:
+    """The league as text: per task the final test loss (median, every seed, order-statistics
+    interval, tests against the leader), flagged rows, the aggregate across tasks, AlgoPerf's
+    score where target-setting runs gave ``validation_targets`` and ``budgets`` per task
+    (``algoperf_table``; ``held_out``: problem -> its variant tasks, the gates), and the time to
+    the problems' test-loss targets (equal wall clock; no equal-updates view: an update of L-BFGS
+    or LM is many evaluations, so updates are not equal work)."""
     scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds)
-    tuning = int(pd.to_numeric(runs["seed"], errors="coerce").isin(tuning_seeds).sum()) if len(runs) else 0
+    left_out = len(runs) - len(scored)
     if scored.empty:
-        return f"no scored runs (done, not on a tuning seed {list(tuning_seeds)}); {tuning} tuning run(s) left out"
+        return f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out (tuning, unfinished)"
     out = [
-        f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings,"
-        f" seeds {sorted(set(pd.to_numeric(scored['seed']).astype(int)))}); {tuning} tuning run(s) left out",
-        "targets (problem.targets): " + "; ".join(f"{t}: {', '.join(f'{v:g}' for v in vs)}" for t, vs in targets.items()),
+        f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings, "
+        f"{seeds_text(scored)} per task and setting); {left_out} run(s) left out "
+        "(tuning, unfinished, or a second run of one identity)",
+        hardware_line(scored),
+        "",
+        "final test loss per task: median and every seed (diverged: inf, the worst)",
+        format_final_loss_table(final_loss_table(scored, first=first_losses(scored, curves))),
     ]
     with pd.option_context("display.width", 250, "display.max_columns", None, "display.float_format", "{:.3f}".format):
-        for unit, view in (("seconds", "equal wall clock"), ("updates", "equal updates")):
-            out += ["", f"performance profile, {view} ({unit} to target; integrated score: area under rho up to tau={TAU_MAX:g})"]
-            out.append(scores(profile_times(reached, unit)).to_string())
-        table = interval_table(scored, reached)
-        out += ["", "per task: IQM over seeds [95% stratified-bootstrap interval]; targets no setting reached are left out"]
-        for task, group in table.groupby("task"):
-            out += [f"-- {task}", _task_table(group).to_string()]
-        best = leaders(table)
-        for c in (TEST_METRIC, "runner-up " + TEST_METRIC):
-            best[c] = best[c].map(lambda v: _ci(v, "inf (seeds diverged)"))
-        out += ["", "lowest final test loss per task, IQM [95% interval]; separated: the runner-up's interval lies above"]
-        out.append(best.to_string(index=False))
-        for reference in (HIG, f"{HIG} (paper)"):  # HIG tuned as every optimizer, and at the paper's settings
-            if reference not in set(scored["league_setting"]):
-                continue
-            improve = improvement_table(scored, reference)
-            out += ["", f"P({reference} ends below X) on the final test loss, mean over tasks [95% interval]; per task after"]
-            out.append(improve.to_string(index=False, float_format="{:.2f}".format))
+        out += ["", "across tasks (rliable): IQM over (task, seed) of normalised scores (1: the task leader's median, "
+                "0: the task's worst finite median or diverged), percentile stratified bootstrap (nominal 95%; "
+                "not exact at few seeds); P(hig < X) averaged over the tasks both ran"]  # fmt: skip
+        out.append(aggregate_table(scored).to_string(index=False))
+        if validation_targets and budgets:
+            given = "; ".join(f"{t}: target {validation_targets[t]:g}, budget {budgets[t]:g} s" for t in validation_targets)
+            out += ["", "AlgoPerf: seconds to the validation target within the budget (median over seeds; inf: fewer "
+                    f"than half reach it), each problem weighing the same; held-out variants are gates: {given}"]  # fmt: skip
+            table = algoperf_table(scored, curves, validation_targets, budgets, held_out)
+            out.append(table.to_string(index=False))
+        out += ["", "targets (problem.targets, test loss): " + "; ".join(f"{t}: {', '.join(f'{v:g}' for v in vs)}"
+                                                                         for t, vs in targets.items())]  # fmt: skip
+        out += [f"performance profile, equal wall clock (seconds to target; score: area under rho up to tau={TAU_MAX:g})"]
+        out.append(scores(profile_times(reached)).to_string())
     return "\n".join(out)
 
 
-def all_spaces(directory: Path | None = None) -> dict[str, dict]:
-    """Every shipped search space: optimizer name -> space (conf/search/*.yaml)."""
-    d = directory or search_dir()
-    return {p.stem: load_space(p.stem, d) for p in sorted(d.glob("*.yaml"))}
+# -- re-reading a published runs.csv (final losses only) -------------------------------------
+
+
+def runs_csv_frame(path: Path) -> pd.DataFrame:
+    """A published runs.csv (task, league_setting, seed, status, final losses, hardware, ...) as
+    the scored-runs frame the tables read. It carries final losses only: no time to target."""
+    df = pd.read_csv(path)
+    missing = {"task", "league_setting", "seed", "status", TEST_METRIC} - set(df.columns)
+    if missing:
+        raise ValueError(f"{path}: missing columns {sorted(missing)}")
+    df = one_run_per_identity(df)
+    return split_by_hardware(df)
+
+
+def format_runs_csv(path: Path, constant_loss: Mapping[str, float] | None = None) -> str:
+    """The final-loss re-read of a published runs.csv: per task the table of ``final_loss_table``,
+    then the aggregate across tasks."""
+    scored = runs_csv_frame(path)
+    out = [
+        f"{len(scored)} scored runs from {Path(path).name} ({scored['task'].nunique()} tasks, "
+        f"{seeds_text(scored)} per task and setting); final losses only "
+        "(no curves: no time to target)",
+        hardware_line(scored),
+        "",
+        "final test loss per task: median and every seed (diverged: inf, the worst)",
+        format_final_loss_table(final_loss_table(scored, constant_loss=constant_loss)),
+        "",
+        "across tasks (rliable): IQM over (task, seed) of normalised scores (1: the task leader's median, 0: the "
+        "task's worst finite median or diverged), percentile stratified bootstrap (nominal 95%; not exact at 3 "
+        "seeds); P(hig < X) averaged over the tasks both ran",
+    ]
+    with pd.option_context("display.width", 250, "display.max_columns", None, "display.float_format", "{:.3f}".format):
+        out.append(aggregate_table(scored).to_string(index=False))
+    return "\n".join(out)
 
 
 # -- figures ---------------------------------------------------------------------------------
 
-
-def profile_band(reached: pd.DataFrame, unit: str, taus: Sequence[float], reps: int = 100, seed: int = 0) -> dict:
-    """rho(tau) per setting, and its 95% band from resampling each (task, setting)'s seeds with
-    replacement (the stratified bootstrap; the fastest setting of a pair is found again in each
-    replicate): {setting: (rho, low, high)} on ``taus``."""
-    from higbench.results.profile import performance_profile
-
-    point = performance_profile(profile_times(reached, unit), taus)
-    rng = np.random.default_rng(seed)
-    rows = reached.reset_index(drop=True)
-    # per (task, setting): the row numbers of each of its seeds (all targets of that run)
-    blocks = [[np.asarray(ix) for ix in g.groupby("seed").groups.values()] for _, g in rows.groupby(["task", "setting"])]
-    draws: dict[str, list] = {name: [] for name in point.columns}
-    for _ in range(reps):
-        picked = [block[i] for block in blocks for i in rng.integers(0, len(block), len(block))]
-        rho = performance_profile(profile_times(rows.iloc[np.concatenate(picked)], unit), taus)
-        for name in draws:
-            draws[name].append(rho[name].to_numpy() if name in rho else np.zeros(len(taus)))
-    return {
-        name: (point[name].to_numpy(), *np.quantile(np.array(draws[name]), [0.025, 0.975], axis=0, method="inverted_cdf"))
-        for name in point.columns
-    }
+LEADER_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
+HIG_COLOURS = {HIG: "tab:red", f"{HIG} (paper)": "tab:pink"}
 
 
-def highlighted(bands: Mapping[str, tuple], tau_max: float = TAU_MAX, top: int = 5) -> set[str]:
-    """The profile curves drawn in colour: the ``top`` settings by the area under rho (the
-    integrated score's), and HIG tuned and at the paper's settings."""
-    area = {name: float(np.mean(rho)) for name, (rho, _, _) in bands.items()}
-    leaders = sorted(area, key=lambda name: -area[name])[:top]
-    return {*leaders, *(n for n in (HIG, f"{HIG} (paper)") if n in bands)}
+def _colours(settings: Sequence[str], leaders: Sequence[str]) -> dict[str, str]:
+    """HIG (tuned, paper) in reds, up to five leaders in distinct colours, the rest grey."""
+    colours = {name: "0.7" for name in settings}
+    for name, colour in zip([n for n in leaders if n not in HIG_COLOURS], LEADER_COLOURS):
+        colours[name] = colour
+    colours.update({n: c for n, c in HIG_COLOURS.items() if n in colours})
+    return colours
 
 
-def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: float = TAU_MAX) -> list[Path]:
-    """profile.png (rho in seconds and in updates, with bands) and time_to_target.png (per task,
-    the IQM of seconds to each target with its interval, per setting)."""
+def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
+    """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
+    log scale; diverged: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
+    median, leaders and HIG in colour, the rest grey. ``table``: ``final_loss_table``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out.mkdir(parents=True, exist_ok=True)
-    taus = np.linspace(1.0, tau_max, 61)
-    settings = sorted(table["setting"].unique())
-    colour = {name: plt.get_cmap("tab20")(i % 20) for i, name in enumerate(settings)}  # one colour per setting
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
-    for ax, unit in zip(axes, ("seconds", "updates")):
-        bands = profile_band(reached, unit, taus)
-        shown = highlighted(bands, tau_max)
-        for name, (rho, lo, hi) in sorted(bands.items()):
-            if name not in shown:  # the rest thin and grey, so that the leaders and HIG can be read
-                ax.step(taus, rho, where="post", color="0.75", lw=0.8, zorder=1)
-                continue
-            ax.step(taus, rho, where="post", label=name, lw=1.8, color=colour.get(name), zorder=3)
-            ax.fill_between(taus, lo, hi, step="post", color=colour.get(name), alpha=0.12, zorder=2)
-        ax.set_xlabel(f"tau ({unit} to target over the fastest)")
-        ax.set_title(f"equal {'wall clock' if unit == 'seconds' else 'updates'} (grey: the other settings)", fontsize=10)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left", ncol=2)
-    axes[0].set_ylabel("rho(tau): fraction of (task, target) pairs")
-    fig.tight_layout()
-    paths = [out / "profile.png"]
-    fig.savefig(paths[0], dpi=120)
-    plt.close(fig)
-
-    tasks = sorted(table["task"].unique())
+    tasks = list(dict.fromkeys(table["task"]))
     ncols = min(len(tasks), 3)
     nrows = -(-len(tasks) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows + 1.0), squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.0 * nrows), squeeze=False)
     for ax in axes.flat[len(tasks) :]:
         ax.set_visible(False)
     for ax, task in zip(axes.flat, tasks):
-        rows = table[table["task"] == task]
-        cols = [c for c in rows.columns if c.startswith("seconds_to_") and rows[c].map(lambda v: isinstance(v, tuple)).any()]
-        cols.sort(key=lambda c: -float(c.split("_to_")[1]))  # this task's targets, highest first
-        for _, row in rows.iterrows():
-            k = settings.index(row["setting"])
-            xs, ys, los, his = [], [], [], []
-            for j, c in enumerate(cols):
-                cell = row[c]
-                if isinstance(cell, tuple) and math.isfinite(cell[0]):
-                    xs.append(j + 0.6 * (k / max(len(settings) - 1, 1) - 0.5))
-                    ys.append(cell[0])
-                    los.append(cell[0] - cell[1])
-                    his.append((cell[2] if math.isfinite(cell[2]) else cell[0]) - cell[0])
-            if xs:
-                ax.errorbar(xs, ys, yerr=[los, his], fmt="o", ms=4, capsize=2, color=colour[row["setting"]])
-        ax.set_xticks(range(len(cols)), [f"{float(c.split('_to_')[1]):g}" for c in cols])
-        ax.set_xlim(-0.5, len(cols) - 0.5)
-        if ax.has_data():
-            ax.set_yscale("log")
-        else:
-            ax.text(0.5, 0.5, "no setting reached a target", ha="center", transform=ax.transAxes, fontsize=8)
-        ax.set_title(task, fontsize=9)
-        ax.set_xlabel("test-loss target (not reached: no point)", fontsize=8)
-        ax.grid(alpha=0.3)
+        rows = table[table["task"] == task].reset_index(drop=True)
+        colours = _colours(list(rows["setting"]), list(rows["setting"][:3]))
+        finite = np.concatenate([np.asarray(s, dtype=float) for s in rows["seeds"]])
+        finite = finite[np.isfinite(finite) & (finite > 0)]
+        top, bottom = (finite.max() * 3, finite.min() / 3) if len(finite) else (1.0, 0.1)
+        for i, r in rows.iterrows():
+            seeds = np.asarray(r["seeds"], dtype=float)
+            c = colours[r["setting"]]
+            ok = np.isfinite(seeds) & (seeds > 0)
+            ax.scatter(np.full(ok.sum(), i), seeds[ok], s=14, color=c, zorder=3)
+            for where, marker, level in ((~np.isfinite(seeds), "x", top), (np.isfinite(seeds) & (seeds <= 0), "v", bottom)):
+                if where.any():  # diverged at the top edge; a loss <= 0 (float rounding) at the bottom
+                    ax.scatter(np.full(where.sum(), i), np.full(where.sum(), level), marker=marker, s=20, color=c, zorder=3)
+            if math.isfinite(r["median"]) and r["median"] > 0:
+                ax.hlines(r["median"], i - 0.3, i + 0.3, color=c, lw=2, zorder=4)
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(rows)), rows["setting"], rotation=70, fontsize=7)
+        for label, name in zip(ax.get_xticklabels(), rows["setting"]):
+            label.set_color(colours[name] if colours[name] != "0.7" else "0.35")
+        ax.set_title(f"{task} (leader by median: {rows['setting'][0]})", fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
     for row_axes in axes:
-        row_axes[0].set_ylabel("seconds to target\n(IQM over seeds, 95% interval)", fontsize=8)
-    handles = [plt.Line2D([], [], marker="o", ls="", color=colour[n], label=n) for n in settings]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(settings), 9), fontsize=8)
-    fig.tight_layout(rect=(0, 0.9 / (3.6 * nrows + 1.0), 1, 1))
-    paths.append(out / "time_to_target.png")
-    fig.savefig(paths[1], dpi=120)
+        row_axes[0].set_ylabel("final test loss (dots: seeds; bar: median;\nx: diverged; v: <= 0, rounding)", fontsize=8)
+    fig.tight_layout()
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "final_losses.png"
+    fig.savefig(path, dpi=110)
     plt.close(fig)
-    return paths
+    return path
+
+
+def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: float = TAU_MAX) -> list[Path]:
+    """profile.png: rho(tau) in seconds to the problems' targets (equal wall clock; no updates
+    view), the leaders and HIG in colour, the rest grey. ``table`` (``interval_table``) names
+    the settings."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from higbench.results.profile import performance_profile
+
+    out.mkdir(parents=True, exist_ok=True)
+    taus = np.linspace(1.0, tau_max, 61)
+    rho = performance_profile(profile_times(reached), taus)
+    area = rho.mean(axis=0).sort_values(ascending=False)
+    colours = _colours(list(table["setting"].unique()), list(area.index[:5]))
+    fig, ax = plt.subplots(figsize=(6.5, 4.4))
+    for name in rho.columns:
+        grey = colours.get(name, "0.7") == "0.7"
+        ax.step(taus, rho[name], where="post", color=colours.get(name, "0.7"), lw=0.8 if grey else 1.8,
+                label=None if grey else name, zorder=1 if grey else 3)  # fmt: skip
+    ax.set_xlabel("tau (seconds to target over the fastest)")
+    ax.set_ylabel("rho(tau): fraction of (task, target) pairs")
+    ax.set_title("equal wall clock (grey: the other settings)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    path = out / "profile.png"
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return [path]

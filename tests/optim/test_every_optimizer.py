@@ -143,7 +143,7 @@ def test_split_state_round_trips():
     "parts,message",
     [
         ({"matrices": MUON}, r"no rule takes the parameters of shapes \[\(2,\), \(5,\)\]; add a `rest` part"),
-        ({"weights": MUON}, "parts.weights: unknown rule; valid rules: matrices, vectors, rest"),
+        ({"weights": MUON}, "parts.weights: unknown rule; valid rules: matrices, hidden_matrices, vectors, rest"),
         ({"matrices": {**MUON, "lr": -1.0}, "rest": ADAMW}, "parts.matrices: torch.optim.Muon refuses its arguments"),
         ({"matrices": {"lr": 1.0}, "rest": ADAMW}, "parts.matrices=.*must be a mapping with a _target_"),
     ],
@@ -160,9 +160,9 @@ def test_a_part_without_parameters_still_checks_its_arguments():
 
 
 def test_a_bad_part_value_is_one_line(higbench, tmp_path):
-    code, _, err = higbench("problem=toy", "optimizer=muon", "optimizer.parts.matrices.lr=-1")
+    code, _, err = higbench("problem=toy", "optimizer=muon", "optimizer.parts.hidden_matrices.lr=-1")
     assert code == 2 and len(err.strip().splitlines()) == 1, err
-    assert "parts.matrices: torch.optim.Muon refuses its arguments" in err
+    assert "parts.hidden_matrices: torch.optim.Muon refuses its arguments" in err
     assert sorted(tmp_path.rglob("*")) == []
 
 

@@ -16,47 +16,6 @@ from higbench.results import league
 from higbench.results.profile import performance_profile
 from higbench.runfile.writer import RunFileWriter
 
-# -- interval estimates ----------------------------------------------------------------------
-
-
-def test_iqm_is_the_mean_of_the_middle_half():
-    assert league.iqm([1, 2, 3, 4, 5, 6, 7, 8]) == pytest.approx(4.5)  # mean of 3, 4, 5, 6
-    assert league.iqm([100, 1, 2, 3]) == pytest.approx(2.5)  # an outlier is cut
-    assert league.iqm([1, 2, 3, math.inf]) == pytest.approx(2.5)  # inf (never reached) is cut too
-    assert league.iqm([1, math.inf, math.inf, math.inf]) == math.inf  # most never reached
-    assert math.isnan(league.iqm([]))
-
-
-def test_bootstrap_of_a_constant_has_a_point_interval():
-    assert league.bootstrap_ci([[2.0, 2.0, 2.0]], league.iqm, reps=200) == (2.0, 2.0, 2.0)
-
-
-def test_bootstrap_is_stratified():
-    # Two tasks of equal size, each constant: every stratified resample has the same pooled mean
-    # (an unstratified one would not: it could draw all 1s).
-    point, lo, hi = league.bootstrap_ci([[1.0] * 4, [3.0] * 4], np.mean, reps=500)
-    assert (point, lo, hi) == (2.0, 2.0, 2.0)
-
-
-def test_bootstrap_interval_covers_the_spread():
-    point, lo, hi = league.bootstrap_ci([[1.0, 2.0, 3.0, 4.0, 5.0]], np.mean, reps=2000, seed=1)
-    assert point == 3.0 and 1.0 <= lo < 3.0 < hi <= 5.0
-    assert league.bootstrap_ci([[1.0, 2.0, 3.0, 4.0, 5.0]], np.mean, reps=2000, seed=1) == (point, lo, hi)  # seeded
-
-
-def test_probability_of_improvement_counts_pairs_and_half_ties():
-    assert league.probability_of_improvement([1, 2], [3, 4]) == 1.0
-    assert league.probability_of_improvement([3, 4], [1, 2]) == 0.0
-    assert league.probability_of_improvement([1], [1]) == 0.5
-    assert league.probability_of_improvement([1, 3], [2]) == 0.5
-    assert league.probability_of_improvement([1, 2, 3], [2]) == pytest.approx((1 + 0.5 + 0) / 3)
-
-
-def test_probability_of_improvement_averages_over_tasks():
-    point, lo, hi = league.probability_of_improvement_ci([([1, 1], [2, 2]), ([5, 5], [2, 2])], reps=200)
-    assert (point, lo, hi) == (0.5, 0.5, 0.5)
-
-
 # -- the integrated score --------------------------------------------------------------------
 
 
@@ -75,18 +34,24 @@ def test_integrated_score_known_answer_and_numeric_area():
 # -- search spaces and the tuning rule -------------------------------------------------------
 
 
-def test_leaders_name_the_lowest_setting_per_task_and_hig_s_rank():
+def test_the_final_loss_table_leads_by_median_and_flags_a_row_that_diverged_everywhere():
     inf = math.inf
-    table = pd.DataFrame({
-        "task": ["a", "a", "a", "b", "b"],
-        "setting": ["adam", "hig", "hig (paper)", "adam", "hig"],
-        "final_test_loss": [(1.0, 0.5, 1.5), (3.0, 2.0, 4.0), (inf, inf, inf), (2.0, 1.0, 3.0), (1.0, 0.5, 2.5)],
+    scored = pd.DataFrame({
+        "task": ["a"] * 9,
+        "league_setting": ["adam"] * 3 + ["hig"] * 3 + ["hig (paper)"] * 3,
+        "seed": [0, 1, 2] * 3,
+        "status": ["completed"] * 6 + ["diverged"] * 3,
+        "final_test_loss": [1.0, 0.5, 1.5, 0.01, 3.0, 4.0, 1e5, inf, math.nan],
     })  # fmt: skip
-    best = league.leaders(table).set_index("task")
-    assert best.loc["a", "best"] == "adam" and best.loc["a", "runner-up"] == "hig"
-    assert bool(best.loc["a", "separated"])  # hig's interval [2, 4] lies above adam's [0.5, 1.5]
-    assert (best.loc["a", "hig rank"], best.loc["a", "hig (paper) rank"]) == (2, 3)  # diverged last
-    assert best.loc["b", "best"] == "hig" and not bool(best.loc["b", "separated"])  # [1, 3] overlaps [0.5, 2.5]
+    table = league.final_loss_table(scored).set_index("setting")
+    assert table.loc["adam", "leader"] and table.loc["adam", "median"] == 1.0  # hig's mean (2.3) is higher, its min lower
+    assert table.loc["hig", "p_leader_below"] == pytest.approx(6 / 9)  # adam below hig on 6 of 9 pairs
+    assert table.loc["hig", "seeds"] == [0.01, 3.0, 4.0] and table.loc["hig", "coverage"] == pytest.approx(0.75)
+    assert table.loc["hig (paper)", "seeds"] == [inf, inf, inf]  # a finite blow-up scores as a NaN does
+    assert table.loc["hig (paper)", "flag"] == "diverged on every seed"
+    assert not table["separated"].any()  # 3 seeds against 2 rivals: Holm's smallest p is 0.1
+    text = league.format_final_loss_table(league.final_loss_table(scored))
+    assert "coverage 75.0% at n=3" in text and "FLAGGED: diverged on every seed" in text
 
 
 def test_every_shipped_optimizer_has_a_search_space():
@@ -128,18 +93,16 @@ def test_tuning_never_reads_the_test_loss():
 
 @pytest.fixture(scope="module")
 def script():
-    """scripts/league.py as a module (a script, not part of the package)."""
-    import importlib.util
+    """The league's driver (higbench.league.driver, the ``higbench-league`` command)."""
+    from higbench.league import driver
 
-    path = Path(__file__).resolve().parents[2] / "scripts" / "league.py"
-    spec = importlib.util.spec_from_file_location("league_script", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return driver
 
 
 def test_the_league_script_tunes_on_the_validation_loss():
-    source = (Path(__file__).resolve().parents[2] / "scripts" / "league.py").read_text()
+    from higbench.league import driver
+
+    source = Path(driver.__file__).read_text()
     assert "best_trial(" in source and "test_loss" not in source.split("def choose")[1].split("\ndef ")[0]
 
 
@@ -159,13 +122,13 @@ def test_an_interrupted_tuning_stops_the_league(script, tmp_path, monkeypatch):
 
     monkeypatch.setattr(script, "run_missing", interrupted)
     monkeypatch.setattr(script, "calibration", lambda: {})
-    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "", "--trials", "2", "--seeds", "1"]
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "", "--trials", "2", "--seeds", "1", "--studies", "1"]
     with pytest.raises(SystemExit, match=r"toy tuning run\(s\) not done .*the same command continues"):
         script.main([*argv, "--seconds", "1", "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
     assert launched == [4]  # the tuning only: nothing confirmed
 
 
-def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path, monkeypatch):
+def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path, monkeypatch, capsys):
     """``--trials 1,toy=2`` tunes the toy on 2 trials and the oscillator on 1; ``--set
     toy/hig:threads=1`` reaches the toy's HIG jobs alone, over ``toy:threads=2`` given after it;
     a league key is refused by --set."""
@@ -177,7 +140,8 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path
 
     monkeypatch.setattr(script, "run_missing", stop)
     monkeypatch.setattr(script, "calibration", lambda: {})
-    common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path)]
+    common = ["--optimizers", "adam,hig", "--paper", "", "--seeds", "1", "--seconds", "1,toy=2", "--root", str(tmp_path),
+              "--studies", "1"]  # fmt: skip
     for problem, trials in (("toy", 2), ("oscillator", 1)):
         with pytest.raises(SystemExit, match="tuning"):
             sets = ["--set", "toy/hig:threads=1", "--set", "toy:threads=2"]
@@ -187,8 +151,8 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path
         assert {j.overrides["budget.seconds"] for j in jobs} == {2.0 if problem == "toy" else 1.0}
         threads = {j.overrides["optimizer"]: j.overrides.get("threads") for j in jobs}
         assert threads == ({"adam": "2", "hig": "1"} if problem == "toy" else {"adam": None, "hig": None})  # narrower wins
-    with pytest.raises(SystemExit, match="--set seed=3: seed is the league's own"):
-        script.main(["--problems", "toy", "--set", "seed=3", *common])
+    assert script.main(["--problems", "toy", "--set", "seed=3", *common]) == 2
+    assert "--set seed=3: seed is the league's own" in capsys.readouterr().err
 
 
 def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(script, tmp_path):
@@ -207,7 +171,7 @@ def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(s
     (tmp_path / "gpu-out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 0.01}]}))
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "league.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 9.0}]}))
-    found = script.recorded_calibrations(tmp_path, tmp_path / "out")
+    found = script.recorded_calibrations([tmp_path], tmp_path / "out")
     assert found == [{"matmul_50x256_s": 0.01, "file": "gpu-out/league.json"}]  # the report's own out left out
 
 
@@ -219,18 +183,31 @@ def test_machine_lines_are_per_problem_and_hardware_and_calibrations_come_back(s
         (["--set", "poison/adam:threads=1"], "poison/adam is not a problem, an optimizer or problem/optimizer"),
         (["--trials", "2,tyo=3"], "--trials tyo=3: no problem tyo (conf/problem/: "),
         (["--seconds", "0"], "--seconds 0: must be positive"),
+        (["--seconds", "inf"], "--seconds inf: must be positive and finite"),
+        (["--seconds", "nan"], "--seconds nan: must be positive and finite"),
+        (["--optimizers", "adma"], "--optimizers adma: no optimizer adma"),
+        (["--problems", "tyo"], "--problems tyo: no problem tyo"),
+        (["--out", "TMP/a-file"], "a-file: an existing file; --out names a folder"),
+        (["--report-only"], "no league runs or tables there"),
     ],
 )
-def test_a_bad_protocol_flag_is_one_line_before_any_run(script, tmp_path, monkeypatch, flags, line):
+def test_a_bad_protocol_flag_is_one_line_before_any_run(script, tmp_path, monkeypatch, capsys, flags, line):
     """A typo in a --set scope trained on the wrong device without a word; a bad --set value made
-    every optimizer 'left out' and ended in a KeyError; --seconds 0 fell back to the default."""
-    launched = []
+    every optimizer 'left out' and ended in a KeyError; --seconds 0 fell back to the default;
+    an unknown optimizer or problem, --seconds inf or nan, an --out naming a file, --report-only of
+    an empty root gave tracebacks; a refused --set first created the root and ran the calibration."""
+    launched, calibrated = [], []
     monkeypatch.setattr(script, "run_missing", lambda jobs, root, **kw: launched.append(jobs) or [])
-    monkeypatch.setattr(script, "calibration", lambda: {})
+    monkeypatch.setattr(script, "calibration", lambda: calibrated.append(1) or {})
+    (tmp_path / "a-file").write_text("mine\n")
+    flags = [f.replace("TMP", str(tmp_path)) for f in flags]
     argv = ["--problems", "toy", "--optimizers", "adam", "--trials", "1", "--seeds", "1", "--seconds", "1", *flags]
-    with pytest.raises(SystemExit) as stop:
-        script.main([*argv, "--root", str(tmp_path / "runs"), "--out", str(tmp_path / "out")])
-    assert line in str(stop.value) and not launched
+    out = [] if "--out" in flags else ["--out", str(tmp_path / "out")]
+    assert script.main([*argv, "--root", str(tmp_path / "runs"), *out]) == 2
+    err = capsys.readouterr().err.strip()
+    assert line in err and len(err.splitlines()) == 1, err
+    assert not launched and not calibrated and not (tmp_path / "runs").exists()
+    assert (tmp_path / "a-file").read_text() == "mine\n"
 
 
 # -- --league on synthetic run files ---------------------------------------------------------
@@ -265,23 +242,17 @@ def test_results_league_prints_scores_and_leaves_tuning_runs_out(tmp_path, capsy
     write_league_run(tmp_path, "tune", "adam", 1000, [1.0, 1e-6], overrides=["optimizer.lr=0.1"])  # a tuning seed
     assert main([str(tmp_path), "--league"]) == 0
     out = capsys.readouterr().out
-    assert "6 scored runs" in out and "1 tuning run(s) left out" in out
-    seconds = out.split("equal wall clock")[1].split("equal updates")[0]
+    assert "6 scored runs" in out and "1 run(s) left out" in out
+    assert "equal updates" not in out  # updates are not equal work (an L-BFGS or LM update is many evaluations)
+    seconds = out.split("equal wall clock")[1]
     hig_row = next(line for line in seconds.splitlines() if line.startswith("hig"))
     adam_row = next(line for line in seconds.splitlines() if line.startswith("adam"))
     # hig: fastest on both targets (score 1); adam: 1e-1 at 2 s (2x), 1e-2 at 3 s (3x): (2 + 1) / 2 / 3
     assert hig_row.split()[-1] == "1.000" and adam_row.split()[-1] == f"{(2 + 1) / 2 / 3:.3f}"
-    assert "P(hig ends below X)" in out and "adam" in out.split("P(hig ends below X)")[1]
-    assert "0.00123 [0.00123, 0.00123]" not in out  # the test loss, not the val loss (1.1x), is the table's
-    assert "0.001 [0.001, 0.001]" in out
-
-
-def test_the_bootstraps_row_wise_iqm_matches_iqm():
-    rng = np.random.default_rng(0)
-    matrix = rng.lognormal(size=(50, 7))
-    matrix[3, 2] = math.inf  # one cut, and a row where inf stays
-    matrix[4, :5] = math.inf
-    np.testing.assert_allclose(league._iqm_rows(matrix), [league.iqm(row) for row in matrix], rtol=1e-12)
+    table = out.split("final test loss per task")[1].split("across tasks")[0]
+    assert "leader (lowest median final_test_loss) hig" in table
+    assert "0.001 0.001 0.001" in table and "0.0011" not in table  # the test loss, not the val loss (1.1x)
+    assert "coverage 75.0% at n=3" in table and "not separated" in table  # Holm over 1 comparison: p = 0.05, not < 0.05
 
 
 def test_profile_targets_come_from_the_problem_configs():
@@ -312,8 +283,37 @@ def test_two_settings_under_one_league_label_are_refused(tmp_path, capsys):
     assert "task toy: adam has runs of 2 different settings" in err, err
 
 
-def test_the_profile_draws_the_leaders_and_hig_in_colour():
-    flat = np.zeros(3)
-    bands = {name: (np.full(3, level), flat, flat) for name, level in
-             [("a", 0.9), ("b", 0.8), ("c", 0.1), ("hig", 0.0), ("hig (paper)", 0.05)]}  # fmt: skip
-    assert league.highlighted(bands, top=2) == {"a", "b", "hig", "hig (paper)"}
+def test_the_figures_draw_the_leaders_and_hig_in_colour_and_the_rest_grey():
+    colours = league._colours(["a", "b", "c", "hig", "hig (paper)"], ["a", "b"])
+    assert colours["c"] == "0.7" and len({colours[n] for n in ("a", "b", "hig", "hig (paper)")}) == 4
+
+
+def test_a_row_whose_seeds_never_moved_from_the_first_evaluation_is_flagged():
+    scored = pd.DataFrame({
+        "task": ["toy"] * 4, "league_setting": ["muon", "muon", "adam", "adam"], "seed": [0, 1, 0, 1],
+        "status": ["completed"] * 4, "final_test_loss": [0.300, 0.301, 0.01, 0.02], "path": ["m0", "m1", "a0", "a1"],
+    })  # fmt: skip
+    curves = pd.DataFrame({"path": ["m0", "m0", "m1", "m1", "a0", "a0", "a1", "a1"],
+                           "test_loss": [0.302, 0.300, 0.300, 0.301, 0.5, 0.01, 0.5, 0.02]})  # fmt: skip
+    table = league.final_loss_table(scored, first=league.first_losses(scored, curves)).set_index("setting")
+    assert "constant predictor" in table.loc["muon", "flag"] and table.loc["adam", "flag"] == ""
+    assert league.final_loss_table(scored).set_index("setting").loc["muon", "flag"] == ""  # without curves: not known
+
+
+@pytest.mark.slow  # draws the 11-panel figure
+def test_the_published_runs_csv_re_reads_to_the_committed_table(tmp_path):
+    """docs/results/league/reread.txt is what scripts/league_reread.py makes of runs.csv alone."""
+    import importlib.util
+
+    docs = Path(__file__).resolve().parents[2] / "docs" / "results" / "league"
+    path = Path(__file__).resolve().parents[2] / "scripts" / "league_reread.py"
+    spec = importlib.util.spec_from_file_location("league_reread", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    assert script.main([str(docs / "runs.csv"), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "reread.txt").read_text() == (docs / "reread.txt").read_text()
+    table = league.final_loss_table(league.runs_csv_frame(docs / "runs.csv"))
+    leaders = table[table["leader"]].set_index("task")["setting"]
+    assert leaders["toy"] == "lm" and leaders["dipole dt=0.04"] == "lm"  # by median, as the audit found
+    assert not table["separated"].any() and table["p_holm"].min() == pytest.approx(0.25)  # 3 seeds separate nothing
+    assert table.groupby("task")["setting"].count().sum() == 147 and (table["n"] == 3).all()

@@ -1,0 +1,781 @@
+"""The league: tune every optimizer the same way, confirm on fresh seeds and held-out variants, score.
+
+examples:
+  higbench-league --problems toy --optimizers adam,sgd,hig --trials 4 --seeds 5 --seconds 2
+  higbench-league --problems toy,oscillator --plan                      # runs and hours, nothing run
+  higbench-league --searchpath examples/heat/conf --problems heat --optimizers adam,sgd,hig \\
+      --trials 3 --seeds 5 --seconds 2                                  # your own problem (PYTHONPATH=examples/heat)
+  higbench-league --problems poisson --set poisson/hig:device=cuda      # HIG on a GPU
+  higbench-league --launcher submitit_slurm --launcher-set partition=gpu --launcher-set timeout_min=60
+  higbench-league --report-only --root runs-a --root runs-b             # merge two machines' tables, train nothing
+
+Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewise ``--seconds``;
+``--set [SCOPE:]KEY=VALUE`` adds an override to every job (no SCOPE), or to those of a problem,
+an optimizer or a ``problem/optimizer`` (SCOPE). The same flags re-read the runs with ``--report-only``.
+
+Per problem (its config owns the budget ``problem.league_seconds``, the targets
+``problem.targets`` and the held-out variants ``problem.held_out``; ``--seconds`` replaces the
+budget for a short league):
+
+1. tuning: ``--studies`` studies of ``--trials`` scrambled Sobol points of each optimizer's search
+   space (conf/search/<optimizer>.yaml, or SEARCHPATH/search/<optimizer>.yaml for your own) on the
+   study's tuning seed; the best trial by *validation* loss at the budget is the optimizer's
+   setting (``choose``);
+2. confirmation: that setting on ``--seeds`` fresh seeds, on the problem and on each held-out
+   variant (never tuned on); the ``--paper`` optimizers also at their shipped settings, as separate
+   rows: "(paper)" where conf/problem_optimizer/ holds the paper's, "(default)" where it holds none;
+3. tables and scores: every league run's identity, role and per-evaluation curve go to
+   ``ROOT/tables/`` (``higbench.league.tables``: what another machine's root is merged with); the
+   scores (test loss, read once here) are computed from those tables and written to ``--out``
+   (default ``ROOT/report``) with the manifest: every run's identity and role, the chosen
+   settings, the hardware calibration and the machine's load.
+
+Every run is an ordinary higbench run launched through ``higbench.jobs`` into ``--root``; a run
+already there (same identity) is reused, so a killed league resumes and a new optimizer adds only
+its own runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from higbench.jobs import LAUNCH_OVERRIDES, Job, job_seconds, resolve, run_index, run_missing
+from higbench.league import tables
+from higbench.league.files import ROOT_FILE_ERRORS, read_json_files, safe_dir, write_text
+from higbench.results import league
+
+EVALUATIONS = 100  # per run: time-to-target ratios up to TAU_MAX = 4 are resolved (a target at 1/25 of the budget)
+DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig",
+                      "adamw", "muon", "soap", "shampoo", "sip")  # fmt: skip
+LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm", "slurm")  # slurm: conf/hydra/launcher/slurm.yaml
+SEARCHPATH_ENV = "HIGBENCH_SEARCHPATH"  # read by hydra_plugins/higbench_searchpath
+
+
+class LeagueError(Exception):
+    """Bad input or a refused file: one line, exit 2, before any run where it can be told."""
+
+
+def fail(text: str):
+    raise LeagueError(f"league: error: {text}")
+
+
+# -- configs: shipped, or the user's through --searchpath ------------------------------------
+
+
+def search_folders() -> list[Path]:
+    return [Path(p) for p in os.environ.get(SEARCHPATH_ENV, "").split(os.pathsep) if p]
+
+
+def use_searchpath(folders: list[Path]) -> None:
+    """Compose with the user's config folders (problem/, optimizer/, search/) from here on: in this
+    process and in every run it launches (the environment is inherited)."""
+    for folder in folders:
+        if not folder.is_dir():
+            fail(f"--searchpath {folder}: no such folder")
+    value = os.pathsep.join(str(f.resolve()) for f in folders)
+    if value:
+        from hydra.core.plugins import Plugins
+
+        from hydra_plugins.higbench_searchpath import HigbenchSearchPath
+
+        # Hydra finds plugins by listing hydra_plugins/ folders on the path; an editable install has
+        # none to list: registered here, and its folder's parent put on the launched runs' PYTHONPATH
+        Plugins.instance().register(HigbenchSearchPath)
+        plugins_parent = str(Path(inspect.getfile(HigbenchSearchPath)).resolve().parents[2])
+        paths = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        os.environ["PYTHONPATH"] = os.pathsep.join([*paths, plugins_parent] if plugins_parent not in paths else paths)
+        os.environ[SEARCHPATH_ENV] = value
+    else:
+        os.environ.pop(SEARCHPATH_ENV, None)
+
+
+def config_names(group: str) -> list[str]:
+    """The configs of a group (problem, optimizer): shipped and in the --searchpath folders."""
+    from higbench.config import config_dir
+
+    folders = [Path(config_dir()), *search_folders()]
+    return sorted({p.stem for folder in folders for p in (folder / group).glob("*.yaml")})
+
+
+def space_of(optimizer: str) -> dict:
+    """The search space of ``optimizer``: SEARCHPATH/search/<name>.yaml first, else conf/search/."""
+    for folder in search_folders():
+        if (folder / "search" / f"{optimizer}.yaml").is_file():
+            return league.load_space(optimizer, folder / "search")
+    try:
+        return league.load_space(optimizer)
+    except ValueError as exc:
+        where = " or ".join([*(f"{f}/search/" for f in search_folders()), "conf/search/"])
+        raise ValueError(f"{exc}; give it one in {where} (keys with low, high, log: see conf/search/adam.yaml)") from None
+
+
+def all_spaces() -> dict:
+    spaces = league.all_spaces()
+    for folder in search_folders():
+        if (folder / "search").is_dir():
+            spaces.update(league.all_spaces(folder / "search"))
+    return spaces
+
+
+def has_paper_settings(problem: str, optimizer: str) -> bool:
+    """Whether higbench ships the pair's settings (conf/problem_optimizer/: the paper's)."""
+    from higbench.config import config_dir
+
+    return (Path(config_dir()) / "problem_optimizer" / f"{problem}_{optimizer}.yaml").is_file()
+
+
+def problem_config(problem: str) -> dict:
+    """The composed problem node (targets, budget, variants) of ``problem``."""
+    from higbench.jobs import compose, hydra_conf
+
+    with hydra_conf():
+        return compose((f"problem={problem}",))["problem"]
+
+
+def has_validation(problem: str, node: dict) -> bool:
+    """Whether the problem's runs have a validation loss (what tuning reads): its config's
+    ``val_size``, or one given with --set for every optimizer of it."""
+    given = [v for scope, key, v in EXTRA if key.lstrip("+") == "problem.val_size" and scope in (None, problem)]
+    try:
+        return int(given[-1] if given else node.get("val_size") or 0) > 0
+    except ValueError:
+        return True  # not a number: the --set check names it
+
+
+# -- the protocol's flags ---------------------------------------------------------------------
+
+LEAGUE_KEYS = {"problem", "optimizer", "seed", "budget.seconds", "eval_every"}
+EXTRA: list[tuple[str | None, str, str]] = []  # (scope, key, value) of --set; set by main
+
+
+def extra_overrides(problem: str, optimizer: str) -> dict[str, str]:
+    """The --set overrides for one (problem, optimizer): unscoped ones, and those scoped to the
+    problem, the optimizer or ``problem/optimizer``; the narrower scope wins a key."""
+    ranks = {None: 0, problem: 1, optimizer: 1, f"{problem}/{optimizer}": 2}
+    chosen = sorted((ranks[scope], key, value) for scope, key, value in EXTRA if scope in ranks)
+    return {key: value for _, key, value in chosen}
+
+
+def base_overrides(problem: str, optimizer: str, seed: int, seconds: float) -> dict:
+    extra = extra_overrides(problem, optimizer)
+    return {"problem": problem, "optimizer": optimizer, "seed": seed, "budget.seconds": seconds,
+            "eval_every": float(f"{seconds / EVALUATIONS:.3g}"), **extra}  # fmt: skip
+
+
+def per_problem(text: str | None, flag: str, cast=float) -> dict[str | None, float]:
+    """``'4,toy=16'`` -> {None: 4, 'toy': 16}: a bare value is every problem's, ``problem=value``
+    one problem's. One line naming the flag on a bad item."""
+    values: dict[str | None, float] = {}
+    for item in filter(None, (text or "").split(",")):
+        name, _, value = item.rpartition("=") if "=" in item else (None, "", item)
+        try:
+            values[name or None] = cast(value)
+        except ValueError:
+            fail(f"{flag} {text}: {item!r} is not a number or problem=number")
+    return values
+
+
+def parse_set(item: str) -> tuple[str | None, str, str]:
+    """``'poisson/hig:device=cuda'`` -> ('poisson/hig', 'device', 'cuda'); ``'threads=1'`` -> (None, 'threads', '1')."""
+    head, sep, value = item.partition("=")
+    if not sep or not head.rpartition(":")[2]:
+        fail(f"--set {item}: expected [SCOPE:]KEY=VALUE")
+    scope, _, key = head.rpartition(":")
+    if key in LEAGUE_KEYS:
+        fail(f"--set {item}: {key} is the league's own (--problems, --optimizers, --seeds, --seconds)")
+    return scope or None, key, value
+
+
+def searchpath_of_set(items: list[str]) -> tuple[list[str], list[Path]]:
+    """``--set hydra.searchpath=[file://DIR,...]`` is --searchpath DIR: (the other items, the folders)."""
+    rest, folders = [], []
+    for item in items:
+        key, _, value = item.partition("=")
+        if key.lstrip("+") == "hydra.searchpath":
+            folders += [Path(v.strip().strip("'\"").removeprefix("file://")) for v in value.strip("[]").split(",") if v.strip()]
+        else:
+            rest.append(item)
+    return rest, folders
+
+
+def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
+    """Why ``optimizer`` cannot run on ``problem`` (the CLI's one line: SIP without an inverse
+    simulator, a package's missing extra), or None. ``with_set=False`` leaves the --set
+    overrides out: re-reading runs trained on a GPU needs none here."""
+    from higbench.config import validate
+    from higbench.errors import ConfigError
+    from higbench.jobs import compose, hydra_conf
+    from higbench.preflight import composition_error
+
+    overrides = [f"problem={problem}", f"optimizer={optimizer}"]
+    overrides += [f"{k}={v}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
+    try:
+        with hydra_conf():
+            cfg = compose(tuple(overrides))
+        validate(cfg)
+    except ConfigError as exc:
+        return str(exc)
+    except Exception as exc:  # Hydra's composition errors (an unknown key in --set): the CLI's line
+        return str(composition_error(exc, overrides))
+    return None
+
+
+def check_protocol(trials: dict, budgets: dict, problems: list[str], optimizers: list[str]) -> None:
+    """Before any run: each named problem and optimizer exists, each per-problem count or budget
+    and each --set scope names one, and counts and budgets are positive and finite. A typo in a
+    scope would otherwise train on the wrong device without a word. Names outside this league's
+    --problems pass: one set of flags serves each problem's command and the --report-only over all."""
+    known = {"problem": config_names("problem"), "optimizer": config_names("optimizer")}
+    where = "conf/{}/" + "".join(f" or {f}/{{}}/" for f in search_folders())
+    for group, names in (("problem", problems), ("optimizer", optimizers)):
+        for name in names:
+            if name not in known[group]:
+                fail(f"--{group}s {name}: no {group} {name} ({where.format(*[group] * (1 + len(search_folders())))}: "
+                     f"{', '.join(known[group])})")  # fmt: skip
+    problems, optimizers = sorted({*problems, *known["problem"]}), sorted({*optimizers, *known["optimizer"]})
+    for flag, values in (("--trials", trials), ("--seconds", budgets)):
+        for name, value in values.items():
+            if name is not None and name not in problems:
+                fail(f"{flag} {name}={value:g}: no problem {name} (conf/problem/: {', '.join(problems)})")
+            if not (value > 0 and math.isfinite(value)):
+                fail(f"{flag} {value:g}: must be positive and finite")
+    for scope, key, value in EXTRA:
+        names = scope.split("/") if scope else []
+        ok = (
+            not names
+            or (len(names) == 1 and names[0] in problems + optimizers)
+            or (len(names) == 2 and names[0] in problems and names[1] in optimizers)
+        )
+        if not ok:
+            why = "is not a problem, an optimizer or problem/optimizer (conf/problem/, conf/optimizer/)"
+            fail(f"--set {scope}:{key}={value}: {scope} {why}")
+
+
+def check_set(problem: str, optimizers: list[str]) -> None:
+    """A --set that makes an optimizer refuse a problem it runs without it is the user's value,
+    not the optimizer's limit: one line naming it, before any run."""
+    for optimizer in optimizers:
+        extra = extra_overrides(problem, optimizer)
+        if extra and refusal(problem, optimizer, with_set=False) is None and (why := refusal(problem, optimizer)):
+            given = " ".join(f"{k}={v}" for k, v in extra.items())
+            fail(f"--set ({problem}, {optimizer}: {given}): {why}")
+
+
+# -- the jobs ---------------------------------------------------------------------------------
+
+
+def variant_overrides(variant: str) -> dict:
+    return dict(item.split("=", 1) for item in variant.split())
+
+
+def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float, studies: int) -> list[Job]:
+    """Each study's trials (``league.trial_points``) on its tuning seed (``league.tuning_seed``),
+    named ``tune/<problem>/<optimizer>/<study>/<trial>``."""
+    space = space_of(optimizer)
+    jobs = []
+    for study in range(studies):
+        seed = league.tuning_seed(study)
+        for i, trial in enumerate(league.trial_points(optimizer, space, trials, study)):
+            overrides = {**base_overrides(problem, optimizer, seed, seconds), **trial}
+            jobs.append(Job("league", f"tune/{problem}/{optimizer}/{study}/{i}", overrides, seed))
+    return jobs
+
+
+def study_and_trial(job: Job) -> tuple[int | None, int | None]:
+    parts = job.sweep.split("/")
+    return (int(parts[3]), int(parts[4])) if parts[0] == "tune" and len(parts) == 5 else (None, None)
+
+
+def choose(jobs: list[Job]) -> dict | None:
+    """The tuned setting: the overrides of the trial with the lowest validation loss (over every
+    study's trials), read from its run files; None when no trial completed."""
+    from higbench.results.index import load_runs
+
+    done = [j for j in jobs if j.path is not None]
+    if not done:
+        return None
+    runs = load_runs([j.path for j in done])
+    by_path = {str(Path(j.path)): j for j in done}
+    runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
+    best = league.best_trial(runs)
+    if best is None:
+        return None
+    job = by_path[str(Path(best["path"]))]
+    space = space_of(str(job.overrides["optimizer"]))
+    return {k: v for k, v in job.overrides.items() if k in space}
+
+
+def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants) -> list[Job]:
+    """The setting (tuned, or the shipped one for ``setting=None``: the paper's where
+    conf/problem_optimizer/ has the pair, else the defaults) on fresh seeds, on the problem and each
+    held-out variant."""
+    role = "confirm" if setting is not None else "paper" if has_paper_settings(problem, optimizer) else "default"
+    jobs = []
+    for variant in ["", *variants]:
+        for seed in seeds:
+            overrides = {**base_overrides(problem, optimizer, seed, seconds), **variant_overrides(variant), **(setting or {})}
+            jobs.append(Job("league", f"{role}/{problem}/{variant or 'base'}/{optimizer}", overrides, seed))
+    return jobs
+
+
+# -- running ----------------------------------------------------------------------------------
+
+
+class Runner:
+    """Launches a phase's jobs on the chosen launcher (``jobs.run_missing``: every done run is
+    reused) and keeps the league's count: runs done of all the protocol's, time left."""
+
+    def __init__(self, root: Path, n_jobs: int, launcher: str, overrides: list[str], progress):
+        self.root, self.n_jobs, self.launcher, self.overrides, self.progress = root, n_jobs, launcher, overrides, progress
+        self.done = 0
+        self.left_seconds = 0.0
+
+    def run(self, jobs: list[Job], phase: str) -> None:
+        """Stops the league when some are still not done (interrupted, failed): a setting chosen
+        from part of a tuning, or a next problem started after a Ctrl-C, is not what was asked for."""
+        safe_dir(self.root / "figures-runs", create=True)  # a planted link there would carry the runs out of the root
+        kwargs = {"n_jobs": self.n_jobs, "launcher": self.launcher, "log": _log}
+        accepts = inspect.signature(run_missing).parameters
+        if "launcher_overrides" in accepts or any(p.kind is p.VAR_KEYWORD for p in accepts.values()):
+            kwargs["launcher_overrides"] = list(self.overrides)
+        elif self.overrides:  # before run_missing took launcher_overrides: the Launcher carries them
+            from higbench.jobs import Launcher
+
+            kwargs["launcher"] = Launcher(self.launcher, tuple(self.overrides))
+        left = run_missing(jobs, self.root, **kwargs)
+        self.count(jobs, left)
+        if left:
+            refused = [j for j in left if j.status == "failed"]
+            hint = (
+                f"{len(refused)} failed: see the launch.log under {self.root / 'figures-runs'}; "
+                if refused
+                else "the same command continues them, reusing every run already done"
+            )
+            fail_stop(f"league: {len(left)} {phase} run(s) not done ({hint})")
+
+    def count(self, jobs: list[Job], left: list[Job]) -> None:
+        self.done += len(jobs) - len(left)
+        self.left_seconds -= sum(float(j.overrides.get("budget.seconds") or 0) for j in jobs)
+        self.progress.update(self.done, max(0.0, self.left_seconds) / max(1, self.n_jobs))
+
+
+def fail_stop(text: str):
+    raise SystemExit(text)
+
+
+def _log(text: str) -> None:
+    for prefix in ("[jobs]", "[figures]"):  # the launcher's lines, as the league's
+        text = text.replace(prefix, "[league]", 1)
+    print(text, file=sys.stderr)
+
+
+def launcher_overrides(items: list[str]) -> list[str]:
+    """``--launcher-set partition=gpu`` -> ``hydra.launcher.partition=gpu``."""
+    out = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            fail(f"--launcher-set {item}: expected KEY=VALUE (partition=gpu, timeout_min=60, array_parallelism=32)")
+        out.append(f"{key if key.startswith('hydra.') else 'hydra.launcher.' + key}={value}")
+    return out
+
+
+# -- the machine ------------------------------------------------------------------------------
+
+
+def calibration() -> dict:
+    """One fixed benchmark, so that tables from different machines can be read side by side:
+    the best of 5 timings of 50 float32 256x256 matrix products and one float64 256x256 SVD,
+    on one thread; with the load average at the time."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    gen = torch.Generator().manual_seed(0)
+    a = torch.randn(256, 256, generator=gen)
+    m = torch.randn(256, 256, generator=gen, dtype=torch.float64)
+    matmul, svd = [], []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(50):
+            a @ a
+        matmul.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        torch.linalg.svd(m)
+        svd.append(time.perf_counter() - t0)
+    torch.set_num_threads(threads)
+    return {"when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "matmul_50x256_s": min(matmul), "svd_256_f64_s": min(svd),
+            "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
+
+
+hardware = tables.hardware
+
+
+def machine(runs: pd.DataFrame) -> list[dict]:
+    """Per problem and hardware, what the runs had of the machine: their CPU share (CPU seconds
+    over wall seconds per thread; 1 = a core of their own), the 1-minute load average at their end,
+    threads, revisions and when they trained. Values that are not what they should be (a file from
+    elsewhere) are left out, never a crash."""
+    if runs.empty:
+        return []
+
+    def column(group: pd.DataFrame, name: str) -> pd.Series:
+        return group[name] if name in group else pd.Series(dtype=object)
+
+    def number(group: pd.DataFrame, name: str) -> pd.Series:
+        return pd.to_numeric(column(group, name), errors="coerce").dropna()
+
+    groups = []
+    where_all = runs["hardware"] if "hardware" in runs else hardware(runs)
+    for (problem, where), group in runs.groupby([runs["problem.name"].astype(str), where_all], sort=True):
+        share = number(group, "env.cpu_share")
+        if "env.load_1min" in group:
+            load = number(group, "env.load_1min")
+        else:
+            load = column(group, "env.load_at_finish").map(tables.load_1min).dropna()
+        threads = number(group, "env.torch_threads").astype(int)
+        when = [str(v) for v in (*column(group, "started").dropna(), *column(group, "finished").dropna())]
+        groups.append({
+            "problem": problem, "hardware": where, "runs": len(group),
+            "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
+            "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
+            "load_1min_median": round(float(load.median()), 2) if len(load) else None,
+            "threads_per_run": sorted({int(t) for t in threads}),
+            "revisions": sorted(set(column(group, "env.git_revision").dropna().astype(str).str[:12])),
+            "trained": [min(when), max(when)] if when else None,
+        })  # fmt: skip
+    return groups
+
+
+def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
+    """The calibrations earlier league invocations wrote beside their runs (``ROOT/manifests/``,
+    or a league.json they left under the root, as a run on another machine brings back), each
+    with where it was read (the report's own ``out`` left out). Never through a link, never a FIFO;
+    a file that is not a manifest is skipped with one line."""
+    found = []
+    for root in roots:
+        manifests = sorted((root / "manifests").glob("*.json")) if safe_dir(root / "manifests") else []
+        paths = [p for p in sorted({*manifests, *root.rglob("league.json")}) if not p.parent.resolve() == out.resolve()]
+        for path, content in read_json_files(paths):
+            entries = content.get("calibration") if isinstance(content, dict) else None
+            if not isinstance(entries, list):
+                if entries is not None:
+                    print(f"[league] skipped {path}: its calibration is not a list", file=sys.stderr)
+                continue
+            found += [{**entry, "file": str(path.relative_to(root))} for entry in entries if isinstance(entry, dict)]
+    return found
+
+
+# -- outputs ----------------------------------------------------------------------------------
+
+
+PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds")  # per problem; another optimizer only adds rows
+
+
+def check_out(out: Path, root: Path, protocol: dict) -> None:
+    """Before anything is created: ``--out`` is a folder (or absent), and if it holds a league's
+    report, that league's (the same root, the same protocol for every problem both name). Another
+    league's output is never overwritten silently."""
+    if os.path.lexists(out) and (os.path.islink(out) or not out.is_dir()):
+        fail(f"--out {out}: {'a symbolic link' if os.path.islink(out) else 'an existing file'}; --out names a folder")
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    manifest = next((c for _, c in read_json_files([out / "league.json"])), None)
+    theirs = manifest.get("protocol") if isinstance(manifest, dict) else None
+    if not isinstance(theirs, dict):
+        fail(f"--out {out}: holds files but no league report of this command (league.json with a protocol); give another --out")
+    if theirs.get("root") != protocol["root"]:
+        fail(f"--out {out}: holds the report of the league of another root ({theirs.get('root')}); give another --out")
+    for problem, settings in (protocol.get("problems") or {}).items():
+        old = (theirs.get("problems") or {}).get(problem)
+        old = old if isinstance(old, dict) else {}
+        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and old[k] != settings[k]]
+        if diff:
+            diff = ", ".join(diff)
+            fail(f"--out {out}: holds a league of another protocol for {problem} ({diff}); give another --out or --root")
+
+
+def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, reached: pd.DataFrame) -> None:
+    """league.txt, league.json, runs.csv and the profile figure into ``out`` (links refused)."""
+    safe_dir(out, create=True)
+    if len(reached):  # the profile needs targets (a problem of your own may declare none)
+        # drawn apart, then moved in: a link planted in out is replaced, not written through
+        plots = out / f".plots-{os.getpid()}"
+        shutil.rmtree(plots, ignore_errors=True)
+        plots.mkdir()
+        try:
+            for path in league.plot_league(reached, league.interval_table(scored, reached), plots):
+                os.replace(path, out / path.name)
+        finally:
+            shutil.rmtree(plots, ignore_errors=True)
+    if len(scored):
+        columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
+                   "config_id", "run", "hardware", "root"]  # fmt: skip
+        rows = scored[[c for c in columns if c in scored]].sort_values(["task", "league_setting", "seed"])
+        write_text(out / "runs.csv", rows.to_csv(index=False))
+    write_text(out / "league.txt", text)
+    write_text(out / "league.json", json.dumps(manifest, indent=1, default=str) + "\n")
+
+
+def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
+    """The scores of the roots' tables (``tables.read``: merged when several), written to ``out``."""
+    runs, curves = tables.read(roots)
+    spaces = all_spaces()
+    try:
+        text = league.format_league(runs, curves, spaces, tuning_seeds)
+        scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
+    except ValueError as exc:
+        fail(str(exc))
+    manifest["machine"] = machine(runs)
+    manifest["recorded_calibration"] = recorded_calibrations(roots, out)
+    lines = ["machine: " + ", ".join(f"{k} {v}" for k, v in group.items()) for group in manifest["machine"]]
+    text = "\n".join([*lines, text])
+    write_report(out, text, manifest, scored, reached)
+    return text
+
+
+# -- the command ------------------------------------------------------------------------------
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    doc = __doc__.split("\n\nPer-problem")[0]
+    p = argparse.ArgumentParser(prog="higbench-league", description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--problems", default="toy,oscillator", help="comma-separated (default: toy,oscillator)")
+    p.add_argument("--optimizers", default=",".join(DEFAULT_OPTIMIZERS),
+                   help="comma-separated; each needs a search space, conf/search/<name>.yaml (default: all shipped)")  # fmt: skip
+    p.add_argument("--paper", default="hig,gn,adam",
+                   help="optimizers also run at their shipped settings: 'NAME (paper)' rows, or 'NAME (default)' where "
+                   "higbench has no paper settings for the problem (default: hig,gn,adam)")  # fmt: skip
+    p.add_argument("--trials", default="6", help="Sobol trials per study and (problem, optimizer), the same for every "
+                   "optimizer; '4,toy=16': 16 on the toy (default: 6)")  # fmt: skip
+    studies = "tuning studies, each its own trial points and tuning seed (default: 2)"
+    p.add_argument("--studies", type=int, default=2, help=studies)
+    p.add_argument("--seeds", type=int, default=3, help="confirmation seeds 0..N-1 (never a tuning seed; default: 3)")
+    p.add_argument("--seconds", help="training-clock budget per run (default: each problem's league_seconds); "
+                   "'toy=10': the toy's")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="[SCOPE:]KEY=VALUE",
+                   help="an override for every job, or for those of one problem or optimizer (SCOPE); repeatable")  # fmt: skip
+    p.add_argument("--searchpath", action="append", default=[], type=Path, metavar="DIR",
+                   help="a folder of your own configs (DIR/problem/, DIR/optimizer/, DIR/search/ for search spaces), as "
+                   "hydra.searchpath=[file://DIR]; the problem's module goes on PYTHONPATH; repeatable")  # fmt: skip
+    p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
+    p.add_argument("--root", type=Path, action="append", default=None,
+                   help="where the runs and their tables go (and are reused from); default outputs/league in the "
+                   "current folder; repeat with --report-only to merge the tables of several roots")  # fmt: skip
+    p.add_argument("--out", type=Path, default=None, help="league.txt, league.json, runs.csv, profile.png (default: ROOT/report)")
+    p.add_argument("--jobs", type=int, default=1, help="runs at once on this machine (1: the budgets are not shared)")
+    p.add_argument("--launcher", choices=LAUNCHERS, default=None,
+                   help="Hydra launcher of the runs (default: basic with --jobs 1, else joblib); submitit_slurm submits each "
+                   "phase as one job array")  # fmt: skip
+    p.add_argument("--launcher-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a hydra.launcher.KEY override: partition=gpu, timeout_min=60, gpus_per_node=1, "
+                   "array_parallelism=32; repeatable")  # fmt: skip
+    p.add_argument("--plan", action="store_true", help="print the runs, training hours and hardware per task; run nothing")
+    only = "train nothing; score the tables under --root (no run files needed)"
+    p.add_argument("--report-only", action="store_true", help=only)
+    return p.parse_args(argv)
+
+
+def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, nodes) -> dict:
+    """What makes a league this league (kept in league.json; ``check_out`` compares it)."""
+    per = {}
+    for problem in problems:
+        per[problem] = {
+            "optimizers": optimizers, "paper": paper, "trials": trials.get(problem, trials.get(None)),
+            "studies": args.studies, "seeds": args.seeds, "seconds": seconds_of(problem, budgets, nodes[problem]),
+            "set": {o: extra_overrides(problem, o) for o in optimizers},
+        }  # fmt: skip
+    return {"root": str(root.resolve()), "problems": per}
+
+
+def seconds_of(problem: str, budgets: dict, node: dict) -> float | None:
+    return budgets.get(problem, budgets.get(None)) or node.get("league_seconds")
+
+
+def span(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
+def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
+    """Runs, training hours and hardware per task, before anything runs."""
+    lines, total_runs, total_s = [], 0, 0.0
+    for problem, jobs in planned:
+        seconds = sum(job_seconds(j) for j in jobs)
+        devices = sorted({str(j.overrides.get("device", "cpu")) for j in jobs})
+        launched = dict(o.split("=", 1) for o in LAUNCH_OVERRIDES)  # what every launched run gets unless --set says otherwise
+        threads = sorted({str(j.overrides.get("threads", launched["threads"])) for j in jobs})
+        tune = sum(j.sweep.startswith("tune/") for j in jobs)
+        lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({tune} tuning, {len(jobs) - tune} confirmation), "
+                     f"{span(seconds)} of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
+        total_runs += len(jobs)
+        total_s += seconds
+    lines.append(f"[league] plan: {total_runs} runs, {span(total_s)} of training (budgets x runs), about "
+                 f"{span(total_s / max(1, n_jobs))} wall clock at --jobs {n_jobs} "
+                 "(evaluations and start-up come on top)")  # fmt: skip
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    try:
+        return _main(argv)
+    except LeagueError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    except ROOT_FILE_ERRORS as exc:
+        print(f"league: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _main(argv=None) -> int:
+    args = parse_args(argv)
+    roots = args.root or [Path("outputs") / "league"]
+    root = roots[0]
+    if len(roots) > 1 and not args.report_only:
+        fail("--root given more than once: merging several roots' tables is --report-only's")
+    out = args.out or root / "report"
+    set_items, set_folders = searchpath_of_set(args.set)
+    use_searchpath([*args.searchpath, *set_folders])
+    problems = [p for p in args.problems.split(",") if p]
+    optimizers = [o for o in args.optimizers.split(",") if o]
+    paper = [o for o in args.paper.split(",") if o in optimizers]
+    trials = per_problem(args.trials, "--trials", int)
+    budgets = per_problem(args.seconds, "--seconds")
+    EXTRA[:] = [parse_set(item) for item in set_items]
+    overrides = launcher_overrides(args.launcher_set)
+    launcher = args.launcher or ("basic" if args.jobs == 1 else "joblib")
+    for flag, value in (("--studies", args.studies), ("--seeds", args.seeds), ("--jobs", args.jobs)):
+        if value < 1:
+            fail(f"{flag} {value}: must be at least 1")
+    check_protocol(trials, budgets, problems, optimizers)
+    seeds = list(range(args.seeds))
+    tuning_seeds = [league.tuning_seed(s) for s in range(args.studies)]
+    if set(seeds) & set(tuning_seeds):
+        fail(f"--seeds {args.seeds}: overlaps the tuning seeds {tuning_seeds}")
+    for o in optimizers:
+        try:
+            space_of(o)  # a missing or bad search space stops the league before any run
+        except ValueError as exc:
+            fail(str(exc))
+    if args.report_only and not any(safe_dir(r / tables.TABLES_DIR) or safe_dir(r / "figures-runs") for r in roots):
+        fail(f"--root {' '.join(map(str, roots))}: no league runs or tables there")
+    nodes = {}
+    for problem in problems:
+        nodes[problem] = problem_config(problem)
+        if not trials.get(problem, trials.get(None)):
+            fail(f"--trials {args.trials}: no count for problem={problem}")
+        if not seconds_of(problem, budgets, nodes[problem]):
+            fail(f"problem={problem}: no problem.league_seconds; give --seconds")
+        if not has_validation(problem, nodes[problem]):
+            fail(f"problem={problem}: no validation set (problem.val_size is 0), and tuning reads the validation loss; "
+                 f"give one in its YAML or --set {problem}:++problem.val_size=256")  # fmt: skip
+        if not args.report_only:
+            check_set(problem, optimizers)
+    protocol = protocol_of(args, root, problems, optimizers, paper, trials, budgets, nodes)
+    refused = {p: {o: why for o in optimizers if (why := refusal(p, o, with_set=False))} for p in problems}
+    if args.plan:
+        planned = []
+        for problem in problems:
+            node, usable = nodes[problem], [o for o in optimizers if o not in refused[problem]]
+            seconds, n = seconds_of(problem, budgets, node), trials.get(problem, trials.get(None))
+            variants = list(node.get("held_out") or [])[: args.variants]
+            jobs = [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
+            jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
+            jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+            planned.append((problem, jobs))
+        print(plan_text(planned, args.jobs))
+        return 0
+    check_out(out, root, protocol)
+    safe_dir(root, create=True)
+    return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
+                      launcher, overrides, protocol, argv)  # fmt: skip
+
+
+def planned_counts(plans, paper: list[str], studies: int, seeds: int) -> tuple[int, float]:
+    """(runs, training seconds) of the whole protocol: tuning, confirmation and the shipped settings
+    (every tuned optimizer assumed to find a setting)."""
+    runs, seconds_total = 0, 0.0
+    for seconds, n, variants, usable in plans:
+        count = len(usable) * (n * studies + (1 + len(variants)) * seeds)
+        count += len([o for o in paper if o in usable]) * (1 + len(variants)) * seeds
+        runs, seconds_total = runs + count, seconds_total + count * seconds
+    return runs, seconds_total
+
+
+def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
+               launcher, overrides, protocol, argv) -> int:  # fmt: skip
+    from higbench.runner.progress import CountProgress
+
+    root = roots[0]
+    reading_runs = not args.report_only or (len(roots) == 1 and safe_dir(root / "figures-runs") is not None)
+    manifest: dict = {"command": " ".join(["higbench-league", *(argv if argv is not None else sys.argv[1:])]),
+                      "protocol": protocol, "searchpath": [str(f) for f in search_folders()],
+                      "tuning_seeds": tuning_seeds, "confirmation_seeds": seeds, "evaluations_per_run": EVALUATIONS,
+                      "problems": {}, "calibration": [] if args.report_only else [calibration()]}  # fmt: skip
+    quiet = any(scope is None and key == "progress" and value.lower() == "false" for scope, key, value in EXTRA)
+    all_jobs: list[tuple[str, Job]] = []
+    plans = {}
+    for problem in problems:
+        node = nodes[problem]
+        seconds, n = seconds_of(problem, budgets, node), trials.get(problem, trials.get(None))
+        variants = list(node.get("held_out") or [])[: args.variants]
+        usable = [o for o in optimizers if o not in refused[problem]]
+        for o, why in refused[problem].items():
+            print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
+        plans[problem] = (seconds, n, variants, usable)
+    total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    progress = CountProgress(not quiet and not args.report_only, "league", total)
+    runner = Runner(root, args.jobs, launcher, overrides, progress)
+    runner.left_seconds = runner_seconds
+    progress.update(0, runner.left_seconds / args.jobs)
+
+    def phase(jobs: list[Job], name: str) -> None:
+        if args.report_only:
+            resolve(jobs, run_index(root))
+        else:
+            runner.run(jobs, name)
+
+    try:
+        for problem in problems if reading_runs else []:
+            seconds, n, variants, usable = plans[problem]
+            tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
+            flat = [j for jobs in tune.values() for j in jobs]
+            phase(flat, f"{problem} tuning")
+            chosen = {o: choose(jobs) for o, jobs in tune.items()}
+            confirm = [j for o in usable if chosen[o] is not None
+                       for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
+            confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+            phase(confirm, f"{problem} confirmation")
+            manifest["problems"][problem] = {"seconds": seconds, "trials": n, "studies": args.studies,
+                                             "targets": nodes[problem].get("targets"), "held_out": variants,
+                                             "set": {o: extra_overrides(problem, o) for o in usable},
+                                             "chosen": chosen, "left_out": refused[problem]}  # fmt: skip
+            all_jobs += [("tune", j) for j in flat] + [(j.sweep.split("/")[0], j) for j in confirm]
+    finally:
+        progress.close()
+    if not args.report_only:
+        manifest["calibration"].append(calibration())
+    manifest["runs"] = [{"role": role, "job": j.sweep, "study": study_and_trial(j)[0], "trial": study_and_trial(j)[1],
+                         "seed": j.seed, "identity": j.identity, "status": j.status,
+                         "path": str(Path(j.path).resolve().relative_to(root.resolve())) if j.path else None}
+                        for role, j in all_jobs]  # fmt: skip
+    if not args.report_only:  # kept beside the runs: a later --report-only, anywhere, reads it back
+        stamp = time.strftime("%Y-%m-%dT%H-%M-%S") + f"-{os.getpid()}"
+        text = json.dumps(manifest, indent=1, default=str) + "\n"
+        write_text(safe_dir(root / "manifests", create=True) / f"{stamp}.json", text)
+    if safe_dir(root / "figures-runs"):
+        tables.export(root, {e["identity"]: e for e in manifest["runs"] if e["identity"]})
+    print(report(roots, out, manifest, tuning_seeds))
+    missing = [j for _, j in all_jobs if not j.done]
+    if missing:
+        print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)
+    return 0

@@ -1,0 +1,277 @@
+"""The league's command (higbench.league.driver) without training: its machine record, the files
+it reads and writes under a root (links, FIFOs, foreign files), a user's own problem and
+optimizer, its outputs, launchers and plan. Runs are faked (``run_missing``) or hand-made."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from higbench.league import driver, tables
+from higbench.league.files import RootFileError, safe_dir, write_text
+
+HEAT = Path(__file__).resolve().parents[2] / "examples" / "heat"
+
+
+@pytest.fixture
+def no_runs(monkeypatch):
+    """run_missing faked (every job returned as done with no file) and no calibration: what the
+    driver launched, with which keywords."""
+    calls = []
+
+    def fake(jobs, root, **kw):
+        calls.append((list(jobs), kw))
+        return []
+
+    monkeypatch.setattr(driver, "run_missing", fake)
+    monkeypatch.setattr(driver, "calibration", lambda: {})
+    monkeypatch.setenv(driver.SEARCHPATH_ENV, "")  # restored after the test: --searchpath sets it
+    monkeypatch.setenv("PYTHONPATH", os.environ.get("PYTHONPATH", ""))
+    return calls
+
+
+# -- the machine record (issue 47: the load; issue 51 break 11: foreign values) ----------------
+
+
+def test_the_load_is_the_first_load_average_not_its_first_character():
+    runs = pd.DataFrame({"problem.name": ["toy"] * 3, "env.device": ["cpu"] * 3, "env.cpu_count": [16] * 3,
+                         "env.load_at_finish": ["11.87 11.99 10.86", "12.50 11.00 10.00", "9.25 9.00 9.00"]})  # fmt: skip
+    (group,) = driver.machine(runs)
+    assert group["load_1min_median"] == 11.87  # the old parse read '1', '1', '9': a median of 1.0
+
+
+def test_foreign_values_in_run_rows_are_left_out_not_a_crash():
+    """A float where the load's string belongs, ``started`` as an int beside a string, a share that
+    is text: the machine line is written from what can be read."""
+    runs = pd.DataFrame({
+        "problem.name": ["toy", "toy"], "env.device": ["cpu", "cpu"], "env.cpu_count": [2, 2],
+        "env.load_at_finish": [3.5, "2.50 1 1"], "env.cpu_share": ["lots", 0.5],
+        "started": [12, "2026-01-01T00:00:00"], "finished": ["2026-01-01T00:01:00", None],
+    })  # fmt: skip
+    (group,) = driver.machine(runs)
+    assert group["load_1min_median"] == 3.0 and group["cpu_share_median"] == 0.5 and group["trained"] is not None
+
+
+def test_foreign_manifests_are_skipped_with_a_line_naming_each(tmp_path, capsys):
+    (tmp_path / "manifests").mkdir()
+    (tmp_path / "manifests" / "a.json").write_text(json.dumps({"calibration": 5}))
+    (tmp_path / "manifests" / "b.json").write_text("[" * 100_000 + "]" * 100_000)  # RecursionError in json
+    (tmp_path / "manifests" / "c.json").write_text(json.dumps({"calibration": [{"matmul_50x256_s": 0.5}]}))
+    found = driver.recorded_calibrations([tmp_path], tmp_path / "report")
+    assert found == [{"matmul_50x256_s": 0.5, "file": "manifests/c.json"}]
+    err = capsys.readouterr().err
+    assert "a.json: its calibration is not a list" in err and "b.json: nested too deeply" in err
+
+
+def test_a_seed_that_is_not_a_number_leaves_its_run_out_of_the_table_with_a_line(tmp_path, capsys):
+    from test_league_tables import league_root
+
+    jobs = league_root(tmp_path, [0, 1])
+    table = tables.runs_table(tmp_path, _with_bad_seed(tmp_path), tables._roles(tmp_path, jobs))
+    assert len(table) == 3 and "seed 'zero'" in capsys.readouterr().err
+
+
+def _with_bad_seed(root: Path) -> pd.DataFrame:
+    from higbench.results.index import load_runs
+
+    runs = load_runs(root, figure_runs=True)
+    runs["seed"] = runs["seed"].astype(object)
+    runs.loc[0, "seed"] = "zero"
+    return runs
+
+
+# -- links and FIFOs under a root (issue 51 breaks 1-3) ---------------------------------------
+
+
+def test_a_linked_manifest_brings_no_file_from_outside_the_root(tmp_path, capsys):
+    secret = tmp_path / "elsewhere.json"
+    secret.write_text(json.dumps({"calibration": [{"secret": 1}]}))
+    root = tmp_path / "root"
+    (root / "manifests").mkdir(parents=True)
+    (root / "manifests" / "x.json").symlink_to(secret)
+    (root / "sub").mkdir()
+    (root / "sub" / "league.json").symlink_to(secret)
+    assert driver.recorded_calibrations([root], root / "report") == []
+    assert capsys.readouterr().err.count("a symbolic link") == 2
+
+
+def test_a_linked_manifests_folder_is_neither_read_nor_written_through(tmp_path):
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "m.json").write_text(json.dumps({"calibration": [{"secret": 1}]}))
+    root = tmp_path / "root"
+    root.mkdir()
+    (root / "manifests").symlink_to(outside)
+    assert driver.recorded_calibrations([root], root / "report") == []
+    with pytest.raises(RootFileError, match="manifests: a symbolic link"):
+        write_text(safe_dir(root / "manifests", create=True) / "new.json", "{}")
+    assert sorted(p.name for p in outside.iterdir()) == ["m.json"]
+
+
+def test_a_fifo_named_league_json_never_hangs_the_report(tmp_path, capsys):
+    root = tmp_path / "root"
+    (root / "old").mkdir(parents=True)
+    os.mkfifo(root / "old" / "league.json")
+    fired = []
+
+    def alarm(*_):  # the old reader blocked in open() until this, then swallowed it (except OSError)
+        fired.append(1)
+        raise TimeoutError("the report hung on a FIFO")
+
+    previous = signal.signal(signal.SIGALRM, alarm)
+    signal.alarm(5)
+    try:
+        assert driver.recorded_calibrations([root], root / "report") == []
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    assert not fired and "not a regular file" in capsys.readouterr().err
+    # and written over: replaced by a file, never opened for writing (no reader: that would block or fail)
+    write_text(root / "old" / "league.json", "{}\n")
+    assert (root / "old" / "league.json").read_text() == "{}\n"
+
+
+def test_a_link_planted_in_the_report_folder_is_replaced_not_written_through(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "league.txt").symlink_to(victim)
+    driver.write_report(out, "the league\n", {"protocol": {}}, pd.DataFrame(), pd.DataFrame())
+    assert victim.read_text() == "mine\n" and (out / "league.txt").read_text() == "the league\n"
+
+
+# -- outputs: under the root, never another league's ------------------------------------------
+
+
+def test_outputs_default_to_outputs_league_under_the_current_folder(tmp_path, monkeypatch, no_runs):
+    monkeypatch.chdir(tmp_path)
+    args = driver.parse_args([])
+    assert args.root is None and args.out is None  # resolved in main: outputs/league, ROOT/report
+    assert driver.main(["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1",
+                        "--seeds", "1", "--seconds", "1"]) == 0  # fmt: skip
+    assert (tmp_path / "outputs" / "league" / "report" / "league.json").is_file()
+    manifest = json.loads((tmp_path / "outputs" / "league" / "report" / "league.json").read_text())
+    assert manifest["protocol"]["root"] == str((tmp_path / "outputs" / "league").resolve())
+
+
+def test_another_league_s_report_is_never_overwritten(tmp_path, no_runs, capsys):
+    published = tmp_path / "published"
+    published.mkdir()
+    (published / "league.json").write_text(json.dumps({"calibration": []}))  # a report of the old script: no protocol
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1"]
+    root = ["--root", str(tmp_path / "runs")]
+    assert driver.main([*argv, "--seconds", "1", *root, "--out", str(published)]) == 2
+    assert "holds files but no league report" in capsys.readouterr().err
+    assert json.loads((published / "league.json").read_text()) == {"calibration": []} and not (tmp_path / "runs").exists()
+    assert driver.main([*argv, "--seconds", "1", *root]) == 0
+    capsys.readouterr()
+    assert driver.main([*argv, "--seconds", "2", *root]) == 2  # the same root and problem, another budget
+    assert "another protocol for toy (seconds 1.0 -> 2.0)" in capsys.readouterr().err
+
+
+# -- your own problem and optimizer ---------------------------------------------------------
+
+
+def test_a_user_s_problem_and_search_space_through_searchpath(tmp_path, monkeypatch, no_runs, capsys):
+    """A problem outside conf/ was a raw Hydra traceback ("Could not find 'problem/heat'");
+    through --searchpath it composes, its shipped-settings rows are 'default' (higbench has no
+    paper settings for it), and an optimizer of the user's takes its space from DIR/search/."""
+    conf = tmp_path / "conf"
+    (conf / "optimizer").mkdir(parents=True)
+    (conf / "problem").mkdir()
+    heat = (HEAT / "conf" / "problem" / "heat.yaml").read_text()
+    assert "val_size: 64" in heat  # the example declares its validation set; this copy drops it
+    (conf / "problem" / "heat.yaml").write_text(heat.replace("val_size: 64", "val_size: 0"))
+    (conf / "optimizer" / "mysgd.yaml").write_text(yaml.safe_dump({"_target_": "torch.optim.SGD", "name": "mysgd", "lr": 0.01}))
+    monkeypatch.syspath_prepend(str(HEAT))
+    argv = ["--searchpath", str(conf), "--problems", "heat", "--trials", "1", "--studies", "1", "--seeds", "1",
+            "--seconds", "1", "--root", str(tmp_path / "runs")]  # fmt: skip
+    assert driver.main([*argv, "--optimizers", "adam"]) == 2  # a problem without a validation set
+    assert "problem=heat: no validation set" in capsys.readouterr().err
+    argv += ["--set", "heat:++problem.val_size=64"]
+    assert driver.main([*argv, "--optimizers", "adam,mysgd"]) == 2
+    assert "optimizer=mysgd: no search space" in capsys.readouterr().err and not (tmp_path / "runs").exists()
+    (conf / "search").mkdir()
+    (conf / "search" / "mysgd.yaml").write_text(yaml.safe_dump({"space": {"optimizer.lr": {"low": 1e-3, "high": 1e-1}}}))
+    assert driver.main([*argv, "--optimizers", "adam,mysgd", "--paper", "adam"]) == 0
+    launched = [j for jobs, _ in no_runs for j in jobs]
+    assert {j.overrides["problem"] for j in launched} == {"heat"}
+    assert {j.sweep.split("/")[0] for j in launched} == {"tune", "default"}  # no tuned setting (faked runs): defaults only
+    assert any(j.overrides["optimizer"] == "mysgd" and "optimizer.lr" in j.overrides for j in launched)
+
+
+def test_shipped_settings_are_paper_only_where_higbench_has_the_paper_s():
+    assert driver.has_paper_settings("toy", "hig") and not driver.has_paper_settings("heat", "hig")
+    jobs = driver.confirmation_jobs("toy", "hig", None, [0], 1.0, [])
+    assert jobs[0].sweep == "paper/toy/base/hig"
+
+
+# -- launchers, plan, progress -----------------------------------------------------------------
+
+
+def test_launcher_flags_reach_run_missing(tmp_path, no_runs):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "2", "--seeds", "1",
+            "--seconds", "1", "--root", str(tmp_path), "--launcher", "submitit_slurm", "--launcher-set", "partition=gpu",
+            "--launcher-set", "timeout_min=30", "--set", "progress=false"]  # fmt: skip
+    assert driver.main(argv) == 0
+    jobs, kw = no_runs[0]
+    assert kw["launcher"] == "submitit_slurm"
+    assert kw["launcher_overrides"] == ["hydra.launcher.partition=gpu", "hydra.launcher.timeout_min=30"]
+    assert sorted(j.sweep for j in jobs) == ["tune/toy/adam/0/0", "tune/toy/adam/1/0"]  # a study index in each name
+    assert sorted(j.seed for j in jobs) == [1000, 1001]
+    assert {j.overrides["eval_every"] for j in jobs} == {0.01}  # 100 evaluations per run
+
+
+def test_the_plan_counts_runs_and_hours_and_runs_nothing(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "adam", "--trials", "3", "--studies", "2",
+            "--seeds", "5", "--seconds", "60", "--variants", "1", "--jobs", "2", "--root", str(tmp_path / "runs"),
+            "--plan"]  # fmt: skip
+    assert driver.main(argv) == 0
+    out = capsys.readouterr().out
+    # tuning 2 x 3 x 2 = 12; confirmation (2 tuned + 1 paper) x (base + 1 variant) x 5 seeds = 30
+    assert "toy: 42 runs (12 tuning, 30 confirmation), 42 min of training, hardware cpu threads=1" in out
+    assert "about 21 min wall clock at --jobs 2" in out
+    assert not no_runs and not (tmp_path / "runs").exists()
+
+
+def test_help_lists_the_flags_with_examples(capsys):
+    from higbench.league.__main__ import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert done.value.code == 0 and out.startswith("usage: higbench-league")
+    assert "examples:" in out and "higbench-league --report-only --root runs-a --root runs-b" in out
+    for flag in ("--searchpath", "--launcher-set", "--studies", "--plan", "--report-only", "--root", "--out"):
+        assert flag in out
+
+
+def test_progress_counts_runs_and_is_quiet_under_progress_false(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "2", "--studies", "1", "--seeds", "1",
+            "--seconds", "3", "--variants", "0"]  # fmt: skip
+    assert driver.main([*argv, "--root", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "[league] 0 of 3 runs done, about 9 s left" in err and "[league] 2 of 3 runs done" in err
+    assert driver.main([*argv, "--root", str(tmp_path / "b"), "--set", "progress=false"]) == 0
+    assert "runs done" not in capsys.readouterr().err
+
+
+def test_a_problem_without_targets_gets_its_report_without_a_profile(tmp_path):
+    """A problem of your own may declare no targets: the league crashed drawing an empty profile
+    after all its training (numpy: need at least one array to concatenate)."""
+    scored = pd.DataFrame({"task": ["heat"], "league_setting": ["adam"], "seed": [0], "status": ["completed"]})
+    reached = pd.DataFrame(columns=["task", "setting", "seed", "target", "seconds", "updates"])
+    driver.write_report(tmp_path / "out", "scores\n", {}, scored, reached)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["league.json", "league.txt", "runs.csv"]
+
+
+def test_set_hydra_searchpath_is_the_searchpath_flag():
+    rest, folders = driver.searchpath_of_set(["threads=1", "hydra.searchpath=[file://examples/heat/conf,file:///x/conf]"])
+    assert rest == ["threads=1"] and folders == [Path("examples/heat/conf"), Path("/x/conf")]

@@ -1,0 +1,98 @@
+"""The league's exported tables (higbench.league.tables): what a root carries to another machine
+re-scores as its run files do, and several roots merge into one score."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from higbench.league import tables
+from higbench.results import league
+from higbench.results.index import load_runs
+from higbench.runfile.writer import RunFileWriter
+
+
+def write_run(root: Path, name: str, optimizer: str, seed: int, losses, *, lr: float, load="3.50 2.00 1.00", cores=2):
+    """A completed toy run under ``root/figures-runs`` (where the league's launches put them)."""
+    config = {"problem": {"name": "toy", "targets": [1e-1, 1e-2]}, "optimizer": {"name": optimizer, "lr": lr}, "seed": seed,
+              "budget": {"seconds": 5.0, "max_updates": None}}  # fmt: skip
+    env = {"hostname": "test", "device": "cpu", "cpu_count": cores, "cpu_share": 0.8, "load_at_finish": load}
+    w = RunFileWriter(
+        root / "figures-runs" / "x" / name / "run.h5", yaml.safe_dump(config),
+        ["problem=toy", f"optimizer={optimizer}", f"seed={seed}", f"optimizer.lr={lr}"],
+        env=env, meta={"problem": "toy", "optimizer": optimizer},
+    )  # fmt: skip
+    for i, loss in enumerate(losses):
+        w.append_row("curves", {"step": i * 10, "epoch": 0, "wall_time": i * 0.37, "train_loss": loss,
+                                "test_loss": loss, "val_loss": loss * 1.1, "rss_mb": 1.0})  # fmt: skip
+    w.flush()
+    w.f.attrs["steps"] = (len(losses) - 1) * 10
+    w.f.attrs["wall_time"] = (len(losses) - 1) * 0.37
+    w.close("completed", "", (len(losses) - 1) * 10)
+
+
+def league_root(root: Path, seeds, cores=2) -> dict:
+    """Confirmation runs of hig and adam on ``seeds``; returns their roles (identity -> entry)."""
+    for seed in seeds:
+        write_run(root, f"h{seed}", "hig", seed, [1.0, 0.05 / (seed + 1), 0.001], lr=0.5, cores=cores)
+        write_run(root, f"a{seed}", "adam", seed, [1.0, 0.5, 0.05, 0.009 * (seed + 1)], lr=0.01, cores=cores)
+    runs = load_runs(root, figure_runs=True)
+    return {
+        cid: {"role": "confirm", "job": f"confirm/toy/base/{opt}"} for cid, opt in zip(runs["config_id"], runs["optimizer.name"])
+    }
+
+
+def score(runs: pd.DataFrame, curves: pd.DataFrame) -> str:
+    return league.format_league(runs, curves, league.all_spaces())
+
+
+def score_files(root: Path) -> str:
+    """The score of the run files themselves, each run's hardware named as the tables name it."""
+    runs, curves = load_runs(root, curves=True, figure_runs=True)
+    return score(runs.assign(hardware=tables.hardware(runs)), curves)
+
+
+def test_tables_hold_the_contract_columns_and_the_load(tmp_path):
+    jobs = league_root(tmp_path, [0, 1])
+    runs_path, curves_path = tables.export(tmp_path, jobs)
+    assert runs_path == tmp_path / "tables" / "runs.csv.gz" and curves_path.is_file()
+    runs = pd.read_csv(runs_path)
+    assert list(runs.columns) == list(tables.RUN_COLUMNS) and len(runs) == 4
+    assert set(runs["league_role"]) == {"confirm"} and set(runs["hardware"]) == {"CPU, 2 cores"}
+    assert set(runs["env.load_1min"]) == {3.5}  # the first of the three load averages, not its first character
+    assert runs["run"].str.startswith("figures-runs/x/").all()
+    roles = tables._roles(tmp_path, {i: {"role": "tune", "job": "tune/toy/adam/1/3", "study": 1, "trial": 3} for i in jobs})
+    tune = tables.runs_table(tmp_path, load_runs(tmp_path, figure_runs=True), roles)
+    assert "1,3," in tune.to_csv(index=False)  # study and trial as whole numbers
+    curves = pd.read_csv(curves_path)
+    assert list(curves.columns) == list(tables.CURVE_COLUMNS) and len(curves) == 2 * 3 + 2 * 4
+    assert 0.37 * 3 in set(curves["wall_time"])  # full precision
+
+
+def test_a_root_without_its_run_files_rescores_the_same_from_its_tables(tmp_path):
+    jobs = league_root(tmp_path, [0, 1, 2])
+    from_files = score_files(tmp_path)
+    tables.export(tmp_path, jobs)
+    shutil.rmtree(tmp_path / "figures-runs")
+    assert "6 scored runs" in from_files and "toy: CPU, 2 cores" in from_files
+    assert score(*tables.read(tmp_path)) == from_files
+    tables.export(tmp_path)  # exporting again without the run files keeps their rows
+    assert score(*tables.read(tmp_path)) == from_files
+
+
+def test_two_roots_merge_into_the_score_of_one_root_holding_both(tmp_path):
+    a, b, both = tmp_path / "a", tmp_path / "b", tmp_path / "both"
+    tables.export(a, league_root(a, [0, 1]))
+    tables.export(b, league_root(b, [2, 3]))  # another machine of the same class
+    jobs = league_root(both, [0, 1, 2, 3])
+    merged_runs, merged_curves = tables.read([a, b])
+    assert set(merged_runs["hardware"]) == {"CPU, 2 cores"} and set(merged_runs["root"]) == {str(a), str(b)}
+    tables.export(both, jobs)
+    single = score(*tables.read(both))
+    assert "8 scored runs" in single
+    tables.export(b, league_root(b, [4], cores=16))  # a machine of another class: the scorer splits its task
+    assert "toy [CPU, 16 cores]" in score(*tables.read([a, b]))
+    assert score(merged_runs, merged_curves) == single == score_files(both)

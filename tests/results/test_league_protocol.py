@@ -1,0 +1,207 @@
+"""The league's protocol, fair to every optimizer: its own Sobol stream, a tuning seed per study,
+search spaces that contain every shipped setting, tuning on what is scored, baselines set up as
+their authors advise, and the scored runs one per identity on one hardware class per task."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import torch
+import yaml
+
+from higbench.config import config_dir
+from higbench.optim.split import SplitOptimizer
+from higbench.results import league
+
+CONF = Path(config_dir())
+
+
+# -- trials ----------------------------------------------------------------------------------
+
+
+def test_two_optimizers_with_same_shaped_spaces_get_different_points():
+    # Before, every optimizer drew the same scrambled Sobol seed: Adam, AdamW, SOAP and Shampoo
+    # tried the same 4 (lr, b) points, HIG, GN and LM the same 4 unit points.
+    space = league.load_space("adam")
+    assert league.load_space("adamw") == space
+    adam, adamw = league.trial_points("adam", space, 4, study=0), league.trial_points("adamw", space, 4, study=0)
+    assert all(a != b for a, b in zip(adam, adamw))
+    assert league.trial_points("adam", space, 4, study=1) != adam  # a second study is a new stream
+    assert league.trial_points("adam", space, 8, study=0)[:4] == adam  # more trials keep the first ones
+    assert league.stream_seed("adam", 0) == league.stream_seed("adam", 0)  # stable across processes (CRC-32)
+
+
+def test_tuning_seeds_are_one_per_study_and_never_a_confirmation_seed():
+    seeds = [league.tuning_seed(s) for s in range(5)]
+    assert seeds == [1000, 1001, 1002, 1003, 1004]
+    assert all(league.is_tuning_seed(pd.Series(seeds))) and not league.is_tuning_seed(pd.Series([0, 9, 999])).any()
+    with pytest.raises(ValueError, match="study=-1"):
+        league.tuning_seed(-1)
+
+
+# -- every shipped setting inside its search space -------------------------------------------
+
+
+def _get(node: dict, dotted: str):
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def shipped_value(problem: str, optimizer: str, key: str):
+    """``key`` of the config the CLI composes for (problem, optimizer): the pair's file
+    (conf/problem_optimizer/, the paper's settings; a global package), else the optimizer's or
+    the problem's default."""
+    pair = CONF / "problem_optimizer" / f"{problem}_{optimizer}.yaml"
+    if pair.is_file() and (value := _get(yaml.safe_load(pair.read_text()) or {}, key)) is not None:
+        return value
+    if key.startswith("optimizer."):
+        return _get(yaml.safe_load((CONF / "optimizer" / f"{optimizer}.yaml").read_text()), key.removeprefix("optimizer."))
+    problem_file = yaml.safe_load((CONF / "problem" / f"{problem}.yaml").read_text())
+    value = _get(problem_file, key)
+    parents = [d for d in problem_file.get("defaults", []) if isinstance(d, str) and d != "_self_"]
+    return value if value is not None or not parents else shipped_value(parents[0], optimizer, key)  # dipole_cnn: dipole's
+
+
+def test_every_search_space_contains_every_shipped_setting():
+    # Before: HIG's lr in [0.1, 2] left out the paper's Poisson lr 0.02 (and Adam's space the
+    # toy's 0.3, the batch sizes the dipole's 16, L-BFGS's max_iter its default 20).
+    outside = []
+    for problem in sorted(p.stem for p in (CONF / "problem").glob("*.yaml")):
+        for optimizer, space in league.all_spaces().items():
+            for key in space:
+                value = shipped_value(problem, optimizer, key)
+                assert value is not None, f"{problem}/{optimizer}: {key} is set nowhere"
+                if not league.in_space(space, key, value):
+                    low, high = space[key]["low"], space[key]["high"]
+                    outside.append(f"{problem}/{optimizer}: {key}={value} outside [{low:g}, {high:g}]")
+    assert not outside, outside
+
+
+def test_the_lookup_reads_the_paper_s_setting():
+    assert shipped_value("poisson", "hig", "optimizer.lr") == 0.02 and shipped_value("toy", "hig", "optimizer.lr") == 1.0
+    assert shipped_value("dipole", "adam", "batch_size") == 16
+
+
+def test_soap_and_shampoo_tune_their_preconditioner_frequency():
+    assert "optimizer.precondition_frequency" in league.load_space("soap")
+    assert "optimizer.preconditioning_compute_steps" in league.load_space("shampoo")
+
+
+# -- Muon as its authors advise ----------------------------------------------------------------
+
+
+def test_muon_takes_hidden_weights_only_and_adamw_the_first_and_last_layers():
+    torch.manual_seed(0)
+    model = torch.nn.Sequential(torch.nn.Linear(3, 8), torch.nn.Tanh(), torch.nn.Linear(8, 8), torch.nn.Tanh(),
+                                torch.nn.Linear(8, 8), torch.nn.Tanh(), torch.nn.Linear(8, 2))  # fmt: skip
+    parts = yaml.safe_load((CONF / "optimizer" / "muon.yaml").read_text())["parts"]
+    split = SplitOptimizer(model.parameters(), parts=parts)
+    muon = [p for g in split.parts["hidden_matrices"].param_groups for p in g["params"]]
+    adamw = [p for g in split.parts["rest"].param_groups for p in g["params"]]
+    assert [id(p) for p in muon] == [id(model[2].weight), id(model[4].weight)]
+    assert {id(model[0].weight), id(model[6].weight)} <= {id(p) for p in adamw}
+    search = league.load_space("muon")
+    assert {"optimizer.parts.hidden_matrices.lr", "optimizer.parts.rest.lr"} <= set(search)
+
+
+# -- tuning selects on what is scored --------------------------------------------------------
+
+
+def test_tuning_selects_on_the_time_to_the_validation_target_when_curves_exist():
+    trials = pd.DataFrame({"trial": [0, 1], "path": ["t0", "t1"], "status": ["completed"] * 2,
+                           "final_val_loss": [1e-4, 1e-3]})  # fmt: skip
+    # trial 1 reaches 1e-2 at 1 s, trial 0 at 3 s but ends lower
+    curves = pd.DataFrame({"path": ["t0"] * 4 + ["t1"] * 4, "wall_time": [0, 1, 2, 3] * 2, "step": [0, 10, 20, 30] * 2,
+                           "val_loss": [1, 0.5, 0.1, 0.005, 1, 0.009, 0.002, 1e-3]})  # fmt: skip
+    best, rule = league.choose_trial(trials, curves, target=1e-2)
+    assert best["trial"] == 1 and "time to the validation target 0.01" in rule
+    best, rule = league.choose_trial(trials)  # no curves: the final validation loss, and it says so
+    assert best["trial"] == 0 and rule.startswith("final validation loss")
+    best, rule = league.choose_trial(trials, curves, target=1e-9)  # nobody reached it: said too
+    assert best["trial"] == 0 and "no trial reached" in rule
+
+
+# -- the scored runs -------------------------------------------------------------------------
+
+
+def _runs(**columns) -> pd.DataFrame:
+    n = len(next(iter(columns.values())))
+    base = {"status": ["completed"] * n, "problem.name": ["toy"] * n, "overrides": [""] * n, "final_test_loss": [0.1] * n,
+            "config_id": [f"c{i}" for i in range(n)], "path": [f"r{i}" for i in range(n)]}  # fmt: skip
+    return pd.DataFrame({**base, **columns})
+
+
+def test_two_leagues_into_one_root_do_not_score_copies_as_seeds():
+    runs = _runs(seed=[0, 0, 1], **{"optimizer.name": ["adam"] * 3}, config_id=["same", "same", "other"])
+    scored = league.league_runs(runs, {})
+    assert len(scored) == 2 and sorted(scored["seed"]) == [0, 1]
+
+
+def test_league_role_names_paper_and_default_and_leaves_tuning_out():
+    runs = _runs(seed=[0, 0, 0, 1000], **{"optimizer.name": ["hig", "hig", "adam", "adam"]},
+                 league_role=["confirm", "paper", "default", "tune"])  # fmt: skip
+    scored = league.league_runs(runs, league.all_spaces())
+    assert sorted(scored["league_setting"]) == ["adam (default)", "hig", "hig (paper)"]
+
+
+def test_a_task_that_mixes_hardware_is_split_into_one_table_per_class():
+    runs = _runs(seed=[0, 0, 0], **{"optimizer.name": ["hig", "adam", "sgd"]}, hardware=["GPU", "CPU", "CPU"])
+    scored = league.league_runs(runs, {})
+    assert sorted(set(scored["task"])) == ["toy [CPU]", "toy [GPU]"]
+    assert "one class per task" in league.hardware_line(scored)
+
+
+# -- AlgoPerf's score: targets, budgets, gates -------------------------------------------------
+
+
+def test_the_validation_target_is_the_best_reference_median_over_at_least_five_reruns():
+    name, target = league.validation_target({"adam": [5, 4, 3, 2, 1], "lm": [0.1, 9, 9, 8, 0.2]})
+    assert (name, target) == ("adam", 3.0)  # lm's best rerun is lower (0.1), its median (8) is not
+    with pytest.raises(ValueError, match="lm has 3 reruns; need at least 5"):
+        league.validation_target({"adam": [1] * 5, "lm": [1, 2, 3]})
+    assert league.budget_from_target([10.0, 12.0, 11.0, 13.0, math.inf]) == pytest.approx(36.0)
+
+
+def test_time_to_target_scores_each_problem_the_same_and_held_out_variants_gate():
+    scored = pd.DataFrame({
+        "task": ["p", "p", "q", "q", "p v", "p v"], "league_setting": ["a", "b"] * 3, "seed": [0] * 6,
+        "status": ["completed"] * 6, "path": [f"r{i}" for i in range(6)],
+    })  # fmt: skip
+    reach_at = {"r0": 1.0, "r1": 2.0, "r2": 4.0, "r3": 2.0, "r4": 1.0, "r5": None}  # r5: b never reaches the variant's
+    rows = []
+    for run, t in reach_at.items():
+        rows += [{"path": run, "wall_time": 0.0, "step": 0, "val_loss": 1.0},
+                 {"path": run, "wall_time": t or 9.0, "step": 1, "val_loss": 0.01 if t else 1.0}]  # fmt: skip
+    table = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1, "p v": 0.1},
+                                  budgets={"p": 10, "q": 10, "p v": 10}, held_out={"p": ["p v"]})  # fmt: skip
+    table = table.set_index("setting")
+    # a: fastest on p (1), 2x on q; b: 2x on p, fastest on q: the same score, each problem weighing 1/2
+    assert table.loc["a", "score"] == pytest.approx(table.loc["b", "score"]) == pytest.approx((3 + 2) / 2 / 3)
+    assert table.loc["b", "gates failed"] == "p v" and table.loc["a", "gates failed"] == ""
+    over_budget = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1},
+                                        budgets={"p": 1.5, "q": 10}).set_index("setting")  # fmt: skip
+    assert math.isinf(over_budget.loc["b", "s to target: p"])  # 2 s is past p's 1.5 s budget
+
+
+def test_the_report_prints_the_algoperf_table_when_targets_and_budgets_are_given():
+    runs = pd.DataFrame({
+        "path": ["a0", "a1", "b0", "b1"], "status": ["completed"] * 4, "problem.name": ["toy"] * 4,
+        "optimizer.name": ["adam", "adam", "sgd", "sgd"], "overrides": ["optimizer.lr=0.1"] * 4, "seed": [0, 1, 0, 1],
+        "final_test_loss": [0.01, 0.02, 0.5, 0.6], "final_val_loss": [0.01, 0.02, 0.5, 0.6],
+        "config_id": ["a0", "a1", "b0", "b1"], "problem.targets": [(0.1,)] * 4,
+    })  # fmt: skip
+    curves = pd.DataFrame({"path": [p for p in runs["path"] for _ in range(2)], "wall_time": [0.0, 2.0] * 4,
+                           "step": [0, 5] * 4, "test_loss": [1, 0.01, 1, 0.02, 1, 0.5, 1, 0.6],
+                           "val_loss": [1, 0.01, 1, 0.02, 1, 0.5, 1, 0.6]})  # fmt: skip
+    text = league.format_league(runs, curves, league.all_spaces(), validation_targets={"toy": 0.05}, budgets={"toy": 6.0})
+    algoperf = text.split("AlgoPerf:")[1].split("targets (problem.targets")[0]
+    assert "toy: target 0.05, budget 6 s" in algoperf
+    rows = {line.split()[0]: line.split() for line in algoperf.splitlines()[2:] if line.strip()}
+    assert float(rows["adam"][1]) == 1.0 and float(rows["sgd"][1]) == 0.0  # sgd never reaches 0.05
+    assert "AlgoPerf" not in league.format_league(runs, curves, league.all_spaces())  # no target-setting runs: no table
