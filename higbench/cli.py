@@ -521,8 +521,13 @@ def _run_app(argv: list[str]) -> list[str] | None:
         # Hydra refuses a key its struct config lacks; a key of the problem's own Config that its
         # YAML does not list is the user's to set, so the app runs again with ++key
         # (tests/test_custom_problem.py::test_a_base_config_key_its_yaml_does_not_list_can_be_set).
+        # Each run again turns one more override into ++key: an error on a key already given
+        # with ++ is refused, so the retries end (at most one per override).
+        again = [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
+        if again == argv:
+            refuse(error)
         GlobalHydra.instance().clear()
-        return [f"++{a}" if a.partition("=")[0] == error.key else a for a in argv]
+        return again
     return None
 
 

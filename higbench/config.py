@@ -262,11 +262,21 @@ def constructor_args(cls: type) -> tuple[str, ...]:
     names: list[str] = []
     for klass in cls.__mro__:
         params = list(inspect.signature(klass.__init__).parameters.values())[1:]
+        if klass is not cls and [p.name for p in params] == ["params", "defaults"]:
+            break  # a base optimizer's (torch's, pytorch-optimizer's): the subclass builds its defaults itself
         keywords = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
         names += [p.name for p in params if p.name not in ("params", *names) and p.kind in keywords]
         if not any(p.kind is p.VAR_KEYWORD for p in params) or klass is object:
             break
     return tuple(names)
+
+
+def takes_any_keyword(cls: type) -> bool:
+    """Whether the constructor itself accepts every keyword (``**kwargs``): a misspelt argument
+    is then swallowed, never refused (pytorch-optimizer's SOAP and Shampoo)."""
+    import inspect
+
+    return any(p.kind is p.VAR_KEYWORD for p in inspect.signature(cls.__init__).parameters.values())
 
 
 def optimizer_class(opt: Any) -> type:
@@ -316,6 +326,13 @@ def check_optimizer(opt: Any, device: str = "cpu") -> None:
 
     cls = optimizer_class(opt)
     kwargs = optimizer_kwargs(opt)
+    if takes_any_keyword(cls):  # checked against its documented signature: a typo would train with the default
+        known = constructor_args(cls)
+        for key in kwargs:
+            if key not in known:
+                raise ConfigError(
+                    f"optimizer.{key}", opt[key], f"not an argument of {opt['_target_']}; its arguments: {', '.join(known)}"
+                )
     _check_number_types(cls, kwargs)
 
     trial_step = cls.__module__.startswith("torch.optim")  # ours (GN/HIG/LM) need a problem to step

@@ -25,6 +25,12 @@ class ConfigError(ValueError):
         super().__init__(f"{key}={show(value)}: {requirement}")
 
 
+class MemoryRefusal(ConfigError):
+    """A config refused because what it needs does not fit in the memory there is (the memory
+    guard, the network-size check): the same config is refused again on the same machine, so a
+    launcher records it as a result, not a failure to retry."""
+
+
 MAX_SHOWN = 80  # a value longer than this is cut in messages: one line stays one line
 
 

@@ -35,7 +35,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
-from omegaconf.errors import OmegaConfBaseException, ValidationError
+from omegaconf.errors import ConfigTypeError, OmegaConfBaseException, ValidationError
 
 from higbench.config import (
     SIZING_KEYS,
@@ -76,9 +76,22 @@ def composition_error(exc: Exception, overrides: list[str]) -> ConfigError:
     if full_key and isinstance(cause, ValidationError):  # a bad type: Hydra's check against the schema
         value = given_value(overrides, str(full_key)) or "?"
         return ConfigError(str(full_key), value, _first_line(cause.msg if hasattr(cause, "msg") else cause))
+    if full_key and isinstance(cause, ConfigTypeError):  # a mapping for a list, a list for a mapping: not an unknown key
+        value = given_value(overrides, str(full_key)) or "?"
+        return ConfigError(str(full_key), value, f"{_kind_there(cause)} ({_first_line(cause.msg)})")
     if full_key:
         return _unknown_key(str(full_key), overrides)
     return _unparsed_override(overrides) or ConfigError("overrides", " ".join(overrides), _first_line(exc))
+
+
+def _kind_there(cause: ConfigTypeError) -> str:
+    """What a value replacing the node of a ConfigTypeError must be (the node's own kind)."""
+    kind = getattr(cause, "object_type", None)
+    if kind is list or kind is tuple:
+        return "must be a list, as the value there is"
+    if kind is dict or dataclasses.is_dataclass(kind):
+        return "must be a mapping, as the value there is"
+    return "has the wrong type for the value there"
 
 
 def _first_line(exc) -> str:

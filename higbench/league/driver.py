@@ -49,7 +49,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from higbench.jobs import LAUNCH_OVERRIDES, Job, job_seconds, resolve, run_index, run_missing
+from higbench.jobs import LAUNCH_OVERRIDES, Job, as_launcher, job_seconds, resolve, run_index, run_missing
+from higbench.jobs.ledger import FINAL_STATUSES
 from higbench.league import tables
 from higbench.league.files import ROOT_FILE_ERRORS, read_json_files, safe_dir, write_text
 from higbench.results import league
@@ -344,29 +345,44 @@ class Runner:
         """Stops the league when some are still not done (interrupted, failed): a setting chosen
         from part of a tuning, or a next problem started after a Ctrl-C, is not what was asked for."""
         safe_dir(self.root / "figures-runs", create=True)  # a planted link there would carry the runs out of the root
-        kwargs = {"n_jobs": self.n_jobs, "launcher": self.launcher, "log": _log}
-        accepts = inspect.signature(run_missing).parameters
-        if "launcher_overrides" in accepts or any(p.kind is p.VAR_KEYWORD for p in accepts.values()):
-            kwargs["launcher_overrides"] = list(self.overrides)
-        elif self.overrides:  # before run_missing took launcher_overrides: the Launcher carries them
-            from higbench.jobs import Launcher
-
-            kwargs["launcher"] = Launcher(self.launcher, tuple(self.overrides))
-        left = run_missing(jobs, self.root, **kwargs)
+        left = run_missing(
+            jobs,
+            self.root,
+            n_jobs=self.n_jobs,
+            launcher=self.launcher,
+            launcher_overrides=self.overrides,
+            log=_log,
+            progress=False,
+        )  # fmt: skip  (the league counts its own whole)
         self.count(jobs, left)
         if left:
-            refused = [j for j in left if j.status == "failed"]
-            hint = (
-                f"{len(refused)} failed: see the launch.log under {self.root / 'figures-runs'}; "
-                if refused
-                else "the same command continues them, reusing every run already done"
-            )
+            final = [j for j in left if j.status in FINAL_STATUSES]
+            failed = [j for j in left if j.status == "failed"]
+            if final:
+                hint = (f"{len(final)} refused for good ({final[0].reason or final[0].status}): the ledger under "
+                        f"{self.root / 'ledger'} keeps them from running again; delete their records there to retry")  # fmt: skip
+            elif failed:
+                hint = f"{len(failed)} failed: see the launch.log under {self.root / 'figures-runs'}"
+            else:
+                hint = "the same command continues them, reusing every run already done"
             fail_stop(f"league: {len(left)} {phase} run(s) not done ({hint})")
 
     def count(self, jobs: list[Job], left: list[Job]) -> None:
         self.done += len(jobs) - len(left)
         self.left_seconds -= sum(float(j.overrides.get("budget.seconds") or 0) for j in jobs)
         self.progress.update(self.done, max(0.0, self.left_seconds) / max(1, self.n_jobs))
+
+
+def check_launcher(launcher: str, overrides: list[str]) -> None:
+    """A launcher setting submitit has not (a typo in --launcher-set): one line before any run."""
+    from higbench.jobs.arrays import LauncherError, submitit_parameters
+
+    try:
+        spec = as_launcher(launcher, overrides)
+        if spec.array:
+            submitit_parameters(spec.name, spec.settings())
+    except LauncherError as exc:
+        fail(str(exc))
 
 
 def fail_stop(text: str):
@@ -653,6 +669,7 @@ def _main(argv=None) -> int:
     EXTRA[:] = [parse_set(item) for item in set_items]
     overrides = launcher_overrides(args.launcher_set)
     launcher = args.launcher or ("basic" if args.jobs == 1 else "joblib")
+    check_launcher(launcher, overrides)
     for flag, value in (("--studies", args.studies), ("--seeds", args.seeds), ("--jobs", args.jobs)):
         if value < 1:
             fail(f"{flag} {value}: must be at least 1")

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import torch
 
 from higbench.optim.inversion import _keep_mask, _powered, _prefactor
+from higbench.optim.solver_choice import lanczos_steps
 from higbench.optim.structured import StructuredJacobian
 
 # Lanczos steps between checks of the error estimate (early stop) and the delay d of the estimate.
@@ -94,7 +95,7 @@ def lanczos(
     (asked every ``CHECK_EVERY`` steps).
     """
     rows = g.numel()
-    steps = max(1, min(int(steps), rows))
+    steps = lanczos_steps(steps, rows)
     g_norm = float(torch.linalg.vector_norm(g))
     Q = torch.zeros(steps, rows, dtype=g.dtype, device=g.device)  # rows of Q: contiguous basis vectors
     alpha = torch.zeros(steps, dtype=g.dtype, device=g.device)

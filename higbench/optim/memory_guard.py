@@ -7,7 +7,9 @@ first-order optimizers are small next to it). ``check`` compares it with the mem
 available now (psutil's available memory, or less where the process's address space is
 capped, ``ulimit -v``; free CUDA memory on a GPU) or a configured cap (``memory_limit_mb``)
 and raises ``ConfigError`` with the estimate and the largest batch size that fits, so a run
-fails in a second instead of being killed by the OS an hour in.
+fails in a second instead of being killed by the OS an hour in. ``check_samples`` does the
+same for the data sets a problem draws after its own (the validation and fresh test sets),
+whatever the optimizer.
 
 The model is deliberately simple and errs on the large side; a faster Jacobian path
 (structured, never materialising J) can refine ``estimate_bytes`` without changing callers.
@@ -17,8 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from higbench.errors import ConfigError
-from higbench.optim.solver_choice import choose_solver
+from higbench.errors import MemoryRefusal
+from higbench.optim.solver_choice import choose_solver, lanczos_steps
 
 ITEMSIZE = {"float16": 2, "bfloat16": 2, "float32": 4, "float64": 8}
 
@@ -67,7 +69,8 @@ def estimate_bytes(
     then cast) or structured (computed in
     ``precision``; counted as one materialised J, an upper bound: the MLP Gram route of
     ``higbench.optim.structured`` forms only per-layer factors).
-    krylov_steps: the Lanczos basis of the krylov route (rows x steps; no K, no J formed).
+    krylov_steps: the Lanczos basis of the krylov route (rows x steps, steps capped at rows:
+        ``solver_choice.lanczos_steps``; no K, no J formed).
     factor_values: values per row of J's per-layer factors where the structured route holds
         those instead of J (MLPs, ``structured.mlp_factor_values``); counted on the krylov
         route, which never forms J (the others do, or K, which dominates).
@@ -86,8 +89,10 @@ def estimate_bytes(
             "jacobian_cast": rows * p * e2 if e2 != e else 0,
         }
     if solver == "krylov":
-        # the Lanczos basis, its T_m eigenvectors (steps^2) and a few vectors of rows
-        parts["krylov_basis"] = (rows * (krylov_steps + 4) + krylov_steps * krylov_steps) * e2
+        # the Lanczos basis, its T_m eigenvectors (steps^2) and a few vectors of rows; Lanczos
+        # stops at J's rows, so a larger krylov_steps costs no more
+        steps = lanczos_steps(krylov_steps, rows)
+        parts["krylov_basis"] = (rows * (steps + 4) + steps * steps) * e2
     elif solver == "gram":
         # K = J J^T, eigenvectors of K, LAPACK syevd workspace (~1 + 6n + 2n^2 doubles)
         parts["gram"] = rows * rows * e2
@@ -129,6 +134,42 @@ def address_space_headroom() -> int | None:
     if soft == resource.RLIM_INFINITY:
         return None
     return max(0, soft - int(psutil.Process().memory_info().vms))
+
+
+def usable_bytes(device: str = "cpu", limit_mb: float | None = None) -> tuple[int, str]:
+    """(bytes a run may use now, where that number comes from): what is available, or the
+    configured cap (``memory_limit_mb``) where it is lower."""
+    avail, source = available_bytes(device)
+    if limit_mb is not None and limit_mb * 2**20 < avail:
+        avail, source = int(limit_mb * 2**20), "memory_limit_mb"
+    return avail, source
+
+
+# A data set being drawn holds its samples and, while a problem makes them (float64 before the
+# cast, the physics' intermediate arrays), about as much again: counted twice, on the large side.
+DRAW_COPIES = 2
+
+
+def check_samples(sizes: dict[str, int], sample_bytes: int, device: str = "cpu", limit_mb: float | None = None) -> None:
+    """Raise ConfigError, naming the size key, if data sets drawn after the run's own do not fit.
+
+    ``sizes``: key -> samples (``problem.val_size``, ``problem.fresh_test_size``), in the order
+    they are drawn; each is held to the end of the run, so each must fit beside those before
+    it. ``sample_bytes``: bytes of one sample (``Problem.sample_bytes``)."""
+    avail, source = usable_bytes(device, limit_mb)
+    held, per_sample = 0, max(1, int(sample_bytes))
+    for key, n in sizes.items():
+        need = DRAW_COPIES * n * per_sample
+        if held + need > avail:
+            fits = max(0, (avail - held) // (DRAW_COPIES * per_sample))
+            beside = f" beside {mb(held)} of the sets before it" if held else ""
+            raise MemoryRefusal(
+                key,
+                n,
+                f"{n:,} samples of {per_sample:,} bytes need about {mb(need)} while drawn{beside}, "
+                f"but {mb(avail)} is available ({source}); at most {fits:,} fit",
+            )
+        held += n * per_sample
 
 
 def largest_batch(
@@ -189,13 +230,11 @@ def check(
         "factor_values": factor_values,
     }
     est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, **route)
-    avail, source = available_bytes(device)
-    if limit_mb is not None and limit_mb * 2**20 < avail:
-        avail, source = int(limit_mb * 2**20), "memory_limit_mb"
+    avail, source = usable_bytes(device, limit_mb)
     if est.total > avail:
         best = largest_batch(avail, output_size, n_params, dtype, solver, precision, upper=batch_size, **route)
         advice = f"largest batch size that fits: {best}" if best else "not even batch_size=1 fits"
-        raise ConfigError(
+        raise MemoryRefusal(
             "batch_size",
             batch_size,
             f"the {est.solver.upper()} Jacobian-power step needs about {mb(est.total)} "

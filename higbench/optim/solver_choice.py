@@ -50,3 +50,9 @@ def choose_solver(
     if rows is not None and n_params is not None and rows >= n_params:
         return "svd"
     return "gram" if gram_is_accurate(tau, precision, truncation) else "svd"
+
+
+def lanczos_steps(steps: int, rows: int) -> int:
+    """Lanczos steps the krylov route takes at most: ``krylov_steps``, but never more than J's rows
+    (the basis of K's row space is then complete). Its memory (``memory_guard``) is sized by these."""
+    return max(1, min(int(steps), int(rows)))

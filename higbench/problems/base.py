@@ -53,6 +53,9 @@ from higbench.schema import value
 
 # problem.solver of the time-stepping problems: the compiled loop with its adjoint, or plain torch.
 PHYSICS_SOLVERS = ("fast", "reference")
+# Most samples a validation or fresh test set may ask for; the memory guard bounds them first.
+MAX_SAMPLES = 10**9
+LATER_DRAWS = ("val_size", "fresh_test_size")  # drawn after train and test, in this order, when first asked for
 
 
 @dataclass
@@ -68,11 +71,12 @@ class ProblemConfig:
     # The keys below change neither training nor the test loss (identity=False: a run keeps its
     # identity, results.index.config_id). The validation set is drawn after train and test, so
     # those draws stay what every earlier run had; 0: no validation curve.
-    val_size: int = value(0, ge=0, identity=False)
+    # Both are drawn when first used, after the runner checked them against memory (runner.train.check_data_memory).
+    val_size: int = value(0, ge=0, le=MAX_SAMPLES, identity=False)
     # A second, large test draw (after every other set) evaluated once, at the end of a run
     # (the file's /final/fresh_test_losses): a mean over one finite test set can rest on a few
     # samples (the oscillator's heavy tail); 0: none.
-    fresh_test_size: int = value(0, ge=0, identity=False)
+    fresh_test_size: int = value(0, ge=0, le=MAX_SAMPLES, identity=False)
     # What the problem is judged by (the league, the profile, the progress line): test-loss targets,
     # the league's budget in training-clock seconds, and the held-out variants the league never tunes on
     # (each an override list, e.g. "problem.gamma=0.001").
@@ -183,16 +187,36 @@ class Problem(abc.ABC):
     def test_set(self) -> Batch:
         """Held-out data for the curves (fixed for the run)."""
 
+    @property
+    def val(self) -> Batch | None:
+        """The validation set (``problem.val_size``; None: none). Drawn at first use where the
+        problem kept its generator after the test set (``keep_later_draws``): the runner has
+        checked its size against memory by then (``runner.train.check_data_memory``)."""
+        if "_val" not in vars(self):
+            state = getattr(self, "_state_after_test", None)
+            if state is None:
+                return None
+            gen = torch.Generator()
+            gen.set_state(state)
+            self._val = draw_validation(self, gen)
+            self.keep_fresh_draw(gen)
+        return self._val
+
+    @val.setter
+    def val(self, batch: Batch | None) -> None:  # a problem that draws it itself (``draw_validation``)
+        self._val = batch
+
     def val_set(self) -> Batch | None:
-        """Validation data, disjoint from train and test (``problem.val_size``; None: none).
-        Tuning reads only its curve (``val_loss``); the test loss is read for the table."""
-        return getattr(self, "val", None)
+        """Validation data, disjoint from train and test (``val``; None: none). Tuning reads
+        only its curve (``val_loss``); the test loss is read for the table."""
+        return self.val
 
     def fresh_test_set(self) -> Batch | None:
         """``problem.fresh_test_size`` samples drawn from ``data_seed``'s generator after every
         other set (so those stay as they were), drawn when asked: the run evaluates it once, at
         its end. None when the size is 0 or the problem keeps no generator state to draw from."""
         n = int(self.cfg.get("fresh_test_size") or 0)
+        self.val  # noqa: B018 - drawn first: the fresh draw follows the validation set's
         state = getattr(self, "_state_after_draws", None)
         if not n or state is None:
             return None
@@ -200,9 +224,21 @@ class Problem(abc.ABC):
         gen.set_state(state)
         return self._sample(n, gen)
 
+    def keep_later_draws(self, gen: torch.Generator) -> None:
+        """Remember ``gen`` after the test set was drawn: the validation set and then the fresh
+        test set are drawn from there when first asked for (``val_set``, ``fresh_test_set``),
+        after the runner has checked their sizes against memory (``runner.train.check_data_memory``)."""
+        self._state_after_test = gen.get_state()
+
     def keep_fresh_draw(self, gen: torch.Generator) -> None:
-        """Remember ``gen`` after the last fixed set was drawn: ``fresh_test_set`` draws from there."""
+        """Remember ``gen`` after the last fixed set was drawn: ``fresh_test_set`` draws from there
+        (for a problem that draws its validation set itself, with ``draw_validation``)."""
         self._state_after_draws = gen.get_state()
+
+    def sample_bytes(self) -> int:
+        """Bytes one sample of this problem's data holds (its test set's first), for the memory guard."""
+        one = self.test_set()[:1]
+        return sum(t.numel() * t.element_size() for t in (one.net_inputs, one.inputs, one.targets))
 
     def eval_logs(self, model: nn.Module) -> dict[str, np.ndarray]:
         """Extra fixed-shape arrays recorded at every evaluation (e.g. neuron saturation)."""
@@ -228,7 +264,6 @@ class FixedDataProblem(Problem):
 
     train: Batch
     test: Batch
-    val: Batch | None = None
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         """``n`` samples drawn with ``gen``: each fixed-data problem's own."""
@@ -237,12 +272,12 @@ class FixedDataProblem(Problem):
     def sample_datasets(self) -> None:
         """Set ``self.train``, ``self.test`` and ``self.val`` from ``self._sample``, with one generator
         seeded by ``data_seed``: train drawn first, then test (the order every run so far was made
-        with), then the validation set (``problem.val_size``; after the others, so they stay as they were)."""
+        with), then, when first asked for, the validation set (``problem.val_size``; after the
+        others, so they stay as they were)."""
         gen = torch.Generator().manual_seed(int(self.cfg.data_seed))
         self.train = self._sample(int(self.cfg.train_size), gen)
         self.test = self._sample(int(self.cfg.test_size), gen)
-        self.val = draw_validation(self, gen)
-        self.keep_fresh_draw(gen)
+        self.keep_later_draws(gen)
 
     def train_size(self) -> int:
         return len(self.train)

@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from higbench.physics.poisson import DATA, laplace, laplace_matrix, sample_potential
-from higbench.problems.base import Batch, Problem, ProblemConfig, draw_validation, register
+from higbench.problems.base import Batch, Problem, ProblemConfig, register
 from higbench.problems.networks import ACTIVATIONS, mlp
 from higbench.schema import value
 
@@ -52,8 +52,7 @@ class Poisson(Problem):
         # from the run seed.
         gen = torch.Generator().manual_seed(int(cfg.data_seed))
         self.test = self._sample(int(cfg.test_size), gen)
-        self.val = draw_validation(self, gen)
-        self.keep_fresh_draw(gen)
+        self.keep_later_draws(gen)  # the validation set next, when first asked for
 
     def _sample(self, n: int, gen: torch.Generator) -> Batch:
         phi = sample_potential(n, gen, n=self.n, modes=int(self.cfg.modes), dtype=torch.float64, data=str(self.cfg.data))

@@ -30,6 +30,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
 
+from omegaconf import OmegaConf
+
 from higbench.config import validate
 from higbench.errors import ConfigError, dotted_get, given_value
 from higbench.runfile.reader import RUN_FILE
@@ -298,39 +300,51 @@ def check_tensorboard_dir(task: Mapping, out: Path, key: str) -> None:
         raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
 
 
-def registered_targets() -> set[str]:
-    """``_target_`` of every problem and optimizer config in Hydra's search path (conf/, and
-    ``hydra.searchpath`` given on the command line) and of every registered Problem class."""
+# The config groups whose files may name a class to build: where a stored config's ``_target_``s
+# may come from (problem_optimizer and experiment files set keys of these nodes).
+TARGET_GROUPS = ("problem", "optimizer", "sink", "problem_optimizer", "experiment")
+
+
+def registered_targets() -> dict[str, set[str]]:
+    """Where a config may name a class, and which: ``{key: {target, ...}}`` for every ``_target_``
+    that a config file in Hydra's search path (conf/, and ``hydra.searchpath`` given on the
+    command line) sets, at the key it sets it (``optimizer._target_``, the nested
+    ``optimizer.parts.PART._target_`` of muon.yaml, ``sink.tensorboard._target_``), and
+    every registered Problem class at ``problem._target_``."""
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.object_type import ObjectType
 
     from higbench.config import config_dir
     from higbench.problems.base import registry
 
-    targets = {f"{c.__module__}.{c.__qualname__}" for c in registry().values()}
     if not GlobalHydra.instance().is_initialized():
         from hydra import initialize_config_dir
 
         with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-            return targets | registered_targets()
+            return registered_targets()
+    targets: dict[str, set[str]] = {"problem._target_": {f"{c.__module__}.{c.__qualname__}" for c in registry().values()}}
     for source in GlobalHydra.instance().config_loader().get_sources():
-        for group in ("problem", "optimizer"):
+        for group in TARGET_GROUPS:
             if not source.is_group(group):
                 continue
             for name in source.list(group, ObjectType.CONFIG):
                 with contextlib.suppress(Exception):  # a YAML that does not load names nothing
-                    target = source.load_config(f"{group}/{name}").config.get("_target_")
-                    targets.add(str(target)) if target else None
+                    loaded = source.load_config(f"{group}/{name}")
+                    package = loaded.header.get("package") or group  # Hydra's default package: the group
+                    prefix = "" if package == "_global_" else f"{package.removeprefix('_global_.')}."
+                    for key, target in _targets(OmegaConf.to_container(loaded.config), prefix):
+                        targets.setdefault(key, set()).add(str(target))
     return targets
 
 
 def check_stored_targets(stored: dict, composed: Mapping, resume_value) -> None:
     """Refuse a stored config (a run file's, or .hydra/config.yaml) naming a ``_target_`` that
-    no higbench config registers: it would be built (called) before anything else is checked."""
-    allowed = registered_targets() | {str(dotted_get(dict(composed), f"{g}._target_", "")) for g in ("problem", "optimizer")}
+    no config file sets at that key (``registered_targets``) and this command line does not
+    name there either: it would be built (called) before anything else is checked."""
+    registered, composed = registered_targets(), dict(composed)
     for key, target in _targets(stored):
-        if str(target) not in allowed:
-            why = f"its stored config names {key}={target}, which no problem or optimizer config registers; refusing to build it"
+        if str(target) not in registered.get(key, set()) and str(target) != str(dotted_get(composed, key, "")):
+            why = f"its stored config names {key}={target}, which no config file sets there; refusing to build it"
             raise ConfigError("resume", resume_value, why)
 
 

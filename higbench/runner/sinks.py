@@ -112,16 +112,20 @@ class ProgressSink(Sink):
 class Sinks(Sink):
     """Several sinks in order; the run file first, so it holds a row before any display shows it.
 
-    The run file is the record: its faults stop the run. A side sink (TensorBoard) that
-    fails is turned off with one line on stderr, and the run goes on without it.
+    ``sinks``: the run's own (the run file first, the display last): the run file is the
+    record, and their faults stop the run. ``side``: the side sinks the config names, placed
+    after the run file; one that fails is turned off with one line on stderr, and the run
+    goes on without it. Which is which is decided here, by the caller, never by a sink's
+    class: a side sink of any class (even ``RunFileSink``, named by a config) is a side sink.
     """
 
-    def __init__(self, *sinks: Sink):
-        self.sinks = list(sinks)
+    def __init__(self, *sinks: Sink, side: tuple[Sink, ...] | list[Sink] = ()):
+        self.sinks = [*sinks[:1], *side, *sinks[1:]]
+        self.side = list(side)
 
     def _each(self, method: str, *args) -> None:
         for s in list(self.sinks):
-            if isinstance(s, (RunFileSink, ProgressSink)):
+            if not any(s is side for side in self.side):
                 getattr(s, method)(*args)
                 continue
             try:

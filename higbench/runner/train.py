@@ -48,11 +48,11 @@ from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
 from higbench.dtypes import DTYPES
-from higbench.errors import ConfigError, show
+from higbench.errors import ConfigError, MemoryRefusal, show
 from higbench.optim import memory_guard
 from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
-from higbench.problems.base import Batch, Problem, build_problem
+from higbench.problems.base import LATER_DRAWS, Batch, Problem, build_problem
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
@@ -195,7 +195,7 @@ def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
         key = "problem.hidden" if "hidden" in cfg.problem else "problem"
         first = " ".join(str(exc).split())[:200]
         hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
-        raise ConfigError(key, hidden, f"the network does not fit in memory ({first})") from None
+        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({first})") from None
 
 
 SMALL_NETWORK_BYTES = 64 << 20  # below this a network is not what exhausts memory
@@ -219,7 +219,7 @@ def check_network_size(cfg: DictConfig, problem: Problem) -> None:
         hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
         need_mb, have_mb = memory_guard.mb(need), memory_guard.mb(available)
         why = f"{need_mb} for {n:,} parameters (weights, gradients, optimizer state), {have_mb} is {where}"
-        raise ConfigError(key, hidden, f"the network does not fit in memory ({why})")
+        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({why})")
 
 
 def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
@@ -245,6 +245,14 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
         jacobian="structured" if getattr(update, "structured", False) else "naive",
         krylov_steps=opt.group.get("krylov_steps", 200),
         factor_values=mlp_factor_values(model),
+    )
+
+
+def check_data_memory(cfg: DictConfig, problem: Problem) -> None:
+    """The validation and fresh test sets (drawn when first asked for, after this) fit in memory."""
+    sizes = {f"problem.{key}": int(cfg.problem.get(key) or 0) for key in LATER_DRAWS}
+    memory_guard.check_samples(
+        {k: n for k, n in sizes.items() if n}, problem.sample_bytes(), str(problem.device), cfg.get("memory_limit_mb")
     )
 
 
@@ -326,6 +334,7 @@ def check_build(cfg: DictConfig, initial_weights=None) -> None:
     check_sinks(cfg)
     if resolve_device(cfg.device).type == "cpu":
         check_memory(cfg, problem, model, update)
+        check_data_memory(cfg, problem)
 
 
 # -- the loop --------------------------------------------------------------------------------
@@ -617,6 +626,7 @@ def train(plan: Plan) -> RunSummary:
     if state is not None:  # all of it fits this network and optimizer, before the run file is touched
         check_checkpoint(state, problem, model, update, cfg, run_path)
     estimate = check_memory(cfg, problem, model, update)
+    check_data_memory(cfg, problem)
     if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
     check_sinks(cfg)
@@ -633,7 +643,7 @@ def train(plan: Plan) -> RunSummary:
         cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
     )
     run = TrainingRun(
-        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, *extra, ProgressSink(progress))
+        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, ProgressSink(progress), side=extra)
     )
     clock.resume()
     signals = StopSignals(parent=plan.stop_with_parent).install()

@@ -9,6 +9,11 @@ file, a list of override lists, and hands them to the configured launcher as one
 
 Overrides on the command line apply to every job (a job's own value wins). The launcher
 starts jobs in list order, so a list sorted longest first keeps the workers busy to the end.
+
+The file may also be ``{"ledger": <runs root>, "jobs": [{"overrides": [...], "claim":
+<identity>, "run": <run file>}, ...]}`` (what ``higbench.jobs.launch`` writes): then each job
+is claimed in the runs root's ledger before it runs, and left alone when a live worker holds it
+(``higbench.jobs.worker``). ``hydra.sweeper.only=<i>`` runs the i-th job alone (a job array's task).
 """
 # No "from __future__ import annotations": Hydra imports plugins outside sys.modules, where a
 # dataclass with string annotations cannot be built.
@@ -18,7 +23,7 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -33,6 +38,7 @@ from hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper import EveryBatc
 class JobListSweeperConf:
     _target_: str = "hydra_plugins.higbench_joblist_sweeper.joblist_sweeper.JobListSweeper"
     jobs_file: str = "???"  # JSON: [["key=value", ...], ...], one list of overrides per job
+    only: Optional[int] = None  # run the job of this index alone (a job array's task)
 
 
 ConfigStore.instance().store(group="hydra/sweeper", name="joblist", node=JobListSweeperConf, provider="higbench")
@@ -40,10 +46,29 @@ ConfigStore.instance().store(group="hydra/sweeper", name="joblist", node=JobList
 
 def read_jobs(path: str | Path) -> list[list[str]]:
     """The job list of a jobs file, checked to be a list of lists of ``key=value`` strings."""
-    jobs = json.loads(_read_regular(Path(path)))
-    if not isinstance(jobs, list) or not all(isinstance(j, list) and all(isinstance(o, str) for o in j) for j in jobs):
-        raise ValueError(f"hydra.sweeper.jobs_file={path}: must hold a JSON list of lists of override strings")
-    return jobs
+    return [e["overrides"] for e in read_entries(path)[1]]
+
+
+def read_entries(path: str | Path) -> tuple[Optional[str], list[dict]]:
+    """(the ledger's runs root or None, one dict per job: ``overrides``, and ``claim`` and
+    ``run`` where the jobs are claimed), checked."""
+    data = json.loads(_read_regular(Path(path)))
+    root, entries = None, data
+    if isinstance(data, dict):
+        root, entries = data.get("ledger"), data.get("jobs")
+        ok = isinstance(root, str) and isinstance(entries, list) and all(
+            isinstance(e, dict) and isinstance(e.get("claim"), str) and isinstance(e.get("run"), str) for e in entries
+        )
+    else:
+        ok = isinstance(entries, list)
+        entries = [{"overrides": e} for e in entries] if ok else entries
+    ok = ok and all(isinstance(e.get("overrides"), list) and all(isinstance(o, str) for o in e["overrides"]) for e in entries)
+    if not ok:
+        raise ValueError(
+            f"hydra.sweeper.jobs_file={path}: must hold a JSON list of lists of override strings "
+            "(or {ledger, jobs: [{overrides, claim, run}]})"
+        )
+    return root, entries
 
 
 MAX_JOBS_FILE_BYTES = 64 << 20
@@ -68,12 +93,25 @@ def merge(common: list[str], job: list[str]) -> list[str]:
 
 
 class JobListSweeper(Sweeper):
-    def __init__(self, jobs_file: str):
-        self.jobs_file = jobs_file
+    def __init__(self, jobs_file: str, only: Optional[int] = None):
+        self.jobs_file, self.only = jobs_file, only
         self.config = self.launcher = self.hydra_context = None
+        self.root, self.entries = None, []
+
+    def _read(self) -> None:
+        self.root, self.entries = read_entries(self.jobs_file)
+        if self.only is not None:
+            if not 0 <= self.only < len(self.entries):
+                raise ValueError(f"hydra.sweeper.only={self.only}: the jobs file holds {len(self.entries)} jobs")
+            self.entries = [self.entries[self.only]]
 
     def setup(self, *, hydra_context, task_function, config) -> None:
         self.hydra_context, self.config = hydra_context, config
+        self._read()
+        if self.root is not None:  # each job claimed in the ledger first (imported only then: it reads run files)
+            from higbench.jobs.worker import ClaimedTask
+
+            task_function = ClaimedTask(task_function, self.root, [(e["claim"], e["run"]) for e in self.entries])
         self.launcher = FailureCountingLauncher(
             Plugins.instance().instantiate_launcher(hydra_context=hydra_context, task_function=task_function, config=config)
         )
@@ -83,7 +121,7 @@ class JobListSweeper(Sweeper):
         swept = [o.input_line for o in parser.parse_overrides(arguments) if o.is_sweep_override()]
         if swept:
             raise ValueError(f"{swept[0]}: the joblist sweeper takes no sweep overrides (list the jobs in jobs_file)")
-        batch = [merge(arguments, job) for job in read_jobs(self.jobs_file)]
+        batch = [merge(arguments, e["overrides"]) for e in self.entries]
         sweep_dir = Path(self.config.hydra.sweep.dir)
         sweep_dir.mkdir(parents=True, exist_ok=True)
         OmegaConf.save(self.config, sweep_dir / "multirun.yaml")

@@ -229,6 +229,41 @@ def test_launcher_flags_reach_run_missing(tmp_path, no_runs):
     assert {j.overrides["eval_every"] for j in jobs} == {0.01}  # 100 evaluations per run
 
 
+def test_a_launcher_setting_submitit_has_not_is_one_line_before_any_run(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1",
+            "--seconds", "1", "--root", str(tmp_path / "runs"), "--launcher", "submitit_slurm",
+            "--launcher-set", "partiton=gpu"]  # fmt: skip
+    assert driver.main(argv) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "hydra.launcher.partiton=gpu: not a setting of the submitit_slurm launcher" in line
+    assert not no_runs and not (tmp_path / "runs").exists()
+
+
+def test_runs_the_ledger_refused_for_good_are_named_not_promised_to_the_same_command(tmp_path, monkeypatch, capsys):
+    """A job the ledger records as final (refused for memory) comes back not done every time: the
+    league must say so and where to clear it, not that the same command continues it."""
+
+    def refusing(jobs, root, **kw):
+        assert kw["progress"] is False  # the league prints its own count; the launch's would be a second line
+        for j in jobs:
+            j.status, j.reason = "refused", "not even batch_size=1 fits"
+        return list(jobs)
+
+    monkeypatch.setattr(driver, "run_missing", refusing)
+    runner = driver.Runner(tmp_path, 1, "basic", [], driver_progress())
+    job = driver.Job("league", "tune/toy/adam/0/0", {"problem": "toy", "optimizer": "adam", "budget.seconds": 1.0}, 1000)
+    with pytest.raises(SystemExit) as stop:
+        runner.run([job], "toy tuning")
+    assert "1 refused for good (not even batch_size=1 fits)" in str(stop.value) and "ledger" in str(stop.value)
+    assert "the same command continues" not in str(stop.value)
+
+
+def driver_progress():
+    from higbench.runner.progress import CountProgress
+
+    return CountProgress(False, "league", 1)
+
+
 def test_the_plan_counts_runs_and_hours_and_runs_nothing(tmp_path, no_runs, capsys):
     argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--paper", "adam", "--trials", "3", "--studies", "2",
             "--seeds", "5", "--seconds", "60", "--variants", "1", "--jobs", "2", "--root", str(tmp_path / "runs"),

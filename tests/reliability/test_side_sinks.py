@@ -66,3 +66,17 @@ def test_the_run_file_failing_still_stops_the_run(tmp_path, monkeypatch):
 
     with pytest.raises(OSError, match="I/O error"):
         Sinks(Broken()).on_eval({"step": 0})
+
+
+@pytest.mark.parametrize("internal", ["RunFileSink", "ProgressSink"])
+def test_an_internal_class_named_as_a_side_sink_is_turned_off_and_the_run_completes(internal, tmp_path, monkeypatch, capsys):
+    """Before, the run's own sinks were told apart by their class: a side sink of class
+    RunFileSink failed as if it were the run file, and the run died with a traceback and a
+    failed file."""
+    monkeypatch.chdir(tmp_path)
+    run = [a for a in RUN if a != "tensorboard=true"]
+    cli.main([*run, f"+sink.x._target_=higbench.runner.sinks.{internal}", "hydra.run.dir=run"])
+    lines = [line for line in capsys.readouterr().err.splitlines() if "turned off" in line]
+    assert len(lines) == 1 and lines[0].startswith(f"higbench: {internal} turned off"), lines
+    head = read_head(tmp_path / "run" / "run.h5")
+    assert head.status == "completed" and head.n_updates == 6

@@ -21,8 +21,14 @@ process is refused by the resume and left alone.
 Running. The jobs that can run now (a continued run waits for its parent, a searched seed for
 its search) form one ``higbench -m`` multirun over their list (the job-list sweeper,
 ``hydra/sweeper=joblist``), longest first, on a Hydra launcher: joblib with ``--jobs``
-workers locally, or any other (``--launcher slurm``, ...) with extra ``hydra.*`` overrides.
-Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
+workers locally, or any other (``--launcher slurm``, ...) with extra ``hydra.*`` overrides;
+with ``submitit_local`` or ``submitit_slurm`` one submitit job array whose task i runs job i
+of that list (``arrays``). Run files go to ``<runs root>/figures-runs/<time>/<job number>/run.h5``.
+
+The ledger. The runs root is the ledger of its jobs (``ledger``): each job is claimed there by
+the worker that runs it (``worker``), so a job held by a live worker is waited for instead of
+run twice (two drivers on one root), a dead worker's job runs again (resumed from its
+checkpoint where it left one), and a job refused for memory or failed repeatedly is final.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import math
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import contextmanager
@@ -45,6 +52,9 @@ import yaml
 
 from higbench.errors import dotted_get
 from higbench.errors import override_value as fmt  # the one value-to-override rule
+from higbench.jobs import arrays
+from higbench.jobs.arrays import LauncherError
+from higbench.jobs.ledger import FINAL_STATUSES, Ledger
 from higbench.results.index import DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
@@ -72,6 +82,7 @@ class Job:
     status: str = "missing"
     resume_from: Path | None = None  # a stopped run of it with a checkpoint: launched as resume=
     clock_done: float = 0.0  # that run's training clock (seconds of its budget already spent)
+    reason: str = ""  # why a job is final without a run that is done (the ledger's record: refused for memory, ...)
 
     def override_list(self) -> list[str]:
         """The job's overrides as ``key=value`` strings (``init_from``: its parent's run file)."""
@@ -205,7 +216,7 @@ def resolve(jobs: Iterable[Job], index: dict[str, IndexedRun], compose: Callable
             job.config = dict(compose(tuple(job.override_list())))
             job.identity = identity_of(job.config, job.parent.identity if job.parent else None)
             run = index.get(job.identity)
-            job.status = run.status if run else "missing"
+            job.status, job.reason = (run.status if run else "missing"), ""
             job.path = run.path if run and job.done else None
             job.resume_from = run.path if run and resumable(run) else None
             job.clock_done = run.clock if job.resume_from else 0.0
@@ -213,13 +224,14 @@ def resolve(jobs: Iterable[Job], index: dict[str, IndexedRun], compose: Callable
 
 @dataclass(frozen=True)
 class Launcher:
-    """The Hydra launcher of the figures' multiruns.
+    """Where a launch's jobs run.
 
     name: ``joblib`` (default; ``auto`` is the same: local workers, ``n_jobs`` = ``--jobs``),
-    ``basic`` (one run after another in one process), or any launcher config of
-    ``hydra/launcher`` (``slurm``: conf/hydra/launcher/slurm.yaml, ``submitit_slurm``,
-    ``submitit_local``). overrides: extra ``hydra.*`` overrides for every multirun
-    (``hydra.launcher.partition=gpu``); they do not change a run's identity.
+    ``basic`` (one run after another in one process), ``submitit_local`` or ``submitit_slurm``
+    (one submitit job array per round: ``higbench.jobs.arrays``), or any other launcher config
+    of ``hydra/launcher`` (``slurm``: conf/hydra/launcher/slurm.yaml). overrides: extra
+    ``hydra.*`` overrides for every multirun (``hydra.launcher.partition=gpu``); they do not
+    change a run's identity. A submitit launcher's settings are checked here (``LauncherError``).
     """
 
     name: str = "joblib"
@@ -228,23 +240,61 @@ class Launcher:
     def __post_init__(self):
         bad = [o for o in self.overrides if not o.split("=", 1)[0].lstrip("+~").startswith("hydra.")]
         if bad:
-            raise ValueError(f"{bad[0]}: only hydra.* overrides may be added to the figures' runs (others change the runs)")
+            raise LauncherError(f"{bad[0]}: only hydra.* overrides may be added to the figures' runs (others change the runs)")
+        if self.array:
+            arrays.submitit_parameters(self.name, self.settings())
+
+    @property
+    def array(self) -> bool:
+        """Whether a round goes out as one submitit job array."""
+        return self.name in arrays.SUBMITIT
+
+    def settings(self) -> dict[str, Any]:
+        """The ``hydra.launcher.*`` overrides as {key: value} (Hydra's grammar reads the values)."""
+        mine = [o.lstrip("+") for o in self.overrides if o.lstrip("+").startswith("hydra.launcher.")]
+        return {k.removeprefix("hydra.launcher."): v for k, v in parse_overrides(mine).items()}
 
     def args(self, n_runs: int, n_jobs: int, seconds: float) -> list[str]:
         """Hydra overrides choosing the launcher for a multirun of ``n_runs`` runs."""
         name = "joblib" if self.name == "auto" else self.name
-        if name in ("joblib", "basic"):
+        if name in ("joblib", "basic") or self.array:  # an array's tasks run one job each, in-process
             workers = min(n_jobs, n_runs)
-            if name == "basic" or workers <= 1 or seconds < PARALLEL_SECONDS:  # not worth starting workers
-                return [o for o in self.overrides if not o.startswith("hydra.launcher.")]
+            if name != "joblib" or workers <= 1 or seconds < PARALLEL_SECONDS:  # not worth starting workers
+                return [o for o in self.overrides if not o.lstrip("+").startswith("hydra.launcher.")]
             return ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={workers}", *self.overrides]
         return [f"hydra/launcher={name}", *self.overrides]
 
+    def workers(self, n_runs: int, n_jobs: int) -> int:
+        """How many of ``n_runs`` jobs run at once (for the time-left forecast)."""
+        if self.array:
+            return max(1, min(n_runs, int(self.settings().get("array_parallelism") or n_runs)))
+        return max(1, min(n_runs, n_jobs if self.name in ("joblib", "auto") else 1))
 
-def multirun_command(jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[str]) -> list[str]:
+
+def as_launcher(launcher: str | Launcher, overrides: Sequence[str] = ()) -> Launcher:
+    """A Launcher from a name and ``KEY=VALUE`` settings (``hydra.launcher.KEY=VALUE`` too)."""
+    if isinstance(launcher, Launcher):
+        return Launcher(launcher.name, (*launcher.overrides, *launcher_overrides(overrides))) if overrides else launcher
+    return Launcher(str(launcher), tuple(launcher_overrides(overrides)))
+
+
+def launcher_overrides(settings: Sequence[str]) -> list[str]:
+    """``partition=gpu`` -> ``hydra.launcher.partition=gpu``; ``hydra.*`` overrides as given."""
+    out = []
+    for item in settings:
+        key, eq, _ = str(item).partition("=")
+        if not eq or not key.strip():
+            raise LauncherError(f"{item}: a launcher setting is KEY=VALUE (partition=gpu, timeout_min=90)")
+        out.append(item if key.lstrip("+~").startswith("hydra.") else f"hydra.launcher.{item}")
+    return out
+
+
+def multirun_command(
+    jobs_file: Path, sweep_dir: Path, launcher_args: Sequence[str], subdir: str = "${hydra.job.num}"
+) -> list[str]:
     """``higbench -m`` over the jobs of ``jobs_file`` (job-list sweeper), into ``sweep_dir``."""
     args = [sys.executable, "-m", "higbench.cli", "-m", "hydra/sweeper=joblist", f"hydra.sweeper.jobs_file={fmt(str(jobs_file))}"]
-    args += [*LAUNCH_OVERRIDES, f"hydra.sweep.dir={fmt(str(sweep_dir))}", "hydra.sweep.subdir=${hydra.job.num}"]
+    args += [*LAUNCH_OVERRIDES, f"hydra.sweep.dir={fmt(str(sweep_dir))}", f"hydra.sweep.subdir={subdir}"]
     return args + list(launcher_args)
 
 
@@ -270,35 +320,169 @@ def training_text(jobs: Sequence[Job]) -> str:
     return " and ".join(parts)
 
 
-def launch(jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print) -> list[Path]:
-    """Run the jobs as one ``higbench -m`` multirun over their list, longest first, on the
-    Hydra launcher (``Launcher``, or the name of one); returns the run files written. With
-    joblib at most ``n_jobs`` training processes at once."""
-    launcher = launcher if isinstance(launcher, Launcher) else Launcher(launcher)
+POLL_S = 2.0  # how often a driver looks at the ledger while its jobs run, or while it waits for others'
+
+
+def launch(
+    jobs: list[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print, progress: bool = True
+) -> list[Path]:
+    """Run the jobs once, longest first: those no live worker holds as one ``higbench -m``
+    multirun over their list on a Hydra launcher, or as one submitit job array (``Launcher``, or
+    the name of one), each job claimed in the ledger of ``runs_root`` first; then wait for the
+    jobs other workers hold. Returns the run files written. With joblib at most ``n_jobs``
+    training processes at once. Jobs the ledger says are final are not run. progress=False: no
+    'N of M runs done' line (a caller that counts a larger whole, the league, prints its own)."""
+    launcher = as_launcher(launcher)
+    runs_root = Path(runs_root)
+    ledger = Ledger(runs_root)
+    claimed = bool(jobs) and all(j.identity for j in jobs)  # jobs resolved: each has its identity in the ledger
+    held = _held_elsewhere(jobs, ledger, log) if claimed else []
+    final = [j for j in jobs if claimed and j not in held and ledger.final(j.identity)]
+    if final:
+        log(f"[jobs] {len(final)} run(s) not run again: the ledger records them refused or failed repeatedly ({ledger.dir})")
+    jobs = [j for j in jobs if j not in held and j not in final]
+    watched = ledger if claimed and progress else None
+    new = (
+        _launch(jobs, runs_root, ledger if claimed else None, watched, n_jobs=n_jobs, launcher=launcher, log=log) if jobs else []
+    )
+    if claimed:
+        wait_for_holders([j for j in [*jobs, *held] if not j.done], ledger, log)
+    return new
+
+
+def _launch(
+    jobs: list[Job], runs_root: Path, ledger: Ledger | None, watched: Ledger | None, *, n_jobs: int, launcher: Launcher, log
+) -> list[Path]:
     jobs = sorted(jobs, key=job_seconds, reverse=True)  # the longest start first: no idle core at the end
     sweep_dir = (runs_root / FIGURE_RUNS_DIR / f"{time.strftime('%Y-%m-%d_%H-%M-%S')}-{os.getpid()}").resolve()
     sweep_dir.mkdir(parents=True, exist_ok=False)
     jobs_file = sweep_dir / "jobs.json"
-    jobs_file.write_text(json.dumps([j.launch_overrides() for j in jobs], indent=1) + "\n")
+    jobs_file.write_text(json.dumps(jobs_listing(jobs, sweep_dir, runs_root if ledger else None), indent=1) + "\n")
     secs = sum(map(job_seconds, jobs))
     extra = launcher.args(len(jobs), n_jobs, secs)
-    how = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
+    chosen = next((a.split("=", 1)[1] for a in extra if a.startswith("hydra/launcher=")), "basic")
+    how = f"{launcher.name} array" if launcher.array else chosen
     figures = ", ".join(sorted({j.figure for j in jobs}))
     resumed = [j.resume_from for j in jobs if j.resume_from is not None]
     again = f", {len(resumed)} resumed in place" if resumed else ""
     log(f"[figures] running {len(jobs)} run(s) of {figures} ({how}{again}, {training_text(jobs)}) -> {sweep_dir}")
+    t0 = time.perf_counter()
+    with watching(jobs, watched, launcher.workers(len(jobs), n_jobs)):
+        if launcher.array:
+            status = _run_array(jobs_file, sweep_dir, len(jobs), launcher, extra)
+        else:
+            status = _run_multirun(jobs_file, sweep_dir, extra)
+    new = sorted([*sweep_dir.rglob(RUN_FILE), *resumed])
+    log(f"[figures] {len(new)}/{len(jobs)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
+    return new
+
+
+def jobs_listing(jobs: Sequence[Job], sweep_dir: Path, ledger_root: Path | None) -> list | dict:
+    """The jobs file of a launch: each job's overrides; with a ledger also its identity (claimed
+    before it runs) and the run file it writes (its own job dir, or the stopped run it resumes)."""
+    if ledger_root is None:
+        return [j.launch_overrides() for j in jobs]
+    entries = []
+    for i, j in enumerate(jobs):
+        run = j.resume_from if j.resume_from is not None else sweep_dir / str(i) / RUN_FILE
+        entries.append({"overrides": j.launch_overrides(), "claim": j.identity, "run": str(run)})
+    return {"ledger": str(Path(ledger_root).resolve()), "jobs": entries}
+
+
+def _checkout_env() -> dict[str, str]:
     env = dict(os.environ)  # the checkout on the path: higbench and its hydra_plugins (the job-list sweeper)
     env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
-    t0 = time.perf_counter()
+    return env
+
+
+def _run_multirun(jobs_file: Path, sweep_dir: Path, extra: list[str]) -> str:
     with open(sweep_dir / "launch.log", "w") as out:
         cmd = multirun_command(jobs_file, sweep_dir, extra)
         out.write(" ".join(cmd) + "\n\n")
         out.flush()
-        proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
-    new = sorted([*sweep_dir.rglob(RUN_FILE), *resumed])
-    status = "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
-    log(f"[figures] {len(new)}/{len(jobs)} run file(s) in {time.perf_counter() - t0:.0f} s ({status})")
-    return new
+        proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=_checkout_env())
+    return "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
+
+
+def _run_array(jobs_file: Path, sweep_dir: Path, n: int, launcher: Launcher, extra: list[str]) -> str:
+    """The jobs as one submitit job array; task i runs job i of the jobs file; waits for all."""
+    ex = arrays.executor(launcher.name, sweep_dir / "submitit", launcher.settings())
+    commands = [multirun_command(jobs_file, sweep_dir, [*extra, f"hydra.sweeper.only={i}"], subdir=str(i)) for i in range(n)]
+    saved = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = _checkout_env()["PYTHONPATH"]  # the tasks' environment is the submitting one
+    try:
+        tasks = arrays.submit_array(ex, commands)
+    finally:
+        os.environ.pop("PYTHONPATH") if saved is None else os.environ.__setitem__("PYTHONPATH", saved)
+    (sweep_dir / "launch.log").write_text(f"submitit array {tasks[0].job_id.split('_')[0]} of {n} task(s)\n" if tasks else "")
+    while not all(t.done() for t in tasks):
+        pause(POLL_S)
+    failed = sum(1 for t in tasks if t.exception() is not None or t.result() != 0)
+    return "ok" if not failed else f"{failed} task(s) failed, see {sweep_dir / 'submitit'}"
+
+
+@contextmanager
+def watching(jobs: Sequence[Job], ledger: Ledger | None, workers: int):
+    """'N of M runs done (K failed), about T left' while the block runs (``CountProgress``),
+    from the ledger's records of the jobs; T: the budgets left, shared among the workers."""
+    from higbench.runner.progress import CountProgress
+
+    enabled = ledger is not None and any(str(j.overrides.get("progress", True)).lower() != "false" for j in jobs)
+    progress = CountProgress(enabled, "jobs", len(jobs))
+    if not progress.enabled:
+        yield
+        return
+    before = {j.identity: ledger.record(j.identity).get("finished") for j in jobs}
+    stop = threading.Event()
+
+    shown = [(0, 0)]
+
+    def look() -> None:
+        ended = {j.identity: r for j in jobs if (r := ledger.record(j.identity)).get("finished") != before[j.identity]}
+        failed = sum(1 for r in ended.values() if r.get("status") not in DONE_STATUSES)
+        if (len(ended), failed) == shown[0]:
+            return  # a line when something ended, not one per look
+        shown[0] = (len(ended), failed)
+        left = [j for j in jobs if j.identity not in ended]
+        progress.update(len(ended), sum(map(job_seconds, left)) / max(1, min(workers, len(left))), failed)
+
+    def watch() -> None:
+        while not stop.wait(POLL_S):
+            look()
+
+    progress.update(0, sum(map(job_seconds, jobs)) / max(1, min(workers, len(jobs))))
+    thread = threading.Thread(target=watch, name="jobs-progress", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+        look()
+        progress.close()
+
+
+def _held_elsewhere(jobs: Sequence[Job], ledger: Ledger, log) -> list[Job]:
+    """The jobs a live worker holds now (another driver's, or one a killed driver left running)."""
+    held = [j for j in jobs if ledger.live_holder(j.identity) is not None]
+    if held:
+        log(f"[jobs] {len(held)} run(s) are being run by other workers (ledger: {ledger.dir}); waited for, not run again")
+    return held
+
+
+def pause(seconds: float) -> None:
+    """A driver's wait between two looks at its jobs (one name: tests replace it)."""
+    time.sleep(seconds)
+
+
+def wait_for_holders(jobs: Sequence[Job], ledger: Ledger, log, poll_s: float | None = None) -> None:
+    """Until no live worker holds any of the jobs (a dead worker's claim no longer counts)."""
+    said = 0
+    while held := [j for j in jobs if ledger.live_holder(j.identity) is not None]:
+        if len(held) != said:
+            log(f"[jobs] waiting for {len(held)} run(s) held by other workers (ledger: {ledger.dir})")
+            said = len(held)
+        pause(POLL_S if poll_s is None else poll_s)
 
 
 def composed_value(key: str, *overrides: str) -> Any:
@@ -318,15 +502,50 @@ def parse_overrides(overrides: Sequence[str]) -> dict[str, Any]:
 
 
 def run_missing(
-    jobs: Sequence[Job], runs_root: Path, *, n_jobs: int, launcher: str | Launcher = "joblib", log=print
+    jobs: Sequence[Job],
+    runs_root: Path,
+    *,
+    n_jobs: int = 1,
+    launcher: str | Launcher = "joblib",  # with n_jobs=1 the same as basic
+    launcher_overrides: Sequence[str] = (),
+    log=print,
+    progress: bool = True,
 ) -> list[Job]:
     """The one reuse rule for a set of jobs (the figures' rounds, the league, the bench scripts):
     resolve them against the runs root's index, launch those not done (a stopped run with a
-    checkpoint resumes in place) and resolve them again. Returns the jobs still not done."""
+    checkpoint resumes in place; one a live worker holds is waited for, not run again), and
+    resolve them again. Returns the jobs still not done; those the ledger says are final
+    (refused for memory, or failed ``MAX_FAILURES`` times in a row) among them have that
+    ``status`` and its ``reason``, and are not launched again.
+
+    launcher: ``basic``, ``joblib`` (``n_jobs`` workers), ``submitit_local``, ``submitit_slurm``
+    (one job array per call) or a ``Launcher``; launcher_overrides: its settings as
+    ``KEY=VALUE`` (``partition=gpu``, ``timeout_min=90``, or ``hydra.launcher.KEY=VALUE``),
+    checked before anything runs (``LauncherError``: one line naming the key)."""
+    launcher = as_launcher(launcher, launcher_overrides)
+    runs_root = Path(runs_root)
+    ledger = Ledger(runs_root)
+    launched: set[str] = set()
     resolve(jobs, run_index(runs_root))
-    todo = [j for j in jobs if not j.done and j.status != "waiting"]
-    log(f"[jobs] {len(jobs) - len(todo)} of {len(jobs)} run(s) already done under {runs_root}")
-    if todo:
-        launch(todo, Path(runs_root), n_jobs=n_jobs, launcher=launcher, log=log)
+    mark_final(jobs, ledger)
+    todo = [j for j in jobs if launchable(j)]
+    log(f"[jobs] {sum(j.done for j in jobs)} of {len(jobs)} run(s) already done under {runs_root}")
+    while todo:  # a job once per call; again only if it was another worker's, and that worker died
+        held = {j.identity for j in todo if j.identity and ledger.live_holder(j.identity) is not None}
+        launch(todo, runs_root, n_jobs=n_jobs, launcher=launcher, log=log, progress=progress)
+        launched.update(j.identity for j in todo if j.identity not in held)
         resolve(jobs, run_index(runs_root))
+        mark_final(jobs, ledger)
+        todo = [j for j in jobs if launchable(j) and j.identity not in launched]
     return [j for j in jobs if not j.done]
+
+
+def launchable(job: Job) -> bool:
+    return not job.done and job.status not in ("waiting", *FINAL_STATUSES) and not job.reason
+
+
+def mark_final(jobs: Sequence[Job], ledger: Ledger) -> None:
+    """Jobs not done whose ledger record is final: their status and reason from it."""
+    for j in jobs:
+        if not j.done and j.identity and (rec := ledger.final(j.identity)) is not None:
+            j.status, j.reason = str(rec.get("status")), str(rec.get("reason") or "failed repeatedly")
