@@ -21,14 +21,13 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import re
-from importlib import resources
-from pathlib import Path
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from higbench.cards import CARD_KEY, conf_dir, optimizer_help, problem_help
 from higbench.errors import ConfigError, dotted_get, show
 from higbench.optim.contract import needs_inverse_simulator
 from higbench.schema import check, keys_where, locate, value
@@ -76,7 +75,8 @@ COSMETIC_KEYS = keys_where(RunConfig, "identity", False)  # not part of a run's 
 RESUMABLE_KEYS = keys_where(RunConfig, "resumable")  # may change on resume=
 JOB_DIR_EXCLUDED_KEYS = keys_where(RunConfig, "in_job_dir", False, nested=True)  # conf/config.yaml exclude_keys
 SIZING_KEYS = keys_where(RunConfig, "sizing")  # what the pre-flight's network build depends on
-OPTIMIZER_META = ("name", "_target_", "kind", "extra")  # optimizer keys that are not constructor arguments
+# optimizer keys that are not constructor arguments (its card: higbench.cards)
+OPTIMIZER_META = ("name", "_target_", "kind", "extra", CARD_KEY)
 
 
 def optimizer_kwargs(opt_cfg: Any) -> dict:
@@ -107,13 +107,18 @@ def flat_dirname(name: str) -> str:
 
 def register_with_hydra() -> None:
     """What conf/config.yaml needs from Python: the schema (``higbench_schema``, first in its
-    defaults), higbench's sweepers, the ``higbench.flat_dirname`` resolver of its sweep subdir and the keys a job's
-    directory name leaves out (``higbench.job_dir_excluded_keys``, from the schema). Idempotent.
+    defaults), higbench's sweepers, the ``higbench.flat_dirname`` resolver of its sweep subdir, the keys a job's
+    directory name leaves out (``higbench.job_dir_excluded_keys``, from the schema) and the
+    problem and optimizer blocks of its help (``higbench.problem_help``, ``higbench.optimizer_help``,
+    from the cards). Idempotent.
     Hydra hands both to its launchers' workers with its other global state."""
     ConfigStore.instance().store(name="higbench_schema", node=RunConfig)
     OmegaConf.register_new_resolver("higbench.flat_dirname", flat_dirname, replace=True)
     # hydra.job.config.override_dirname.exclude_keys: the keys the schema keeps out of job names
     OmegaConf.register_new_resolver("higbench.job_dir_excluded_keys", lambda: list(JOB_DIR_EXCLUDED_KEYS), replace=True)
+    # hydra.help.template: the problem and optimizer blocks of --help, one line per card
+    OmegaConf.register_new_resolver("higbench.problem_help", problem_help, replace=True)
+    OmegaConf.register_new_resolver("higbench.optimizer_help", optimizer_help, replace=True)
     # Its sweepers (joblist, and the basic sweeper that runs every batch): Hydra's plugin scan
     # misses hydra_plugins/ of an editable install (tests/figures/test_figures_units.py::
     # test_joblist_sweeper_runs_a_job_list).
@@ -129,10 +134,7 @@ def config_dir() -> str:
     it needs are registered here (``register_with_hydra``), not as a side effect of an import.
     """
     register_with_hydra()
-    checkout = Path(__file__).resolve().parent.parent / "conf"
-    if (checkout / "config.yaml").is_file():
-        return str(checkout)
-    return str(resources.files("higbench") / "conf")
+    return str(conf_dir())
 
 
 def to_plain(cfg: DictConfig | dict) -> dict:
@@ -247,7 +249,7 @@ def _validate_problem(problem: Any) -> dict:
     if not isinstance(problem, dict):
         raise ConfigError("problem", problem, "must be a mapping (pick one with problem=<name>)")
     cls = problem_class(problem)
-    plain = check(cls.Config, problem, "problem.")
+    plain = check(cls.Config, {k: v for k, v in problem.items() if k != CARD_KEY}, "problem.")  # its card: higbench.cards
     if cls.name != "?" and plain["name"] != cls.name:  # the name a run file records must be the class's
         raise ConfigError("problem.name", plain["name"], f"is not the name of {cls.__module__}.{cls.__qualname__} ({cls.name})")
     return plain

@@ -1,10 +1,11 @@
 """How results are shown: each optimizer's name and colour, the Markdown table writer and the
 number formatters. The one copy of each, for the figures, the claims, the results tables, a
-run's progress lines, the benchmarks and the scripts (it imports nothing of higbench and sits
-in the lowest layer, so every one of them may import it).
+run's progress lines, the benchmarks and the scripts (it imports only ``higbench.cards``, below
+it, and sits in the lowest layer but one, so every one of them may import it).
 
-A new optimizer (conf/optimizer/<name>.yaml) gets its row in ``OPTIMIZERS``; a test checks that
-every shipped optimizer config has one.
+An optimizer's name and colour are on its card (``card.display``, ``card.color`` in
+conf/optimizer/<name>.yaml; ``higbench.cards``): ``OPTIMIZERS`` and its views are read from
+the cards when first asked for; a test checks that every shipped optimizer has both.
 """
 
 from __future__ import annotations
@@ -15,38 +16,39 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from higbench import cards
+
 
 class Look(NamedTuple):
     """An optimizer as figures and tables show it."""
 
     name: str  # display name (legends, table columns, claim texts)
-    color: str  # matplotlib colour of its lines
+    color: str | None  # matplotlib colour of its lines (None: matplotlib's colour cycle)
 
 
-OPTIMIZERS: dict[str, Look] = {
-    "adam": Look("Adam", "tab:blue"),
-    "sgd": Look("SGD", "tab:gray"),
-    "adagrad": Look("Adagrad", "tab:purple"),
-    "adadelta": Look("Adadelta", "tab:brown"),
-    "rmsprop": Look("RMSprop", "tab:orange"),
-    "gn": Look("GN", "tab:red"),
-    "hig": Look("HIG", "tab:green"),
-    "lbfgs": Look("L-BFGS", "tab:pink"),
-    "lm": Look("Levenberg-Marquardt", "tab:olive"),
-    "adamw": Look("AdamW", "tab:cyan"),
-    "muon": Look("Muon", "navy"),
-    "soap": Look("SOAP", "darkgoldenrod"),
-    "shampoo": Look("Shampoo", "teal"),
-    "sip": Look("SIP", "crimson"),
-}
-# Views of the one table (name -> display name, name -> colour), for code that reads one of them.
-OPTIMIZER_NAMES: dict[str, str] = {k: v.name for k, v in OPTIMIZERS.items()}
-COLORS: dict[str, str] = {k: v.color for k, v in OPTIMIZERS.items()}
+def optimizer_looks() -> dict[str, Look]:
+    """Every shipped optimizer's look, from its card."""
+    return {name: Look(card.display, card.color) for name, card in cards.optimizer_cards().items()}
+
+
+def __getattr__(attr: str) -> Any:
+    """``OPTIMIZERS`` (name -> Look) and its views (name -> display name, name -> colour), read
+    from the cards when first imported (PEP 562), not when a run imports ``fmt``."""
+    looks = optimizer_looks()
+    views = {
+        "OPTIMIZERS": looks,
+        "OPTIMIZER_NAMES": {k: v.name for k, v in looks.items()},
+        "COLORS": {k: v.color for k, v in looks.items()},
+    }
+    if attr not in views:
+        raise AttributeError(f"module {__name__!r} has no attribute {attr!r}")
+    return views[attr]
 
 
 def optimizer_name(name: str) -> str:
     """The display name of an optimizer (``lbfgs`` -> ``L-BFGS``); an unknown one as it is."""
-    return OPTIMIZER_NAMES.get(name, name)
+    card = cards.optimizer_cards().get(name)
+    return card.display if card else name
 
 
 # -- tables and numbers ----------------------------------------------------------------------

@@ -3,7 +3,8 @@
 The runner, the optimizers and the results only use this surface, so adding a problem is one
 module (a ``Problem`` subclass with its ``Config`` schema) plus one YAML file in a ``problem``
 config group whose ``_target_`` names the class (docs/recipe.md; a shipped one also registers
-its name with ``@register``, and the shared tests pick it up from ``registry()``).
+its name with ``@register``, and ``registry()`` finds it by scanning, so the shared tests pick
+it up without an import line anywhere).
 
 Required (abstract on ``Problem``; ``FixedDataProblem`` supplies the data methods from
 ``_sample``):
@@ -309,9 +310,33 @@ def register(name: str):
     return wrap
 
 
-def registry() -> dict[str, type[Problem]]:
-    import higbench.problems  # noqa: F401  (imports every problem module)
+ENTRY_POINT_GROUP = "higbench.problems"  # an installed package's problems: NAME = "module" or "module:Class"
 
+
+def registry() -> dict[str, type[Problem]]:
+    """Every problem class by name, found, not listed: the modules of higbench/problems/, the
+    classes the shipped problem configs name (conf/problem/*.yaml's ``_target_``:
+    ``higbench.cards.problem_targets``) and the modules or classes installed packages declare
+    in the ``higbench.problems`` entry-point group. A module that fails to import raises: a
+    problem is never silently missing (tests/cases.py parametrises the shared tests from here)."""
+    import importlib
+    import pkgutil
+    from importlib.metadata import entry_points
+
+    import higbench.problems
+    from higbench.cards import problem_targets
+
+    for module in pkgutil.iter_modules(higbench.problems.__path__, "higbench.problems."):
+        importlib.import_module(module.name)
+    for target, name in problem_targets().items():  # a class no decorator registered: by its config's name
+        module, _, qualname = target.rpartition(".")
+        found = getattr(importlib.import_module(module), qualname)
+        if found not in _REGISTRY.values():
+            register(name)(found)
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        found = entry.load()
+        if isinstance(found, type) and issubclass(found, Problem) and found not in _REGISTRY.values():
+            register(entry.name)(found)
     return dict(_REGISTRY)
 
 

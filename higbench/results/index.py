@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from higbench.cards import without_card  # how an optimizer is shown is no part of a run
 from higbench.config import COSMETIC_KEYS  # identity=False in the schema: not part of config_id
 from higbench.display import BUSY_SHARE
 from higbench.problems.base import ProblemConfig
@@ -79,12 +80,13 @@ NOT_SETTING_KEYS = ("seed", "budget", "eval_every", "eval_unit", *COSMETIC_KEYS)
 
 
 def config_id(config: dict, parent_id: str | None = None) -> str:
-    """The identity of a run: a hash of its resolved config without ``COSMETIC_KEYS``.
+    """The identity of a run: a hash of its resolved config without ``COSMETIC_KEYS`` and its
+    optimizer's card (``higbench.cards``: how it is shown, the same before cards existed).
 
     ``init_from`` (a path) is replaced by ``parent_id``, the identity of the run it starts
     from, so a continued run keeps its identity wherever its parent's file lies.
     """
-    c = {k: v for k, v in config.items() if k not in COSMETIC_KEYS}
+    c = {k: v for k, v in without_card(config).items() if k not in COSMETIC_KEYS}
     if isinstance(c.get("problem"), dict):  # the problem's own such keys (validation size, targets, ...)
         c["problem"] = {k: v for k, v in c["problem"].items() if k not in PROBLEM_COSMETIC_KEYS}
     if c.get("init_from"):
@@ -100,7 +102,7 @@ def setting_config(config: dict, device: str | None = None) -> str:
     (``auto`` resolves to ``cpu`` on a CPU-only machine: the same setting as ``device=cpu``).
     Runs with equal strings are seeds of one setting (``profile.setting_labels``).
     """
-    kept = {k: v for k, v in config.items() if k not in NOT_SETTING_KEYS}
+    kept = {k: v for k, v in without_card(config).items() if k not in NOT_SETTING_KEYS}
     if isinstance(kept.get("problem"), dict):  # the problem's own such keys (targets, validation size, ...)
         kept["problem"] = {k: v for k, v in kept["problem"].items() if k not in PROBLEM_COSMETIC_KEYS}
     if device:
