@@ -49,6 +49,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from higbench.cards import league_optimizers
 from higbench.jobs import LAUNCH_OVERRIDES, Job, as_launcher, job_seconds, resolve, run_index, run_missing
 from higbench.jobs.ledger import FINAL_STATUSES
 from higbench.league import tables
@@ -56,8 +57,7 @@ from higbench.league.files import ROOT_FILE_ERRORS, read_json_files, safe_dir, w
 from higbench.results import league
 
 EVALUATIONS = 100  # per run: time-to-target ratios up to TAU_MAX = 4 are resolved (a target at 1/25 of the budget)
-DEFAULT_OPTIMIZERS = ("adam", "sgd", "rmsprop", "adagrad", "adadelta", "lbfgs", "lm", "gn", "hig",
-                      "adamw", "muon", "soap", "shampoo", "sip")  # fmt: skip
+DEFAULT_OPTIMIZERS = league_optimizers()  # every optimizer whose card (conf/optimizer/) says league: true
 LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm", "slurm")  # slurm: conf/hydra/launcher/slurm.yaml
 SEARCHPATH_ENV = "HIGBENCH_SEARCHPATH"  # read by hydra_plugins/higbench_searchpath
 
