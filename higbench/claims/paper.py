@@ -53,6 +53,7 @@ from higbench.claims.rules import (
 )
 from higbench.display import OPTIMIZER_NAMES, num, sci
 from higbench.problems.toy import target_function
+from higbench.results.targets import time_to
 
 # -- toy (figure 1) -------------------------------------------------------------------------
 # Paper 2.1, appendix B.1. fig1's sweeps: "toy" (γ x Adam, GN, HIG) and "adam_tuned".
@@ -1504,13 +1505,9 @@ def cnn(datas):
 
 
 def time_to_reach(run, level: float) -> float:
-    """Training seconds from which on the run stays at or below ``level`` (its first such evaluation;
-    inf if it ends above it)."""
-    t, y = run.curves["wall_time"].to_numpy(dtype=float), _loss_of(run)
-    above = np.flatnonzero(~(y <= level))
-    if len(above) and above[-1] == len(y) - 1:
-        return math.inf
-    return float(t[above[-1] + 1]) if len(above) else float(t[0])
+    """Training seconds to ``level``: the project's one time-to-target rule (``targets.time_to``:
+    the first evaluation at or below it; inf if none)."""
+    return time_to(_loss_of(run), run.curves["wall_time"].to_numpy(dtype=float), level)
 
 
 def _loss_of(run) -> np.ndarray:
@@ -1546,8 +1543,8 @@ def cnn3_rule(v: dict) -> tuple:
 )
 def cnn_faster(datas):
     """Dipole CNN (appendix B.4): HIG minimises the loss faster than Adam. Rule: the best HIG CNN setting reaches the
-    levels the best Adam setting reaches at half of its run and at its end sooner than Adam does (time to stay at or
-    below each level; medians over seeds; partly: one of the two). The first tenth is left out: B.4 puts HIG's early
+    levels the best Adam setting reaches at half of its run and at its end sooner than Adam does (time to each
+    level, targets.time_to; medians over seeds; partly: one of the two). The first tenth is left out: B.4 puts HIG's early
     plateaus down to the framework's start-up, not the method"""
     adam, hig = by_setting(datas["fig10"].runs("adam")), by_setting(datas["fig11"].runs("hig"))
     require(adam, hig, what="fig10/fig11")

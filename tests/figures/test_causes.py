@@ -856,3 +856,16 @@ def test_toy6_quotes_the_three_seed_trajectory_probe(monkeypatch, tmp_path):
     values = dict(adam_y2_left=0.36, hig_y2_left=0.08, gn_aim=0.85, adam_aim=0.66, seeds_read=1, seeds=1)
     kind, text = finish(registry.claims()["toy-6"], _row("toy-6", "reproduced", values))["cause"]
     assert kind == "seeds" and "(seeds) reads" in text and "behind on 2 of 3 seeds" in text, text
+
+
+def test_a_cause_whose_value_the_runs_did_not_give_reads_open_not_a_crash():
+    """A smoke preset's few updates leave a measured value None; the seed gate renders the claim's
+    own cause for it. None is a value the runs did not give: open, with what it needs."""
+    from higbench.claims.rules import Cause
+
+    category, text = Cause("budget", "falls {rate:g} decades per doubling").render({"rate": None})
+    assert category == "open" and "needs rate" in text
+    assert Cause("budget", "falls {rate:g} decades per doubling").render({"rate": 0.41}) == (
+        "budget",
+        "falls 0.41 decades per doubling",
+    )
