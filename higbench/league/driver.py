@@ -46,10 +46,13 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
+from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from higbench.cards import league_optimizers
+from higbench.errors import override_value as fmt
 from higbench.jobs import LAUNCH_OVERRIDES, Job, as_launcher, job_seconds, resolve, run_index, run_missing
 from higbench.jobs.ledger import FINAL_STATUSES
 from higbench.league import tables
@@ -149,21 +152,21 @@ def has_validation(problem: str, node: dict) -> bool:
     given = [v for scope, key, v in EXTRA if key.lstrip("+") == "problem.val_size" and scope in (None, problem)]
     try:
         return int(given[-1] if given else node.get("val_size") or 0) > 0
-    except ValueError:
+    except (TypeError, ValueError):
         return True  # not a number: the --set check names it
 
 
 # -- the protocol's flags ---------------------------------------------------------------------
 
-LEAGUE_KEYS = {"problem", "optimizer", "seed", "budget.seconds", "eval_every"}
-EXTRA: list[tuple[str | None, str, str]] = []  # (scope, key, value) of --set; set by main
+LEAGUE_KEYS = {"problem", "optimizer", "seed", "budget.seconds", "eval_every", "problem.held_out"}
+EXTRA: list[tuple[str | None, str, Any]] = []  # (scope, key, value as Hydra reads it) of --set; set by main
 
 
-def extra_overrides(problem: str, optimizer: str) -> dict[str, str]:
+def extra_overrides(problem: str, optimizer: str) -> dict[str, Any]:
     """The --set overrides for one (problem, optimizer): unscoped ones, and those scoped to the
     problem, the optimizer or ``problem/optimizer``; the narrower scope wins a key."""
     ranks = {None: 0, problem: 1, optimizer: 1, f"{problem}/{optimizer}": 2}
-    chosen = sorted((ranks[scope], key, value) for scope, key, value in EXTRA if scope in ranks)
+    chosen = sorted(((ranks[scope], key, value) for scope, key, value in EXTRA if scope in ranks), key=lambda c: c[:2])
     return {key: value for _, key, value in chosen}
 
 
@@ -192,9 +195,22 @@ def parse_set(item: str) -> tuple[str | None, str, str]:
     if not sep or not head.rpartition(":")[2]:
         fail(f"--set {item}: expected [SCOPE:]KEY=VALUE")
     scope, _, key = head.rpartition(":")
-    if key in LEAGUE_KEYS:
-        fail(f"--set {item}: {key} is the league's own (--problems, --optimizers, --seeds, --seconds)")
-    return scope or None, key, value
+    if key.lstrip("+~") in LEAGUE_KEYS:
+        fail(f"--set {item}: {key} is the league's own (--problems, --optimizers, --seeds, --seconds, --variants)")
+    return scope or None, key, set_value(item, key, value)
+
+
+def set_value(item: str, key: str, text: str):
+    """The value as Hydra's override grammar reads it (a list stays a list, a number a number),
+    as a single run reads ``KEY=VALUE``: a job renders it back exactly (``errors.override_value``).
+    Kept as text it was quoted into a string (``optimizer.betas='[0.8,0.99]'``) and every job failed."""
+    from hydra.errors import HydraException
+
+    try:
+        (override,) = OverridesParser.create().parse_overrides([f"{key}={text}"])
+        return override.value()
+    except HydraException as exc:
+        fail(f"--set {item}: {' '.join(str(exc).split())[:200]}")
 
 
 def searchpath_of_set(items: list[str]) -> tuple[list[str], list[Path]]:
@@ -219,7 +235,7 @@ def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
     from higbench.preflight import composition_error
 
     overrides = [f"problem={problem}", f"optimizer={optimizer}"]
-    overrides += [f"{k}={v}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
+    overrides += [f"{k}={fmt(v)}" for k, v in extra_overrides(problem, optimizer).items()] if with_set else []
     try:
         with hydra_conf():
             cfg = compose(tuple(overrides))
@@ -268,7 +284,7 @@ def check_set(problem: str, optimizers: list[str]) -> None:
     for optimizer in optimizers:
         extra = extra_overrides(problem, optimizer)
         if extra and refusal(problem, optimizer, with_set=False) is None and (why := refusal(problem, optimizer)):
-            given = " ".join(f"{k}={v}" for k, v in extra.items())
+            given = " ".join(f"{k}={fmt(v)}" for k, v in extra.items())
             fail(f"--set ({problem}, {optimizer}: {given}): {why}")
 
 
@@ -712,7 +728,8 @@ def _main(argv=None) -> int:
         print(plan_text(planned, args.jobs))
         return 0
     check_out(out, root, protocol)
-    safe_dir(root, create=True)
+    for folder in (root, root / "manifests", root / "figures-runs", root / "ledger"):  # a planted link: refused before work
+        safe_dir(folder, create=True)
     return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
                       launcher, overrides, protocol, argv)  # fmt: skip
 
@@ -738,7 +755,7 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
                       "protocol": protocol, "searchpath": [str(f) for f in search_folders()],
                       "tuning_seeds": tuning_seeds, "confirmation_seeds": seeds, "evaluations_per_run": EVALUATIONS,
                       "problems": {}, "calibration": [] if args.report_only else [calibration()]}  # fmt: skip
-    quiet = any(scope is None and key == "progress" and value.lower() == "false" for scope, key, value in EXTRA)
+    quiet = any(scope is None and key == "progress" and str(value).lower() == "false" for scope, key, value in EXTRA)
     all_jobs: list[tuple[str, Job]] = []
     plans = {}
     for problem in problems:

@@ -310,3 +310,38 @@ def test_a_problem_without_targets_gets_its_report_without_a_profile(tmp_path):
 def test_set_hydra_searchpath_is_the_searchpath_flag():
     rest, folders = driver.searchpath_of_set(["threads=1", "hydra.searchpath=[file://examples/heat/conf,file:///x/conf]"])
     assert rest == ["threads=1"] and folders == [Path("examples/heat/conf"), Path("/x/conf")]
+
+
+# -- --set values and the root's folders (the adversarial re-check of issue 51) -----------------
+
+
+def test_a_list_in_set_reaches_the_jobs_as_a_list_not_a_quoted_string(tmp_path, no_runs):
+    """`--set optimizer.betas=[0.8,0.99]` was kept as text and rendered `optimizer.betas='[0.8,0.99]'`:
+    every job failed (Adam compared a float with a str) and the league said the same command continues."""
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1",
+            "--seconds", "1", "--root", str(tmp_path), "--set", "adam:optimizer.betas=[0.8,0.99]",
+            "--set", "progress=false"]  # fmt: skip
+    assert driver.main(argv) == 0
+    (job,) = no_runs[0][0]
+    assert job.overrides["optimizer.betas"] == [0.8, 0.99]
+    assert "optimizer.betas=[0.8,0.99]" in job.launch_overrides()
+
+
+def test_held_out_through_set_is_the_league_s_own(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--root", str(tmp_path / "r"), "--set", "toy:problem.held_out=[{a:1}]"]
+    assert driver.main(argv) == 2
+    assert "problem.held_out is the league's own" in capsys.readouterr().err and not no_runs
+
+
+def test_a_planted_manifests_link_in_a_new_root_is_refused_before_the_calibration(tmp_path, no_runs, monkeypatch, capsys):
+    """It was refused only when the manifest was written, after all training."""
+    calibrated = []
+    monkeypatch.setattr(driver, "calibration", lambda: calibrated.append(1) or {})
+    (tmp_path / "victim").mkdir()
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "manifests").symlink_to(tmp_path / "victim")
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1",
+            "--seconds", "1", "--root", str(tmp_path / "r")]  # fmt: skip
+    assert driver.main(argv) == 2
+    assert "a symbolic link" in capsys.readouterr().err
+    assert not calibrated and not no_runs and not any((tmp_path / "victim").iterdir())
