@@ -101,14 +101,25 @@ def _first_line(exc) -> str:
 
 def _unknown_key(full_key: str, overrides: list[str]) -> ConfigError:
     """``problem.foo=1``: the key is not there; list the keys that are (from a composition without it)."""
+    def under(override: str) -> bool:  # the key itself, or a key below it (nosuch.key=3: Hydra names nosuch)
+        key = override.split("=", 1)[0].lstrip("+~")
+        return key == full_key or key.startswith(full_key + ".")
+
     value = given_value(overrides, full_key)
+    if value is None:  # a key below an unknown one: name the key and value the user gave
+        given = next((o.lstrip("+~") for o in overrides if under(o)), None)
+        if given is not None and "=" in given:
+            full_key, value = given.split("=", 1)[0], given.split("=", 1)[1]
     value = "<missing>" if value is None else value
     parent = full_key.rsplit(".", 1)[0] if "." in full_key else ""
-    others = [o for o in overrides if o.split("=", 1)[0].lstrip("+~") != full_key]
+    others = [o for o in overrides if not under(o)]
     base = None
     with contextlib.suppress(HydraException, OmegaConfBaseException):
         base = _compose_plain(others)
     node = dotted_get(base, parent, None) if base is not None and parent else base
+    while parent and base is not None and not isinstance(node, dict):  # the parent is unknown too: list where it is not
+        parent = parent.rsplit(".", 1)[0] if "." in parent else ""
+        node = dotted_get(base, parent, None) if parent else base
     valid = sorted(node.keys()) if isinstance(node, dict) else []
     if parent == "optimizer" and isinstance(node, dict) and node.get("_target_"):
         leaf = full_key.rsplit(".", 1)[-1]

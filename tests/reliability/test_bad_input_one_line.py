@@ -166,3 +166,12 @@ def test_the_later_sets_are_the_same_samples_drawn_when_first_asked_for():
     assert torch.equal(problem.train.net_inputs, train.net_inputs) and torch.equal(problem.test.targets, test.targets)
     assert torch.equal(problem.fresh_test_set().net_inputs, fresh.net_inputs)  # asks for the validation set first
     assert torch.equal(problem.val_set().net_inputs, val.net_inputs)
+
+
+def test_a_key_below_an_unknown_one_names_it_and_where_it_is_not(capsys, tmp_path, monkeypatch):
+    """`higbench nosuch.key=3` read "nosuch='<missing>': unknown key; valid keys:" (an empty list): Hydra
+    names the unknown parent, and the valid keys were composed with the bad override still in."""
+    monkeypatch.chdir(tmp_path)
+    line = refused(["nosuch.key=3"], capsys)
+    assert line.startswith("higbench: error: nosuch.key=3: unknown key; valid keys: ")
+    assert "budget" in line and "problem" in line
