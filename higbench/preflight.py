@@ -101,6 +101,7 @@ def _first_line(exc) -> str:
 
 def _unknown_key(full_key: str, overrides: list[str]) -> ConfigError:
     """``problem.foo=1``: the key is not there; list the keys that are (from a composition without it)."""
+
     def under(override: str) -> bool:  # the key itself, or a key below it (nosuch.key=3: Hydra names nosuch)
         key = override.split("=", 1)[0].lstrip("+~")
         return key == full_key or key.startswith(full_key + ".")
