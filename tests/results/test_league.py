@@ -150,7 +150,7 @@ def test_per_problem_trials_and_scoped_overrides_reach_the_jobs(script, tmp_path
         assert len(jobs) == 2 * trials
         assert {j.overrides["budget.seconds"] for j in jobs} == {2.0 if problem == "toy" else 1.0}
         threads = {j.overrides["optimizer"]: j.overrides.get("threads") for j in jobs}
-        assert threads == ({"adam": "2", "hig": "1"} if problem == "toy" else {"adam": None, "hig": None})  # narrower wins
+        assert threads == ({"adam": 2, "hig": 1} if problem == "toy" else {"adam": None, "hig": None})  # narrower wins
     assert script.main(["--problems", "toy", "--set", "seed=3", *common]) == 2
     assert "--set seed=3: seed is the league's own" in capsys.readouterr().err
 
