@@ -57,9 +57,23 @@ def sha256(path: Path) -> str:
 def stopped_run(path: Path, monkeypatch, overrides=(), after: int = 25):
     """A run trained here and stopped cleanly (as by SIGTERM) after ``after`` loop turns:
     status interrupted, checkpoint saved next to it."""
+    from higbench.runner.checkpoint import checkpoint_path
+
+    with monkeypatch.context() as m:
+        stop_after(m, after)
+        cfg = compose_here(
+            ["problem=toy", "optimizer=adam", "budget.max_updates=1000", "eval_unit=updates", "eval_every=5", *FAST, *overrides]
+        )
+        summary = train_here(cfg, path)
+    assert summary.status == "interrupted" and checkpoint_path(path).is_file()
+    return summary
+
+
+def stop_after(monkeypatch, turns: int) -> None:
+    """The run stops cleanly after ``turns`` loop turns, as on SIGTERM (checkpoint, status
+    interrupted): the runner's own stop path, no timed signal."""
     import signal
 
-    from higbench.runner.checkpoint import checkpoint_path
     from higbench.runner.train import StopSignals
 
     calls = {"n": 0}
@@ -67,15 +81,19 @@ def stopped_run(path: Path, monkeypatch, overrides=(), after: int = 25):
 
     def check(self):
         calls["n"] += 1
-        if calls["n"] == after:
+        if calls["n"] == turns:
             self.signum = signal.SIGTERM
         original(self)
 
-    with monkeypatch.context() as m:
-        m.setattr(StopSignals, "check", check)
-        cfg = compose_here(
-            ["problem=toy", "optimizer=adam", "budget.max_updates=1000", "eval_unit=updates", "eval_every=5", *FAST, *overrides]
-        )
-        summary = train_here(cfg, path)
-    assert summary.status == "interrupted" and checkpoint_path(path).is_file()
-    return summary
+    monkeypatch.setattr(StopSignals, "check", check)
+
+
+def refused(argv: list[str], capsys) -> str:
+    """Run ``higbench argv`` in-process: it must exit 2 with one line; the line."""
+    from higbench import cli
+
+    with pytest.raises(SystemExit) as info:
+        cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert info.value.code == 2 and len(err) == 1 and err[0].startswith("higbench: error: "), err
+    return err[0]

@@ -5,20 +5,12 @@ argument a ``**kwargs`` optimizer would swallow, the Krylov route's true size.""
 from __future__ import annotations
 
 import pytest
+from rel_helpers import refused
 
 from higbench import cli
 from higbench.errors import ConfigError
 
 TINY = ["budget.max_updates=3", "budget.seconds=null", "eval_unit=updates", "eval_every=1", "progress=false", "threads=1"]
-
-
-def refused(argv: list[str], capsys) -> str:
-    """Run ``higbench argv``: it must exit 2 with one line; the line."""
-    with pytest.raises(SystemExit) as info:
-        cli.main(argv)
-    err = capsys.readouterr().err.strip().splitlines()
-    assert info.value.code == 2 and len(err) == 1 and err[0].startswith("higbench: error: "), err
-    return err[0]
 
 
 def count_app_runs(monkeypatch, limit: int = 5) -> dict:

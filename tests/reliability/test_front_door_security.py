@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 from cases import TINY_RUN
+from rel_helpers import refused
 
 from higbench import cli
 
@@ -24,15 +25,6 @@ def sha(path: Path) -> str:
 
 def listing(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file() and not p.is_symlink()}
-
-
-def refused(argv: list[str], capsys) -> str:
-    """Run ``higbench argv``: it must exit 2 with one line; the line."""
-    with pytest.raises(SystemExit) as info:
-        cli.main(argv)
-    err = capsys.readouterr().err.strip().splitlines()
-    assert info.value.code == 2 and len(err) == 1 and err[0].startswith("higbench: error: "), err
-    return err[0]
 
 
 def test_a_stored_config_cannot_name_an_arbitrary_callable(tmp_path, monkeypatch, capsys):

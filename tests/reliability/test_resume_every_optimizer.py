@@ -14,12 +14,12 @@ from pathlib import Path
 
 import pytest
 from omegaconf import OmegaConf
+from rel_helpers import stop_after
 
 from higbench import cli
 from higbench.config import config_dir
 from higbench.runfile.reader import load_updates, read_head
 from higbench.runner.checkpoint import checkpoint_path
-from higbench.runner.train import StopSignals
 
 UPDATES = 6
 RUN = ["problem=toy", f"budget.max_updates={UPDATES}", "budget.seconds=null", "eval_unit=updates", "eval_every=2"]
@@ -27,20 +27,6 @@ RUN += ["progress=false", "threads=1", "batch_size=64"]
 OPTIMIZERS = sorted(p.stem for p in (Path(config_dir()) / "optimizer").glob("*.yaml"))
 SINKS = sorted(p.stem for p in (Path(config_dir()) / "sink").glob("*.yaml"))
 BREAKS = ("muon",)  # resumed on the old code too (in-process), refused through the command line: the fast set
-
-
-def stop_after(monkeypatch, turns: int) -> None:
-    """The run stops cleanly after ``turns`` loop turns, as on SIGTERM (checkpoint, status interrupted)."""
-    calls = {"n": 0}
-    original = StopSignals.check
-
-    def check(self):
-        calls["n"] += 1
-        if calls["n"] == turns:
-            self.signum = signal.SIGTERM
-        original(self)
-
-    monkeypatch.setattr(StopSignals, "check", check)
 
 
 def stopped_and_resumed(tmp_path: Path, monkeypatch, overrides: list[str]) -> Path:
