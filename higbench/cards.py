@@ -1,7 +1,7 @@
 """The cards: what a shipped optimizer or problem says about itself, read from its own YAML.
 
 An optimizer's YAML in conf/optimizer/ is its whole card. Besides its constructor arguments
-it holds, under ``card:`` (a key no constructor sees: ``higbench.config.OPTIMIZER_META``, and
+it holds, under ``card:`` (a key no constructor sees: ``higbench.optim.choice.OPTIMIZER_META``, and
 no part of a run's identity: ``without_card``), how higbench shows and runs it::
 
     card:

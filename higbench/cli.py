@@ -5,25 +5,22 @@
     higbench resume=outputs/runs/<date>/<run>         # continue an interrupted run
 
 One pass, in order: Hydra composes; ``higbench.preflight.Preflight`` (a Hydra callback,
-before Hydra creates anything) validates and makes the run's ``Plan``
-(``higbench.runner.plan``: the output policy and the inputs, read once); the job claims its
+before Hydra creates anything) makes the run's ``Plan`` (``higbench.runner.plan``: the
+config validated and typed, the output policy, the inputs read once); the job claims its
 directory (``claimed_dir``: of two runs started into one directory, the second is refused
-with nothing written), writes Hydra's files itself (``write_job_files``: never through a
-link, never over another run's) and calls ``runner.train.train(plan)``, which builds the
-network and optimizer once and checks them before its run file exists. Hydra's own
-composition errors (an unknown key or config, an override that does not parse) become the
-same one line, ``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written.
-Sweep jobs are planned in the job (sweepers whose jobs cannot be listed in advance, e.g.
-Optuna). What higbench does here that Hydra would do itself is each marked "Hydra's wart",
-with the test that shows why.
+with nothing written), makes room as planned (``RunDir.make_room``, ``higbench.runner.rundir``),
+writes Hydra's files itself (``write_job_files``: never through a link, never over another
+run's) and calls ``runner.train.train(plan)``. Hydra's own composition errors (an unknown
+key or config, an override that does not parse) become the same one line,
+``higbench: error: <key>=<value>: <why>``, exit code 2, nothing written. Sweep jobs are
+planned in the job (sweepers whose jobs cannot be listed in advance, e.g. Optuna). What
+higbench does here that Hydra would do itself is each marked "Hydra's wart", with the test
+that shows why.
 
-Existing runs are never overwritten: a ``hydra.run.dir`` that already holds a run file is
-refused. The only way to write into an existing run file is ``resume=`` (see
-``higbench.runner.checkpoint``). A run dir whose run recorded nothing
-(``checkpoint.recorded_nothing``) is started again in place, its dead file moved aside. A
-multirun into an existing sweep directory keeps every job that already has a run
-(``resume=true`` resumes the interrupted and failed ones); Hydra's files for a job whose
-directory already has them go to ``.hydra/rerun-<time>`` (``.hydra/resume-<time>``).
+Existing runs are never overwritten: what an existing directory means (a run to refuse, to
+continue with ``resume=``, to start again because it recorded nothing, or a sweep's job to
+keep) is the plan's output policy. Hydra's files for a job whose directory already has
+them go to ``.hydra/rerun-<time>`` (``.hydra/resume-<time>``).
 
 Exit codes: 0 completed or diverged (a diverged run is a result: its file says where and
 why), 2 bad input, 128+signal for a run stopped by SIGINT/SIGTERM (its file is closed,
@@ -59,11 +56,9 @@ from omegaconf.errors import OmegaConfBaseException
 from higbench.config import check_hydra_references
 from higbench.errors import EXIT_BAD_INPUT, ConfigError, given_value, output_never_fails, quiet_broken_pipe
 from higbench.preflight import Preflight, composition_error, config_dir, invocation, new_invocation, precheck, refuse, take_plan
-from higbench.runfile.reader import RUN_FILE
 from higbench.runner.plan import Plan
 
 __all__ = ["main", "config_dir", "Preflight", "precheck", "check_hydra_references", "ConfigError", "EXIT_BAD_INPUT"]
-RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 log = logging.getLogger("higbench")
 
 # -- the job's directory: claimed, Hydra's files written by us, never through a link ----------
@@ -209,26 +204,17 @@ def remove_hydra_outputs(output_dir: Path, output_subdir: str | None) -> None:
 
 
 def _prepare(plan: Plan, output_dir: Path, hydra_cfg: DictConfig, task_cfg: DictConfig) -> list[Path]:
-    """Check the directory is still what the plan saw, write Hydra's files (the caller holds it)."""
-    from higbench.runner import checkpoint
-
-    key = _dir_key(plan, task_cfg)
-    if plan.policy == "new" and os.path.lexists(plan.run_path):  # made after the plan
-        raise ConfigError(key, str(output_dir), f"already holds a run file ({RUN_FILE}); refusing to overwrite it")
-    if plan.restart:
-        stopped = plan.why.startswith("stopped")  # checkpoint.stopped_without_checkpoint
-        aside = checkpoint.move_aside(plan.run_path, "stopped" if stopped else "empty")
-        what = plan.why if stopped else f"recorded nothing ({plan.why})"
-        print(f"higbench: {plan.run_path} {what}; moved to {aside.name}, starting the run again", file=sys.stderr)
-    if not plan.resume and checkpoint.checkpoint_path(plan.run_path).exists():  # never adopt another run's checkpoint
-        aside = checkpoint.move_aside(checkpoint.checkpoint_path(plan.run_path), "stray")
-        print(f"higbench: a checkpoint without its run was in {output_dir}; moved to {aside.name}", file=sys.stderr)
+    """Make room for the run as planned (``RunDir.make_room``), write Hydra's files (the caller holds it)."""
+    for line in plan.dir.make_room(plan.policy, plan.why, output_dir):
+        print(f"higbench: {line}", file=sys.stderr)
     if hydra_cfg.output_subdir is not None:  # the user asked Hydra to write them: it has
         return []
     try:
         return write_job_files(output_dir, "resume" if plan.resume else "rerun", hydra_cfg, task_cfg)
     except FileExistsError as exc:
-        raise ConfigError(key, str(output_dir), f"{exc.filename} appeared while starting; refusing to write over it") from None
+        raise ConfigError(
+            plan.dir.key, str(output_dir), f"{exc.filename} appeared while starting; refusing to write over it"
+        ) from None
 
 
 def parallel_jobs(hydra_cfg: DictConfig) -> int:
@@ -241,11 +227,6 @@ def parallel_jobs(hydra_cfg: DictConfig) -> int:
     cores = os.cpu_count() or 1
     workers = max(1, cores + 1 + n_jobs if n_jobs < 0 else n_jobs)  # joblib: -1 is every core
     return min(workers, int(os.environ.get("HIGBENCH_SWEEP_JOBS", workers)))  # a sweep of 2 jobs: 2 at most
-
-
-def _dir_key(plan: Plan, task_cfg) -> str:
-    """The key a refusal about the job's directory names: the one the user gave for it."""
-    return "resume" if task_cfg.get("resume") or plan.resume else "hydra.run.dir"
 
 
 def _train(plan: Plan, parent: int | None):
@@ -336,7 +317,7 @@ def summary_lines(summary, cfg: DictConfig) -> list[str]:
     label = job_label()
     head = f"{label}{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in {summary.wall_time:.1f}s"
     thresholds = for_problem(cfg)  # the problem's targets (problem.targets), as the index times them
-    row, _ = read_run_summary(summary.path, thresholds=thresholds)  # never raises
+    row, _ = read_run_summary(summary.path, thresholds=thresholds, tables=summary.tables)  # never raises
     if "final_test_loss" not in row:  # an unreadable file: say what the loop knew
         row["final_test_loss"] = summary.final_test_loss
     final = row.get("final_test_loss", math.nan)
@@ -396,9 +377,9 @@ def _hydra_main(cfg: DictConfig) -> float:
     try:
         guard_log_files(output_dir, "hydra.sweep.dir" if multirun else "hydra.run.dir")  # before any line is logged
         plan = take_plan(cfg, output_dir, overrides, multirun=multirun)
-        if plan.kept:
+        if plan.policy == "keep":
             return _report_kept_run(plan.run_path, plan.why)
-        with claimed_dir(output_dir, _dir_key(plan, cfg)):
+        with claimed_dir(output_dir, plan.dir.key):
             made = _prepare(plan, output_dir, hydra_cfg, cfg)
             return _run_job(plan, multirun)
     except ConfigError as exc:  # refused before its run file: nothing of it stays

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import re
+from collections.abc import Mapping
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
@@ -28,7 +29,8 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from higbench.cards import CARD_KEY, conf_dir, optimizer_help, problem_help
-from higbench.errors import ConfigError, dotted_get, show
+from higbench.errors import ABSENT, ConfigError, dotted_get, leaves, show
+from higbench.optim.choice import OptimizerChoice, check_optimizer, constructor_args, optimizer_choice, optimizer_kwargs  # noqa: F401
 from higbench.optim.contract import needs_inverse_simulator
 from higbench.schema import check, keys_where, locate, value
 
@@ -49,7 +51,9 @@ _COSMETIC = dict(identity=False, resumable=True, in_job_dir=False)
 
 @dataclasses.dataclass
 class RunConfig:
-    """The top-level keys (defaults in conf/config.yaml; documented there and in --help)."""
+    """The top-level keys: their types and rules. Their values are conf/config.yaml's, written
+    there once (and documented there and in --help); only the keys a config group fills
+    (problem, optimizer, sink) start as None here."""
 
     problem: Any = value(None, sizing=True)  # checked against its problem class's Config
     optimizer: Any = value(None, sizing=True)  # checked by its constructor (sizing: all but lr)
@@ -57,17 +61,26 @@ class RunConfig:
     batch_size: int = value(ge=1, sizing=True)
     budget: Budget = dataclasses.field(default_factory=Budget, metadata={"resumable": True})
     eval_every: float = value(gt=0, resumable=True, in_job_dir=False)
-    eval_unit: str = value("seconds", choices=("seconds", "updates"))
+    eval_unit: str = value(choices=("seconds", "updates"))
     device: str = value(resumable=True, sizing=True)
     dtype: str = value(choices=("float32", "float64"), sizing=True)
-    threads: Any = value("auto", **_COSMETIC)  # auto | null | an integer >= 1
-    init_from: Optional[str] = value(None, sizing=True)  # noqa: UP045
-    progress: bool = value(True, **_COSMETIC)
-    checkpoint_every: Optional[float] = value(None, gt=0, **_COSMETIC)  # noqa: UP045
-    resume: Any = value(None, **_COSMETIC)  # null | true | false | a run dir or run file
-    memory_limit_mb: Optional[float] = value(None, gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
-    tensorboard: bool = value(False, **_COSMETIC)  # also write TensorBoard event files (higbench.runner.tensorboard)
+    threads: Any = value(**_COSMETIC)  # auto | null | an integer >= 1
+    init_from: Optional[str] = value(sizing=True)  # noqa: UP045
+    progress: bool = value(**_COSMETIC)
+    checkpoint_every: Optional[float] = value(gt=0, **_COSMETIC)  # noqa: UP045
+    resume: Any = value(**_COSMETIC)  # null | true | false | a run dir or run file
+    memory_limit_mb: Optional[float] = value(gt=0, sizing=True, **_COSMETIC)  # noqa: UP045
+    tensorboard: bool = value(**_COSMETIC)  # also write TensorBoard event files (higbench.runner.tensorboard)
     sink: Any = value(None, **_COSMETIC)  # side sinks, NAME -> {_target_, ...}: the conf/sink/ group (higbench.runner.sinks)
+
+
+@dataclasses.dataclass(frozen=True)
+class Checked:
+    """What ``validate`` found: the top-level keys typed, the problem node, the optimizer resolved."""
+
+    run: RunConfig
+    problem: Mapping[str, Any]
+    optimizer: OptimizerChoice
 
 
 # The lists each rule is read from (derived from the metadata above, never written twice):
@@ -75,18 +88,6 @@ COSMETIC_KEYS = keys_where(RunConfig, "identity", False)  # not part of a run's 
 RESUMABLE_KEYS = keys_where(RunConfig, "resumable")  # may change on resume=
 JOB_DIR_EXCLUDED_KEYS = keys_where(RunConfig, "in_job_dir", False, nested=True)  # conf/config.yaml exclude_keys
 SIZING_KEYS = keys_where(RunConfig, "sizing")  # what the pre-flight's network build depends on
-# optimizer keys that are not constructor arguments (its card: higbench.cards)
-OPTIMIZER_META = ("name", "_target_", "kind", "extra", CARD_KEY)
-
-
-def optimizer_kwargs(opt_cfg: Any) -> dict:
-    """The constructor arguments of an ``optimizer`` node (lists become tuples, e.g. Adam's betas)."""
-    kwargs = dict(opt_cfg) if isinstance(opt_cfg, dict) else OmegaConf.to_container(opt_cfg, resolve=True)
-    for key in OPTIMIZER_META:
-        kwargs.pop(key, None)
-    return {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
-
-
 DIRNAME_BYTES = 200  # a job directory's name at most (file systems: 255, with the job number before it)
 
 
@@ -159,13 +160,14 @@ def to_plain(cfg: DictConfig | dict) -> dict:
     return data
 
 
-def validate(cfg: DictConfig | dict) -> None:
-    """Raise ConfigError for the first bad key or value. Builds nothing, writes nothing."""
+def validate(cfg: DictConfig | dict) -> Checked:
+    """Raise ConfigError for the first bad key or value; else the config, typed. Builds
+    nothing but the optimizer's trial on a dummy parameter, writes nothing."""
     data = to_plain(cfg)
-    top = check(RunConfig, data)
-    if top["budget"].get("seconds") is None and top["budget"].get("max_updates") is None:
+    top: RunConfig = check(RunConfig, data, typed=True)
+    if top.budget.seconds is None and top.budget.max_updates is None:
         raise ConfigError("budget", "{seconds:null,max_updates:null}", "set at least one of budget.seconds, budget.max_updates")
-    device, threads, resume = top["device"], top["threads"], top["resume"]
+    device, threads, resume = top.device, top.threads, top.resume
     if device not in DEVICES and not re.fullmatch(r"cuda:\d+", device):
         raise ConfigError("device", device, f"must be one of {', '.join(DEVICES)} (or cuda:<index>)")
     if not (threads is None or threads == "auto" or (type(threads) is int and threads >= 1)):
@@ -174,17 +176,17 @@ def validate(cfg: DictConfig | dict) -> None:
         raise ConfigError("threads", threads, f"must be at most {max_threads()} (8 per core of this machine, at least 256)")
     if not (resume is None or isinstance(resume, bool) or (isinstance(resume, str) and resume)):
         raise ConfigError("resume", resume, "must be null, true, false, or the path of a run directory or run file")
-    if top["init_from"] == "":
+    if top.init_from == "":
         raise ConfigError("init_from", "", "must be the path of a run file or null")
 
     problem = _validate_problem(data.get("problem"))
     for size_key in ("train_size", "epoch_size"):
         size = problem.get(size_key)
-        if isinstance(size, int) and top["batch_size"] > size:
+        if isinstance(size, int) and top.batch_size > size:
             why = f"must not exceed problem.{size_key}={size} (no full batch would fit)"
-            raise ConfigError("batch_size", top["batch_size"], why)
-    check_optimizer(data.get("optimizer"), device)
-    if needs_inverse_simulator(optimizer_class(data["optimizer"])):  # SIP
+            raise ConfigError("batch_size", top.batch_size, why)
+    optimizer = check_optimizer(data.get("optimizer"), device)
+    if needs_inverse_simulator(optimizer.cls):  # SIP
         if not problem_class(data["problem"]).has_inverse_simulator():
             name = data["optimizer"].get("name", data["optimizer"]["_target_"])
             raise ConfigError("optimizer", name, f"problem {problem['name']} has no inverse simulator")
@@ -195,6 +197,16 @@ def validate(cfg: DictConfig | dict) -> None:
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
     # init_from's file is read (and checked) once, by the plan: higbench.runner.plan.load_initial_weights
+    return Checked(top, {**problem, **data["problem"]}, optimizer)  # the problem's node, its defaults filled in
+
+
+def typed(cfg: DictConfig | dict) -> Checked:
+    """A config's typed parts, without its checks: for code that calls ``train`` itself with a
+    config it vouches for (``runner.plan.Plan.for_run``; tests train outside the bounds)."""
+    data = to_plain(cfg)
+    run = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(RunConfig), data))
+    problem = {**OmegaConf.to_container(OmegaConf.structured(problem_class(data["problem"]).Config)), **data["problem"]}
+    return Checked(run, problem, optimizer_choice(data["optimizer"]))
 
 
 def max_threads() -> int:
@@ -255,123 +267,6 @@ def _validate_problem(problem: Any) -> dict:
     return plain
 
 
-def constructor_args(cls: type) -> tuple[str, ...]:
-    """Keyword arguments of an optimizer class (following ``**kwargs`` up to the class that takes them)."""
-    import inspect
-
-    names: list[str] = []
-    for klass in cls.__mro__:
-        params = list(inspect.signature(klass.__init__).parameters.values())[1:]
-        if klass is not cls and [p.name for p in params] == ["params", "defaults"]:
-            break  # a base optimizer's (torch's, pytorch-optimizer's): the subclass builds its defaults itself
-        keywords = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-        names += [p.name for p in params if p.name not in ("params", *names) and p.kind in keywords]
-        if not any(p.kind is p.VAR_KEYWORD for p in params) or klass is object:
-            break
-    return tuple(names)
-
-
-def takes_any_keyword(cls: type) -> bool:
-    """Whether the constructor itself accepts every keyword (``**kwargs``): a misspelt argument
-    is then swallowed, never refused (pytorch-optimizer's SOAP and Shampoo)."""
-    import inspect
-
-    return any(p.kind is p.VAR_KEYWORD for p in inspect.signature(cls.__init__).parameters.values())
-
-
-def optimizer_class(opt: Any) -> type:
-    """The ``torch.optim.Optimizer`` subclass ``optimizer._target_`` names (never any other callable)."""
-    import torch
-
-    if not isinstance(opt, dict):
-        raise ConfigError("optimizer", opt, "must be a mapping (pick one with optimizer=<name>)")
-    target = opt.get("_target_")
-    try:
-        cls = locate(target)
-    except ImportError as exc:
-        if opt.get("extra"):  # a third-party optimizer: its YAML names the optional extra that installs it
-            why = f'{target} comes with the {opt["extra"]} extra: pip install -e ".[{opt["extra"]}]"'
-            raise ConfigError("optimizer", opt.get("name", target), why) from None
-        raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
-    except AttributeError as exc:
-        raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
-    if not (isinstance(cls, type) and issubclass(cls, torch.optim.Optimizer)):
-        raise ConfigError("optimizer._target_", target, "is not a torch.optim.Optimizer subclass")
-    return cls
-
-
-def _check_number_types(cls: type, kwargs: dict) -> None:
-    """An argument whose default is a number must be one (``kappa=abc``: one line, not a TypeError)."""
-    import inspect
-
-    defaults = {}
-    for klass in reversed(cls.__mro__):
-        if klass is not object:
-            params = inspect.signature(klass.__init__).parameters.values()
-            defaults.update({p.name: p.default for p in params if p.default is not inspect.Parameter.empty})
-    for key, given in kwargs.items():
-        default = defaults.get(key)
-        number = isinstance(default, (int, float)) and not isinstance(default, bool)
-        if number and (isinstance(given, (str, bool)) or given is None):
-            raise ConfigError(f"optimizer.{key}", given, f"must be a number (the default is {default})")
-
-
-def check_optimizer(opt: Any, device: str = "cpu") -> None:
-    """Build the optimizer on a dummy parameter: its constructor checks its own arguments.
-
-    When it refuses, each argument is left out in turn to find the one it refuses (a pair
-    that conflicts, e.g. SGD's nesterov without momentum, names the one listed later).
-    """
-    import torch
-
-    cls = optimizer_class(opt)
-    kwargs = optimizer_kwargs(opt)
-    if takes_any_keyword(cls):  # checked against its documented signature: a typo would train with the default
-        known = constructor_args(cls)
-        for key in kwargs:
-            if key not in known:
-                raise ConfigError(
-                    f"optimizer.{key}", opt[key], f"not an argument of {opt['_target_']}; its arguments: {', '.join(known)}"
-                )
-    _check_number_types(cls, kwargs)
-
-    trial_step = cls.__module__.startswith("torch.optim")  # ours (GN/HIG/LM) need a problem to step
-    trial_device = device if device.startswith("cuda") and torch.cuda.is_available() else "cpu"  # capturable: CUDA only
-
-    def refusal(args: dict) -> Exception | None:
-        try:
-            param = torch.nn.Parameter(torch.ones(2, device=trial_device))
-            optimizer = cls([param], **args)
-            if trial_step:  # some arguments fail only when used (L-BFGS history_size=0, Adam capturable)
-                optimizer.step(lambda: _dummy_loss(optimizer, param))
-        except Exception as exc:  # noqa: BLE001 - ValueError, TypeError, IndexError: whatever the class raises
-            return exc
-        return None
-
-    exc = refusal(kwargs)
-    if exc is None:
-        return
-    target = opt["_target_"]
-    culprit = next((k for k in reversed(kwargs) if refusal({a: v for a, v in kwargs.items() if a != k}) is None), None)
-    why = " ".join(str(exc).split()) or type(exc).__name__
-    if culprit is None:
-        raise ConfigError("optimizer", opt.get("name", target), f"{target} refuses its arguments: {why}")
-    shown = opt[culprit]
-    why = why.split(": ", 1)[1] if why.startswith(f"{culprit}=") and ": " in why else why  # "lr=-1: must be > 0"
-    raise ConfigError(f"optimizer.{culprit}", shown, f"refused by {target}: {why}")
-
-
-def _dummy_loss(optimizer, param):
-    """The closure of ``check_optimizer``'s trial step: a quadratic on the dummy parameter."""
-    import torch
-
-    with torch.enable_grad():
-        optimizer.zero_grad()
-        loss = (param**2).sum()
-        loss.backward()
-    return loss
-
-
 _HYDRA_REFERENCE = re.compile(r"\$\{hydra:([^}]+)\}")
 
 
@@ -384,23 +279,8 @@ def check_hydra_references(cfg: DictConfig) -> None:
     raw = OmegaConf.to_container(cfg, resolve=False)
     raw.pop("hydra", None)
     launcher = OmegaConf.select(cfg, "hydra.launcher._target_", default="?")
-
-    def walk(node, prefix):
-        if isinstance(node, dict):
-            for k, v in node.items():
-                walk(v, f"{prefix}{k}.")
-        elif isinstance(node, list):
-            for i, v in enumerate(node):
-                walk(v, f"{prefix}{i}.")
-        elif isinstance(node, str):
-            for ref in _HYDRA_REFERENCE.findall(node):
-                missing = object()
-                found = OmegaConf.select(
-                    cfg, f"hydra.{ref.strip()}", default=missing, throw_on_missing=False, throw_on_resolution_failure=False
-                )
-                if found is missing:
-                    raise ConfigError(
-                        prefix[:-1], node, f"hydra.{ref.strip()} does not exist in this job's Hydra config (launcher {launcher})"
-                    )
-
-    walk(raw, "")
+    for key, node in leaves(raw):
+        for ref in _HYDRA_REFERENCE.findall(node) if isinstance(node, str) else ():
+            where = f"hydra.{ref.strip()}"
+            if OmegaConf.select(cfg, where, default=ABSENT, throw_on_missing=False, throw_on_resolution_failure=False) is ABSENT:
+                raise ConfigError(key, node, f"{where} does not exist in this job's Hydra config (launcher {launcher})")

@@ -90,6 +90,15 @@ def dotted_set(data: dict, dotted: str, value: Any) -> None:
     data[leaf] = value
 
 
+def leaves(node: Any, prefix: str = ""):
+    """``(dotted key, value)`` of every value in nested mappings and lists that is neither."""
+    if isinstance(node, (dict, list)):
+        for k, v in node.items() if isinstance(node, dict) else enumerate(node):
+            yield from leaves(v, f"{prefix}{k}.")
+    else:
+        yield prefix[:-1], node
+
+
 def fail(exc: BaseException | str, code: int = EXIT_BAD_INPUT) -> None:
     """Print ``higbench: error: <one line>`` on stderr and exit (2: bad input)."""
     message = " ".join(str(exc).split())  # one line, whatever the cause

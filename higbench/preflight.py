@@ -2,18 +2,13 @@
 
 Hydra calls ``on_run_start`` / ``on_multirun_start`` of the callbacks listed under
 ``hydra.callbacks`` (conf/config.yaml) after composing the config and before it creates
-any directory. For a single run, one pass decides it, before anything is written:
-
-1. validate the config (``higbench.config``: keys, types, ranges);
-2. make its plan (``higbench.runner.plan.make_plan``: the output policy, the stored config of a run
-   to continue, its checkpoint, the ``init_from`` weights, each read once).
-
-The plan goes to the job through this command line's ``Invocation``; the job builds the
-network and the optimizer once and checks the inputs against them before its run file
-exists (``runner.train``). A sweep's jobs are all validated here, and each distinct network
-built once (``train.check_build``), so that a bad job refuses the sweep before any runs;
-each job then plans itself in its own directory. Any problem is one line on stderr,
-``higbench: error: <key>=<value>: <why>``, and exit code 2, with nothing written.
+any directory. A single run is decided there, in one pass, before anything is written: its
+``Plan`` (``higbench.runner.plan.make_plan``: the config validated and typed, the output
+policy, the inputs read once), handed to its job through this command line's
+``Invocation``. A sweep's jobs are all validated there (each distinct network built once,
+``train.check_build``), so that a bad job refuses the sweep before any runs; each job then
+plans itself in its own directory, not validated again. Any problem is one line on stderr,
+``higbench: error: <key>=<value>: <why>``, and exit code 2, with nothing written;
 ``composition_error`` makes such a line of Hydra's own composition errors.
 """
 
@@ -39,17 +34,18 @@ from omegaconf.errors import ConfigTypeError, OmegaConfBaseException, Validation
 
 from higbench.config import (
     SIZING_KEYS,
+    Checked,
     check_bool_overrides,
     check_hydra_references,
     config_dir,
-    constructor_args,
-    optimizer_class,
     to_plain,
     validate,
 )
 from higbench.errors import ConfigError, dotted_get, fail, given_value
+from higbench.optim.choice import constructor_args, optimizer_class
 from higbench.runfile.reader import RUN_FILE
-from higbench.runner.plan import Plan, load_initial_weights, make_plan
+from higbench.runner.plan import Plan, make_plan, planned
+from higbench.runner.rundir import RunDir, check_output_dir, run_file_of
 
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
 
@@ -219,6 +215,7 @@ class Invocation:
     failed: int = 0
     job_started: bool = False  # errors after a job started are the job's, not the command line's
     main: bool = False  # opened by ``cli.main`` (False: a launcher's worker process, or code calling the job)
+    validated: list[tuple[dict, Checked]] = dataclasses.field(default_factory=list)  # a sweep's jobs, by the callback
     sweep_dir: str | None = None  # a sweep's directory, known to the parent (its Ctrl-C line)
 
 
@@ -244,34 +241,32 @@ def invocation() -> Invocation:
 
 
 def take_plan(cfg: DictConfig, output_dir: Path, overrides: list[str], *, multirun: bool) -> Plan:
-    """The job's plan: the callback's (a single run), else made now (sweep jobs)."""
+    """The job's plan: the callback's (a single run), else made now (sweep jobs; a job the
+    callback validated is not validated again)."""
     current = invocation()
     planned, current.plan = current.plan, None
     if planned is not None and not multirun:
         return planned
     task = to_plain(cfg)
-    if not task.get("resume"):
-        validate(task)
+    checked = next((c for t, c in current.validated if t == task), None)
     try:
-        return make_plan(task, output_dir, overrides, multirun=multirun)
+        return make_plan(task, output_dir, overrides, multirun=multirun, checked=checked)
     except ConfigError as exc:
-        run_path = Path(output_dir) / RUN_FILE
-        if multirun and task.get("resume") and run_path.exists():  # this job's run cannot continue
-            return Plan(MappingProxyType(task), run_path, "keep", str(exc).split(": ", 1)[-1])
+        run_dir = RunDir(Path(output_dir) / RUN_FILE)
+        if multirun and task.get("resume") and run_dir.run_file.exists():  # this job's run cannot continue
+            return Plan(MappingProxyType(task), run_dir, "keep", str(exc).split(": ", 1)[-1])
         raise
 
 
-def _checked_task(config: DictConfig) -> dict:
-    """The task part of a composed config (with its hydra node), validated (a resumed run's
-    config is validated once merged with the stored one, in ``plan.make_plan``)."""
+def _checked_task(config: DictConfig) -> tuple[dict, Checked | None]:
+    """The task part of a composed config (with its hydra node), and its validation (a resumed
+    run's config is validated once merged with the stored one, by the plan)."""
     with contextlib.suppress(Exception):  # ${hydra:...} resolves against this job's Hydra config
         HydraConfig.instance().set_config(config)
     check_hydra_references(config)
     task = to_plain(config)
     check_bool_overrides(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))  # as typed
-    if not task.get("resume"):
-        validate(task)
-    return task
+    return task, None if task.get("resume") else validate(task)
 
 
 def check_run(config: DictConfig) -> Plan:
@@ -283,39 +278,36 @@ def check_run(config: DictConfig) -> Plan:
     """
     from higbench.runner.progress import announce, start_text
 
-    task = _checked_task(config)
+    task, checked = _checked_task(config)
     overrides = [*config.hydra.overrides.hydra, *config.hydra.overrides.task]
-    explicit_dir = given_value(overrides, "hydra.run.dir") is not None
-    if task.get("resume") and not explicit_dir:
-        from higbench.runner import checkpoint
-
+    if task.get("resume") and given_value(overrides, "hydra.run.dir") is None:
         with read_write(config.hydra), open_dict(config.hydra):
-            config.hydra.run.dir = str(checkpoint.run_file_of(task["resume"], None).parent)
+            config.hydra.run.dir = str(run_file_of(task["resume"], None).parent)
     output_dir = Path(os.path.abspath(str(config.hydra.run.dir)))  # as Hydra's runtime.output_dir
-    plan = make_plan(task, output_dir, list(config.hydra.overrides.task), multirun=False)
+    plan = make_plan(task, output_dir, list(config.hydra.overrides.task), multirun=False, checked=checked)
     # on a terminal, a line at once: torch, the build and the checks take seconds
-    announce(task.get("progress", True), start_text(plan.start_config()) + " - checking", transient=True)
+    announce(plan.run.progress, start_text(plan.start_config()) + " - checking", transient=True)
     return plan
 
 
 def check_sweep(config: DictConfig) -> int | None:
     """Every job of a multirun (see ``sweep_jobs``), before Hydra makes the sweep directory.
 
-    A bad job refuses the whole sweep before any job runs. Returns how many jobs the sweeper
+    A bad job refuses the whole sweep before any job runs; a job validated here is not
+    validated again in the job (``Invocation.validated``). Returns how many jobs the sweeper
     launches together (``launched_together``), where known.
     """
-    from higbench.runner.output_location import check_output_dir
     from higbench.runner.train import check_build
 
     loader = GlobalHydra.instance().config_loader()
-    tasks = []
+    checked = []
     for job in sweep_jobs(config) or [[]]:
         try:
             job_config = loader.load_sweep_config(config, job)
         except (HydraException, OmegaConfBaseException) as exc:
             raise composition_error(exc, job) from None
-        tasks.append(_checked_task(job_config))
-    together = launched_together(config, len(tasks))
+        checked.append(_checked_task(job_config))
+    together = launched_together(config, len(checked))
     if together is None:  # not known here: the launcher's workers are the bound (``cli.parallel_jobs``)
         os.environ.pop("HIGBENCH_SWEEP_JOBS", None)
     else:  # an environment variable: joblib's workers, spawned after this, are other processes
@@ -323,19 +315,19 @@ def check_sweep(config: DictConfig) -> int | None:
     sweep_dir = Path(str(config.hydra.sweep.dir))
     check_output_dir(sweep_dir, "hydra.sweep.dir")
     if (sweep_dir / "multirun.yaml").is_symlink():
-        raise ConfigError(
-            "hydra.sweep.dir", str(sweep_dir), "its multirun.yaml is a symbolic link; higbench never writes through links"
-        )
-    if any(task.get("resume") for task in tasks):
+        why = "its multirun.yaml is a symbolic link; higbench never writes through links"
+        raise ConfigError("hydra.sweep.dir", str(sweep_dir), why)
+    if any(task.get("resume") for task, _ in checked):
         return together  # which jobs resume is known only in their directories: checked in-job
+    invocation().validated = checked
     seen = set()
-    for task in tasks:  # the network-sized checks once per distinct network and batch
+    for task, job_checked in checked:  # the network-sized checks once per distinct network and batch
         sizing = {k: task.get(k) for k in SIZING_KEYS}
         sizing["optimizer"] = {k: v for k, v in task["optimizer"].items() if k != "lr"}
         key = OmegaConf.to_yaml(sizing)
         if key not in seen:
             seen.add(key)
-            check_build(OmegaConf.create(task), load_initial_weights(task))
+            check_build(planned(task, job_checked, RunDir(sweep_dir / RUN_FILE, "hydra.sweep.dir")))
     return together
 
 

@@ -108,8 +108,9 @@ def locate(path: str) -> Any:
     raise ImportError(f"no module in {path!r}")
 
 
-def check(schema: type, values: Any, prefix: str = "") -> dict:
-    """``values`` merged into ``schema`` and checked; the plain result, or ConfigError."""
+def check(schema: type, values: Any, prefix: str = "", *, typed: bool = False) -> Any:
+    """``values`` merged into ``schema`` and checked: the plain result (``typed``: an instance of
+    ``schema``), or ConfigError."""
     if not isinstance(values, dict):
         raise ConfigError(prefix.rstrip(".") or "config", values, f"must be a mapping of the keys of {schema.__name__}")
     try:
@@ -125,7 +126,7 @@ def check(schema: type, values: Any, prefix: str = "") -> dict:
         raise ConfigError(prefix + key, "<missing>", "is required")
     plain = OmegaConf.to_container(merged)
     _check_rules(schema, plain, values, prefix)
-    return plain
+    return OmegaConf.to_object(merged) if typed else plain
 
 
 def _check_rules(schema: type, plain: dict, given: dict, prefix: str) -> None:

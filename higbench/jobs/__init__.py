@@ -58,7 +58,8 @@ from higbench.jobs.ledger import FINAL_STATUSES, Ledger
 from higbench.results.index import DONE_STATUSES, FIGURE_RUNS_DIR, load_runs, one_per_config
 from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
-from higbench.runner.checkpoint import RESUMABLE_STATUSES, checkpoint_path
+from higbench.runner.checkpoint import checkpoint_path
+from higbench.runner.rundir import RESUMABLE_STATUSES
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
 LAUNCH_OVERRIDES = ("progress=false", "threads=1")

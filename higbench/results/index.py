@@ -44,6 +44,7 @@ from higbench.results.spectrum import CONDITIONING_COLUMNS, UPDATE_SPECTRUM_COLU
 from higbench.results.targets import for_problem, reach_index
 from higbench.runfile.reader import (
     RUN_FILE_GLOB,
+    SUMMARY_COLUMNS,
     RunFileLocked,
     RunFileOpenForWrite,
     RunTables,
@@ -187,10 +188,6 @@ def _mean(values: np.ndarray | None) -> float:
     return float(np.mean(values))
 
 
-_CURVE_COLUMNS = ("step", "wall_time", "train_loss", "test_loss", "val_loss")  # what the row needs (curves=False)
-_UPDATE_COLUMNS = ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS)
-
-
 def final_test_spread(per_sample: np.ndarray | None, fresh: np.ndarray | None = None) -> dict[str, float]:
     """The final evaluation's test losses sample by sample (/final/test_losses) as a median
     and a 95th percentile, and the mean over the problem's large fresh draw
@@ -311,16 +308,17 @@ def _summarise(
 
 
 def read_run_summary(
-    path: str | Path, thresholds: Sequence[float] | None = None, curves: bool = False
+    path: str | Path, thresholds: Sequence[float] | None = None, curves: bool = False, tables: RunTables | None = None
 ) -> tuple[dict, dict | None]:
     """(row, curve columns or None) of one run file; never raises for an unreadable file.
-    thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets)."""
+    thresholds: the ``time_to_<t>`` levels (None: the run's problem's targets). tables: its
+    ``SUMMARY_COLUMNS`` as its writer kept them closing it (the file is then not read)."""
     path = Path(path)
     row: dict = {"path": str(path), "error": ""}
-    final = ("test_losses", "fresh_test_losses")
-    wanted = {"curves": None if curves else _CURVE_COLUMNS, "updates": _UPDATE_COLUMNS, "final": final}
+    wanted = {**SUMMARY_COLUMNS, "curves": None} if curves else SUMMARY_COLUMNS
     try:
-        summary, columns = _summarise(read_tables(path, wanted), thresholds, curves)
+        read = tables if tables is not None and not curves else read_tables(path, wanted)
+        summary, columns = _summarise(read, thresholds, curves)
         note = summary.pop("curves_note", "")
         row.update(summary)
         if row.get("status") == "running":

@@ -19,9 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from higbench.runfile.reader import load_logs, read_tables
+from higbench.runfile.reader import UPDATE_SPECTRUM_COLUMNS, load_logs, read_tables
 
-UPDATE_SPECTRUM_COLUMNS = ("sv_max", "sv_min_kept", "sv_dropped")
 # The index's columns (NaN for runs without a spectrum). cond_kept = sv_max / sv_min_kept: the
 # condition number of the part of J the step inverts (with relative truncation at most 1/tau).
 CONDITIONING_COLUMNS = ("cond_kept_median", "cond_kept_max", "sv_dropped_mean")

@@ -34,6 +34,15 @@ import pandas as pd
 import yaml
 
 RUN_FILE = "run.h5"  # the file name of a run inside its output directory
+UPDATE_SPECTRUM_COLUMNS = ("sv_max", "sv_min_kept", "sv_dropped")
+# What a run's summary row reads of its tables (``results.index.read_run_summary``); its writer
+# keeps them as it closes the file (``RunFileWriter.final_tables``), so the summary of the run
+# just ended does not open it again.
+SUMMARY_COLUMNS = {
+    "curves": ("step", "wall_time", "train_loss", "test_loss", "val_loss"),
+    "updates": ("update_s", "jacobian_s", "inversion_s", *UPDATE_SPECTRUM_COLUMNS),
+    "final": ("test_losses", "fresh_test_losses"),
+}
 RUN_FILE_GLOB = "*.h5"  # what an index looks for: run files, also renamed copies; never checkpoints (run.h5.ckpt)
 
 
@@ -347,16 +356,20 @@ def read_tables(path: str | Path, columns: dict[str, Sequence[str] | None], lock
         raise UnreadableRunFile(f"{p}: no such run file")
     try:
         with h5py.File(p, "r", locking=locking) as f:
-            check_contained(f, datasets=False)  # _columns checks the datasets it reads
-            attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            budget = ReadBudget(f.id.get_filesize())
-            tables = {group: _columns(f, group, names, budget) for group, names in columns.items()}
-            memory = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
-            env = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
-        config = parse_config(str(attrs.get("config") or "{}"))
+            return tables_of(f, columns)
     except Exception as exc:  # noqa: BLE001 - truncated, garbage, not HDF5, half-written, refused
         raise _unreadable(p, exc) from None
-    return RunTables(attrs, tables, memory, env, config)
+
+
+def tables_of(f: h5py.File, columns: dict[str, Sequence[str] | None]) -> RunTables:
+    """``read_tables`` of a file already open (its writer's, as it closes it)."""
+    check_contained(f, datasets=False)  # _columns checks the datasets it reads
+    attrs = {k: _attr(v) for k, v in f.attrs.items()}
+    budget = ReadBudget(f.id.get_filesize())
+    tables = {group: _columns(f, group, names, budget) for group, names in columns.items()}
+    memory = {k: _attr(v) for k, v in f["memory"].attrs.items()} if "memory" in f else {}
+    env = {k: _attr(v) for k, v in f["env"].attrs.items()} if "env" in f else {}
+    return RunTables(attrs, tables, memory, env, parse_config(str(attrs.get("config") or "{}")))
 
 
 def _columns(f: h5py.File, group: str, names: Sequence[str] | None, budget: ReadBudget) -> dict[str, np.ndarray]:

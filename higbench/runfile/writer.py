@@ -60,6 +60,7 @@ from and appends from there.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -73,7 +74,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from higbench.runfile.reader import check_contained
+from higbench.runfile.reader import SUMMARY_COLUMNS, RunTables, check_contained, tables_of
 
 FORMAT_VERSION = 1
 H5PY_VERSION = h5py.__version__  # recorded in each run's environment
@@ -194,6 +195,8 @@ def dataset_info(group: str, name: str) -> tuple[str, str] | None:
 
 
 class RunFileWriter:
+    final_tables: RunTables | None = None  # its SUMMARY_COLUMNS, kept as it closed the file
+
     def __init__(self, path: str | Path, config_yaml: str, overrides: list[str], env: Mapping, meta: Mapping):
         self.path = Path(path)
         try:
@@ -433,6 +436,8 @@ class RunFileWriter:
             if status is not None:
                 self.set_status(status, reason, step)
             self.f.attrs["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+            with contextlib.suppress(Exception):  # else the summary reads the closed file
+                self.final_tables = tables_of(self.f, SUMMARY_COLUMNS)
         finally:
             self.f.close()
 

@@ -1,4 +1,4 @@
-"""Checkpoints and resume: continue an interrupted run exactly where its last checkpoint was.
+"""Checkpoints: save, load, and the checks that one fits its run (to continue it exactly).
 
 A checkpoint is a sidecar file next to the run file, ``run.h5.ckpt`` (so an index that
 globs ``*.h5`` never mistakes it for a run), written atomically: ``torch.save`` to a
@@ -25,21 +25,15 @@ unlinked by the next save (which removes a link, never its target).
 Checkpoints may come from somebody else (a shared run dir), so loading one runs no code:
 it holds only tensors and plain containers, and is read with torch's restricted unpickler
 (``weights_only=True``) after refusing links, non-zip files and compressed records; its
-``run_id`` is compared with the run file's before anything in it is used (``check_owner``,
-right after ``load``).
+``run_id`` is compared with the run file's before anything in it is used.
 
 The runner writes one every ``checkpoint_every`` seconds of training clock (null: off)
-and one when it stops on SIGINT/SIGTERM. A run killed with SIGKILL resumes from the last
-periodic one. Resuming: ``higbench resume=<run dir or run file>`` (or ``resume=true`` with
-``hydra.run.dir=<run dir>``); the run's own stored config is used, and only the keys in
-``RESUMABLE_KEYS`` (budgets, evaluation and checkpoint intervals, threads, progress,
-device, memory cap) may be changed on the command line.
+and one when it stops on SIGINT/SIGTERM; ``resume=`` is planned by ``runner.plan``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
 import io
 import math
 import os
@@ -50,22 +44,18 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from higbench.config import RESUMABLE_KEYS  # the schema marks them (resumable=True)
-from higbench.errors import ABSENT, ConfigError, dotted_get, dotted_set, show
-from higbench.runfile.reader import RUN_FILE, RunFileLocked, RunHead, UnreadableRunFile, read_head, run_file_path
+from higbench.errors import ConfigError, show
+from higbench.runfile.reader import RunHead
 from higbench.runfile.writer import RESERVE_BYTES, DiskFull, RunFileFault, free_bytes
 
-RUN_FILE_NAME = RUN_FILE  # kept as a name for the callers
 SUFFIX = ".ckpt"
 FORMAT = 1  # every format-1 checkpoint holds only tensors and plain containers
 READABLE_FORMATS = (1,)
 TMP_MARK = ".tmp"  # temporaries: run.h5.ckpt.tmp<random>
-RESUMABLE_STATUSES = ("running", "interrupted", "failed")
 
 
 def checkpoint_path(run_path: str | Path) -> Path:
-    run_path = Path(run_path)
-    return run_path.with_name(run_path.name + SUFFIX)
+    return Path(run_path).with_name(Path(run_path).name + SUFFIX)
 
 
 def save(run_path: str | Path, state: dict[str, Any]) -> Path:
@@ -84,10 +74,8 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
     data = buffer.getbuffer()
     free = free_bytes(final.parent)
     if free < len(data) + RESERVE_BYTES:
-        raise DiskFull(
-            f"no space left for checkpoint {final} ({free // 1024} KiB free, it needs {len(data) // 1024} KiB "
-            "plus the reserve for closing the run file); run stopped before writing"
-        )
+        need = f"{free // 1024} KiB free, it needs {len(data) // 1024} KiB plus the reserve for closing the run file"
+        raise DiskFull(f"no space left for checkpoint {final} ({need}); run stopped before writing")
     tmp = None
     try:
         fd, name = tempfile.mkstemp(prefix=f"{final.name}{TMP_MARK}", dir=final.parent)
@@ -98,22 +86,18 @@ def save(run_path: str | Path, state: dict[str, Any]) -> Path:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, final)  # rename replaces a link at ``final`` itself, never its target
-    except OSError as exc:
+    except BaseException as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)  # the previous checkpoint stays as it was
-        raise RunFileFault(exc.errno, f"cannot write checkpoint {final} ({exc.strerror or exc}); run stopped") from None
-    except BaseException:
-        if tmp is not None:
-            tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise RunFileFault(exc.errno, f"cannot write checkpoint {final} ({exc.strerror or exc}); run stopped") from None
         raise
-    try:  # make the rename itself durable
+    with contextlib.suppress(OSError):  # make the rename itself durable
         fd = os.open(final.parent, os.O_RDONLY)
         try:
             os.fsync(fd)
         finally:
             os.close(fd)
-    except OSError:
-        pass
     return final
 
 
@@ -123,34 +107,29 @@ def _umask() -> int:
     return mask
 
 
-def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
-    """The checkpoint of run file ``run_path``: checked, then deserialised without running code.
+def load(head: RunHead, resume_value: Any) -> dict[str, Any]:
+    """The checkpoint of the run file ``head`` describes: checked, deserialised without running
+    code, and of this very run file (``check_owner``).
 
     Refused (``ConfigError`` on ``resume``): a missing checkpoint, a link, anything but a
     torch zip archive of uncompressed records (a plain pickle is never unpickled), an archive
     holding any object but tensors and plain containers (``weights_only=True``: torch's
     restricted unpickler constructs nothing else and calls no function), another format, a
-    checkpoint of another run (``check_owner``, next, compares its ``run_id``).
+    checkpoint of another run, or of more rows than its run file holds.
     """
-    path = checkpoint_path(run_path)
-    value = str(run_path) if resume_value is None else resume_value
+    path, value = checkpoint_path(head.path), resume_value
 
     def refuse(why: str) -> ConfigError:
         return ConfigError("resume", value, f"checkpoint {path.name} {why}")
 
     if not os.path.lexists(path):
-        raise ConfigError(
-            "resume", value, f"no checkpoint {path.name} next to the run file (was checkpoint_every null and the run killed?)"
-        )
+        why = f"no checkpoint {path.name} next to the run file (was checkpoint_every null and the run killed?)"
+        raise ConfigError("resume", value, why)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | getattr(os, "O_NONBLOCK", 0))
     except OSError as exc:
-        why = (
-            "is a symbolic link; checkpoints are never read through links"
-            if os.path.islink(path)
-            else f"cannot be opened ({exc.strerror})"
-        )
-        raise refuse(why) from None
+        link = "is a symbolic link; checkpoints are never read through links"
+        raise refuse(link if os.path.islink(path) else f"cannot be opened ({exc.strerror})") from None
     with os.fdopen(fd, "rb") as f:
         st = os.fstat(f.fileno())
         if not stat.S_ISREG(st.st_mode):
@@ -161,6 +140,7 @@ def load(run_path: str | Path, resume_value: Any = None) -> dict[str, Any]:
     if state.get("format") not in READABLE_FORMATS:
         raise refuse(f"has format {show(state.get('format'))}; this version reads {', '.join(map(str, READABLE_FORMATS))}")
     check_fields(state, refuse)
+    check_owner(state, head, value)
     return state
 
 
@@ -305,13 +285,13 @@ def _brief(v) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, resume_value: Any, path: Path) -> None:
+def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, run_path: Path) -> None:
     """The checkpoint's weights and optimizer state fit the network and optimizer built from
     the run's stored config: the same keys, dtypes and shapes, dense tensors, ranges. Run
     before the run file is reopened; ``ConfigError`` on ``resume`` otherwise."""
 
     def refuse(why: str) -> ConfigError:
-        return ConfigError("resume", resume_value, f"checkpoint {path.name} {why}")
+        return ConfigError("resume", str(run_path), f"checkpoint {checkpoint_path(run_path).name} {why}")
 
     ours = model.state_dict()
     theirs = state["model"]
@@ -324,20 +304,16 @@ def check_fits(state: dict, model, optimizer, batches_per_epoch: int | None, res
             raise refuse(f"has {key}={_brief(t)}; the network has {mine.dtype} {tuple(mine.shape)}")
     if batches_per_epoch is not None and state["position"] > batches_per_epoch:
         raise refuse(f"has position={state['position']}, beyond the {batches_per_epoch} batches of an epoch")
-    if _standard_layout(optimizer):
+    from higbench.optim.contract import uses_jacobian
+
+    # torch.optim's classes and higbench's Jacobian-power family: torch's state_dict layout,
+    # per-parameter state shaped as the parameter (or scalars, or L-BFGS's flat histories)
+    if type(optimizer).__module__.startswith("torch.optim") or uses_jacobian(optimizer):
         _check_optimizer_state(state["optimizer"], optimizer, refuse)
     else:  # another layout (a split optimizer, Shampoo's preconditioners): plain values, bounded sizes
         params = [p for g in optimizer.param_groups for p in g["params"]]
         largest = max([p.numel() for p in params] + [d for p in params for d in p.shape] + [1])
         _check_plain_tree(state["optimizer"], 4 * max(sum(p.numel() for p in params), largest**2), refuse)
-
-
-def _standard_layout(optimizer) -> bool:
-    """torch.optim's classes and higbench's Jacobian-power family: torch's state_dict layout,
-    per-parameter state shaped as the parameter (or scalars, or L-BFGS's flat histories)."""
-    from higbench.optim.contract import uses_jacobian
-
-    return type(optimizer).__module__.startswith("torch.optim") or uses_jacobian(optimizer)
 
 
 def _check_plain_tree(node, max_numel: int, refuse, depth: int = 0, key: str = "optimizer") -> None:
@@ -367,13 +343,8 @@ def _check_plain_tree(node, max_numel: int, refuse, depth: int = 0, key: str = "
 def _dense_like(t, dtype, shape) -> bool:
     import torch
 
-    return (
-        isinstance(t, torch.Tensor)
-        and t.layout == torch.strided
-        and t.device.type != "meta"
-        and t.dtype == dtype
-        and t.shape == shape
-    )
+    dense = isinstance(t, torch.Tensor) and t.layout == torch.strided and t.device.type != "meta"
+    return dense and t.dtype == dtype and t.shape == shape
 
 
 def _check_optimizer_state(saved: dict, optimizer, refuse) -> None:
@@ -440,19 +411,8 @@ def _state_value_fits(v, param, flat: int) -> bool:
     return v.numel() == 1 or v.shape == param.shape or (v.dim() == 1 and v.numel() == flat)
 
 
-def _check_run_id(state: dict, head: RunHead, resume_value: Any) -> None:
-    run_file, file_id = head.path, str(head.run_id or "")
-    ckpt_id = str(state.get("run_id") or "")
-    if ckpt_id != file_id:
-        raise ConfigError(
-            "resume",
-            resume_value,
-            f"checkpoint {checkpoint_path(run_file).name} belongs to another run "
-            f"(its run id {ckpt_id or '<none>'}, the run file's {file_id or '<none>'}); refusing to resume from it",
-        )
-
-
 def remove(run_path: str | Path) -> None:
+    """A run that ended (completed, diverged) has nothing left to resume."""
     checkpoint_path(run_path).unlink(missing_ok=True)
     remove_stale_temporaries(run_path)
 
@@ -470,7 +430,10 @@ def remove_stale_temporaries(run_path: str | Path) -> None:
 def check_owner(state: dict[str, Any], head: RunHead, resume_value: Any) -> None:
     """Refuse a checkpoint that is not of the run file ``head`` describes (its run_id differs)
     or records more rows than the file holds. Called before anything in the state is used."""
-    _check_run_id(state, head, resume_value)
+    file_id, ckpt_id = str(head.run_id or ""), str(state.get("run_id") or "")
+    if ckpt_id != file_id:
+        why = f"(its run id {ckpt_id or '<none>'}, the run file's {file_id or '<none>'}); refusing to resume from it"
+        raise ConfigError("resume", resume_value, f"checkpoint {checkpoint_path(head.path).name} belongs to another run {why}")
     short = [
         f"{group}/{name} has {head.rows.get(group, {}).get(name, 0)}, the checkpoint {n}"
         for group, names in (state.get("rows") or {}).items()
@@ -479,174 +442,8 @@ def check_owner(state: dict[str, Any], head: RunHead, resume_value: Any) -> None
     ]
     updates = max(head.rows.get("updates", {}).values(), default=0)
     if state.get("step", 0) > updates:  # every update recorded before the checkpoint has its row
-        raise ConfigError(
-            "resume", resume_value, f"its checkpoint is at step {state['step']}, the run file records {updates} updates"
-        )
+        why = f"its checkpoint is at step {state['step']}, the run file records {updates} updates"
+        raise ConfigError("resume", resume_value, why)
     if short:
-        raise ConfigError(
-            "resume", resume_value, f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
-        )
-
-
-def _why(exc: UnreadableRunFile) -> str:
-    """What to say of an unreadable run file: the error's name, or what was refused in it."""
-    return exc.detail.split(": ", 1)[-1] if exc.kind == "refused" else exc.kind
-
-
-# -- resolving what to resume ----------------------------------------------------------------
-
-
-def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
-    """The run file that ``resume=<value>`` designates (``true``: the one in ``run_dir``)."""
-    if resume is True:
-        if run_dir is None:
-            raise ConfigError("resume", True, "needs hydra.run.dir=<run dir>, or give the run: resume=<run dir or run file>")
-        return Path(run_dir) / RUN_FILE_NAME
-    p = Path(str(resume)).expanduser()
-    return run_file_path(p)
-
-
-def inspect_run(run_file: Path, resume_value: Any) -> RunHead:
-    """The head of a run to resume (status, stored config, rows); ConfigError if it cannot be resumed."""
-    if run_file.is_symlink():  # the run would go on elsewhere while its checkpoint and logs stay here
-        why = f"{run_file} is a symbolic link (to {os.readlink(run_file)}); resume runs in their own directory"
+        why = f"the run file holds fewer rows than its checkpoint records ({short[0]}); cannot resume"
         raise ConfigError("resume", resume_value, why)
-    if not run_file.is_file():
-        raise ConfigError("resume", resume_value, f"no run file {run_file}")
-    links = run_file.stat().st_nlink
-    if links > 1:  # resume writes it in place: a snapshot sharing its inode (cp -al) would change too
-        why = f"{run_file} has {links} hard links (a snapshot shares it); resume writes in place: copy it (cp, not cp -l) first"
-        raise ConfigError("resume", resume_value, why)
-    try:  # with file locking: a live writer holds the file, and we must not write into it
-        head = read_head(run_file, locking=True)
-    except RunFileLocked:
-        raise ConfigError("resume", resume_value, f"{run_file} is open in another process (that run is still going)") from None
-    except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"{run_file} is not a readable run file ({_why(exc)})") from None
-    status, config = str(head.attrs.get("status", "")), head.config_yaml
-    if status not in RESUMABLE_STATUSES:
-        raise ConfigError(
-            "resume", resume_value, f"run is {status}, nothing to resume (resumable: {', '.join(RESUMABLE_STATUSES)})"
-        )
-    if not checkpoint_path(run_file).is_file():
-        every = _checkpoint_every(config)
-        why = (
-            "set checkpoint_every to make runs resumable"
-            if every is None
-            else f"it stopped before its first checkpoint, due after {every} s of training clock"
-        )
-        raise ConfigError("resume", resume_value, f"no checkpoint next to {run_file} ({why})")
-    if not config:
-        raise ConfigError("resume", resume_value, f"{run_file} holds no config")
-    return head
-
-
-def _checkpoint_every(config_yaml: str):
-    import yaml
-
-    try:
-        return (yaml.safe_load(config_yaml) or {}).get("checkpoint_every")
-    except Exception:  # noqa: BLE001
-        return None
-
-
-def override_keys(overrides: list[str]) -> list[tuple[str, str]]:
-    """(key, override text) of command-line overrides, parsed by Hydra's own grammar."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parsed = OverridesParser.create().parse_overrides(list(overrides))
-    return [(o.key_or_group, o.input_line) for o in parsed]
-
-
-def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
-    """The stored config of the run, with the command-line changes that resuming allows.
-
-    ``composed``: the config Hydra composed for this invocation; ``overrides``: the task
-    overrides given on the command line. A key outside ``RESUMABLE_KEYS`` may be repeated
-    with the run's own value (re-running the same command with ``resume=...``) but not
-    changed: that would be another experiment.
-    """
-    merged = copy.deepcopy(stored)
-    for key, line in override_keys(overrides):
-        if key.startswith("hydra.") or key == "hydra":
-            continue
-        top = key.split(".")[0]
-        new = dotted_get(composed, key)
-        if top in RESUMABLE_KEYS:
-            if new is not ABSENT:
-                dotted_set(merged, key, new)
-            continue
-        old = dotted_get(stored, key)
-        if new is ABSENT or old is ABSENT or new != old:
-            shown = "<absent>" if old is ABSENT else show(old)
-            raise ConfigError(
-                key,
-                line.split("=", 1)[-1],
-                f"cannot change when resuming (the run has {key}={shown}); resumable keys: {', '.join(RESUMABLE_KEYS)}",
-            )
-    merged["resume"] = None
-    return merged
-
-
-# -- run dirs that recorded nothing ----------------------------------------------------------
-
-EMPTY_FILE_BYTES = 64 * 1024  # an unopenable file this small was killed while being created
-
-
-def recorded_nothing(run_file: Path) -> str | None:
-    """Why ``run_file`` holds nothing worth keeping, or None (it does, or a process holds it).
-
-    Nothing worth keeping: a file that is not an openable HDF5 file and is at most a few
-    KiB (a run killed while it was being created), or a run that stopped (status running,
-    interrupted or failed, no writer alive) before recording a single update and left no
-    checkpoint. Such a run may be started again in place; its file is moved aside first.
-    """
-    run_file = Path(run_file)
-    if not run_file.is_file() or checkpoint_path(run_file).exists():
-        return None
-    try:
-        head = read_head(run_file, locking=True)  # a live writer on this host holds the lock
-    except RunFileLocked:
-        return None
-    except UnreadableRunFile:
-        try:  # readable without locking (a file system without locks): judged by its content
-            read_head(run_file, locking=False)
-        except UnreadableRunFile:  # not HDF5, truncated header
-            if run_file.stat().st_size <= EMPTY_FILE_BYTES:
-                return f"unreadable {run_file.stat().st_size}-byte file, killed while it was being created"
-        return None
-    status = str(head.attrs.get("status", ""))
-    if status in RESUMABLE_STATUSES and head.n_updates == 0:
-        return f"status {status}, no update recorded, no checkpoint"
-    return None
-
-
-def stopped_without_checkpoint(run_file: Path) -> str | None:
-    """Why a sweep job's run must run again from the start, or None: it stopped (status
-    running, interrupted or failed, no writer alive on this host) before its first
-    checkpoint, so nothing can continue it. A sweep stopped with Ctrl-C hard-kills the
-    parallel workers that were not yet writing one; the sweep's resume command reruns them
-    (the stopped file is moved aside, never deleted)."""
-    run_file = Path(run_file)
-    if not run_file.is_file() or checkpoint_path(run_file).exists():
-        return None
-    try:
-        head = read_head(run_file, locking=True)  # a live writer on this host holds the lock
-    except UnreadableRunFile:
-        return None
-    status = str(head.attrs.get("status", ""))
-    if status in RESUMABLE_STATUSES:
-        return f"stopped ({status}) after {head.n_updates} updates, before its first checkpoint"
-    return None
-
-
-def move_aside(path: Path, label: str) -> Path:
-    """Rename ``path`` to ``<name>.<label>-<time>`` beside it (never deleted: nothing is lost)."""
-    path = Path(path)
-    target = path.with_name(f"{path.name}.{label}-{time.strftime('%Y%m%d-%H%M%S')}")
-    n = 1
-    while target.exists():
-        target = path.with_name(f"{path.name}.{label}-{time.strftime('%Y%m%d-%H%M%S')}-{n}")
-        n += 1
-    os.replace(path, target)
-    return target

@@ -1,11 +1,15 @@
 """The plan of one run: what it trains, where it writes, and the inputs it reads, decided once.
 
-``make_plan`` turns a composed, validated config and the job's output directory into a
-``Plan``, an immutable value. Everything a run reads from disk is read here, once, before
-anything is written: the stored config of a run to continue, its checkpoint (checked whole
-against its schema and its run file's ``run_id``), the ``init_from`` run's final weights.
-``runner.train.train(plan)`` then builds the problem, the network and the optimizer once,
-checks these inputs against them (shapes, memory) before its run file exists, and trains.
+``make_plan`` turns a composed config and the job's output directory into a ``Plan``, an
+immutable value with typed parts: ``run`` (the top-level keys as a ``config.RunConfig``),
+``problem`` (its config node), ``optimizer`` (its class and checked arguments, resolved once
+by ``config.validate``) and ``dir`` (the ``RunDir``, ``runner.rundir``: every question about
+what the directory already holds is answered there). Everything a run reads from disk is read
+here, once, before anything is written: the stored config of a run to continue, its checkpoint
+(checked whole against its schema and its run file's ``run_id``), the ``init_from`` run's
+final weights. ``runner.train.train(plan)`` then builds the problem, the network and the
+optimizer once, checks these inputs against them (shapes, memory) before its run file exists,
+and trains.
 
 What an existing directory means (the output policy):
 
@@ -17,12 +21,14 @@ What an existing directory means (the output policy):
 
 A stored config is someone else's file: it may never make higbench build a callable that no
 higbench config registers (``check_stored_targets``) nor open a file the user did not name
-on this command line (``check_stored_paths``).
+on this command line (``check_stored_paths``); a resumed run may change only the keys the
+schema marks resumable (``resume_config``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import os
 from collections.abc import Mapping
@@ -30,33 +36,34 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
 
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import validate
-from higbench.errors import ConfigError, dotted_get, given_value
+from higbench.config import COSMETIC_KEYS, RESUMABLE_KEYS, Checked, RunConfig, typed, validate
+from higbench.errors import ABSENT, ConfigError, dotted_get, dotted_set, given_value, show
+from higbench.optim.choice import OptimizerChoice
 from higbench.runfile.reader import RUN_FILE
+from higbench.runner import checkpoint
+from higbench.runner.rundir import RunDir, run_file_of
 
 Policy = Literal["new", "resume", "restart", "keep"]
-
-# Everything higbench (and Hydra for it) writes in a run directory: none may be a link.
-WRITTEN_NAMES = (".hydra", *(f".hydra/{n}.yaml" for n in ("config", "hydra", "overrides")), "higbench.log")
-WRITTEN_NAMES += (RUN_FILE, f"{RUN_FILE}.ckpt")
 PATH_KEYS = ("init_from",)  # config keys naming a file higbench opens
 
 
 @dataclasses.dataclass(frozen=True)
 class Plan:
-    """One run, decided: its config, its run file and what to do with it, the inputs it reads.
-
-    ``config`` is the validated task config (a continued run's stored config with the changes
-    resuming allows); ``initial_weights`` the ``init_from`` run's final weights; ``checkpoint``
-    the state a continued run starts from. Neither is read again by the run.
-    """
+    """One run, decided: its config (typed parts beside it), its directory and what to do with
+    it, the inputs it reads. ``config`` is the task config the run file records (a continued
+    run's stored config with the changes resuming allows); ``initial_weights`` the ``init_from``
+    run's final weights; ``checkpoint`` the state a continued run starts from. Neither is read
+    again by the run. A kept run (``keep``) has no typed parts: it is not trained."""
 
     config: Mapping[str, Any]
-    run_path: Path
+    dir: RunDir
     policy: Policy = "new"
     why: str = ""  # restart: why the file there recorded nothing; keep: why the run stays as it is
+    run: RunConfig | None = None
+    problem: DictConfig | None = None
+    optimizer: OptimizerChoice | None = None
     initial_weights: Mapping[str, Any] | None = None
     checkpoint: Mapping[str, Any] | None = None
     overrides: tuple[str, ...] = ()  # the command line's task overrides (the run file records them)
@@ -64,27 +71,19 @@ class Plan:
     stop_with_parent: int | None = None  # a launcher worker's parent pid: the run stops cleanly once it is gone
 
     @property
+    def run_path(self) -> Path:
+        return self.dir.run_file
+
+    @property
     def resume(self) -> bool:
         return self.policy == "resume"
 
-    @property
-    def restart(self) -> bool:
-        return self.policy == "restart"
-
-    @property
-    def kept(self) -> bool:
-        return self.policy == "keep"
-
     def task(self) -> dict:
         """The config as a plain dict (a copy: the plan stays as it was)."""
-        import copy
-
         return copy.deepcopy(dict(self.config))
 
-    def start_config(self):
+    def start_config(self) -> DictConfig:
         """The config the start line shows: the stored run's when it resumes."""
-        from omegaconf import OmegaConf
-
         return OmegaConf.create({**self.task(), "resume": True if self.resume else None})
 
     def in_sweep(self, parallel_jobs: int, stop_with_parent: int | None) -> Plan:
@@ -94,20 +93,31 @@ class Plan:
 
     @classmethod
     def for_run(cls, cfg, run_path: str | Path, *, resume: bool = False, overrides=()) -> Plan:
-        """The plan of a config that is already validated, for code that calls ``train`` itself
-        (tests, notebooks): its ``init_from`` weights or, with ``resume``, its checkpoint loaded."""
+        """The plan of a config already validated (or vouched for: it is not checked again), for
+        code that calls ``train`` itself (tests, notebooks): its ``init_from`` weights or, with
+        ``resume``, its checkpoint loaded."""
         from higbench.config import to_plain
+        from higbench.runfile.reader import UnreadableRunFile, read_head
 
-        task = to_plain(cfg)
-        run_path = Path(run_path)
-        if resume:
-            state = _load_checkpoint(run_path, str(run_path))
-            return cls(_frozen(task), run_path, "resume", checkpoint=state, overrides=tuple(overrides))
-        return cls(_frozen(task), run_path, initial_weights=load_initial_weights(task), overrides=tuple(overrides))
+        task, run_dir = to_plain(cfg), RunDir(Path(run_path))
+        if not resume:
+            return planned(task, typed(task), run_dir, overrides=overrides)
+        try:
+            head = read_head(run_dir.run_file)
+        except UnreadableRunFile as exc:
+            raise ConfigError("resume", str(run_path), f"{run_path} is not a readable run file ({exc})") from None
+        state = checkpoint.load(head, str(run_path))
+        return planned(task, typed(task), run_dir, "resume", "", overrides, state)
 
 
-def _frozen(task: dict) -> Mapping[str, Any]:
-    return MappingProxyType(task)
+def planned(
+    task: dict, checked: Checked, run_dir: RunDir, policy: Policy = "new", why: str = "", overrides=(), state=None
+) -> Plan:
+    """A plan to train: its typed parts, and its ``init_from`` weights unless it continues."""
+    problem = OmegaConf.create(dict(checked.problem), flags={"readonly": True})
+    weights = load_initial_weights(task) if state is None else None
+    parts = dict(run=checked.run, problem=problem, optimizer=checked.optimizer, initial_weights=weights, checkpoint=state)
+    return Plan(MappingProxyType(task), run_dir, policy, why, **parts, overrides=tuple(overrides))
 
 
 # -- inputs, read once -----------------------------------------------------------------------
@@ -145,106 +155,100 @@ def load_initial_weights(task: Mapping) -> dict | None:
     return head.weights
 
 
-def _load_checkpoint(run_path: Path, resume_value, head=None) -> dict:
-    """The checkpoint of the run to continue, checked whole, and of this very run file
-    (``head``: the run file's head, already read)."""
-    from higbench.runfile.reader import UnreadableRunFile, read_head
-    from higbench.runner import checkpoint
-
-    state = checkpoint.load(run_path, resume_value)
-    if head is None:
-        try:
-            head = read_head(run_path)
-        except UnreadableRunFile as exc:
-            raise ConfigError("resume", resume_value, f"{run_path} is not a readable run file ({exc})") from None
-    checkpoint.check_owner(state, head, resume_value)
-    return state
-
-
 # -- the decision -----------------------------------------------------------------------------
 
 
-def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool) -> Plan:
+def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool, checked: Checked | None = None) -> Plan:
     """The one decision about a job (ConfigError when it must not run): its policy, its
-    config and its inputs. ``task`` is the composed config (validated unless it resumes)."""
-    from higbench.runner.output_location import check_output_dir
-
+    config and its inputs. ``task``: the composed config; ``checked``: its validation, where
+    done already (a sweep's jobs, validated up front)."""
     output_dir, overrides = Path(output_dir), tuple(overrides)
     if task.get("resume"):
         return _resume_plan(task, output_dir, overrides, multirun=multirun)
-    run_path = output_dir / RUN_FILE
-    check_output_dir(output_dir, "hydra.run.dir", RUN_FILE)
-    check_no_links(output_dir, "hydra.run.dir")
-    check_tensorboard_dir(task, output_dir, "hydra.run.dir")
-    policy, why = "new", ""
-    if os.path.lexists(run_path):
-        policy, why = _existing_run(run_path, output_dir, multirun)
-    if policy == "keep":
-        return Plan(_frozen(task), run_path, "keep", why, overrides=overrides)
-    return Plan(_frozen(task), run_path, policy, why, initial_weights=load_initial_weights(task), overrides=overrides)
-
-
-def _existing_run(run_path: Path, output_dir: Path, multirun: bool) -> tuple[Policy, str]:
-    from higbench.runner import checkpoint
-
-    empty = checkpoint.recorded_nothing(run_path)
+    checked = checked or validate(task)
+    run_dir = RunDir(output_dir / RUN_FILE)
+    run_dir.check()
+    run_dir.check_tensorboard_dir(task)
+    if not os.path.lexists(run_dir.run_file):
+        return planned(task, checked, run_dir, overrides=overrides)
+    empty = run_dir.recorded_nothing(run_dir.look())
     if empty:
-        return "restart", empty
+        return planned(task, checked, run_dir, "restart", empty, overrides)
     if multirun:  # a sweep run again into its directory: its runs stay as they are
-        return "keep", "already holds a run (resume=true completes interrupted and failed jobs)"
-    raise ConfigError(
-        "hydra.run.dir",
-        str(output_dir),
+        why = "already holds a run (resume=true completes interrupted and failed jobs)"
+        return Plan(MappingProxyType(task), run_dir, "keep", why, overrides=overrides)
+    raise run_dir.refuse(
         f"already holds a run file ({RUN_FILE}); refusing to overwrite it "
-        f"(resume={output_dir} continues it, or pick a new hydra.run.dir)",
+        f"(resume={output_dir} continues it, or pick a new hydra.run.dir)"
     )
 
 
 def _resume_plan(task: dict, output_dir: Path, overrides: tuple[str, ...], *, multirun: bool) -> Plan:
     """``resume=``: continue the run from its checkpoint, or start it again when it recorded
-    nothing; a sweep job that never started starts now."""
-    from higbench.runner import checkpoint
-    from higbench.runner.output_location import check_output_dir
-
+    nothing; a sweep job that never started, or stopped before its first checkpoint, starts now."""
     resume = task["resume"]
-    run_path = checkpoint.run_file_of(resume, output_dir)
-    check_output_dir(run_path.parent, "resume")
-    check_no_links(run_path.parent, "resume")
-    fresh = {**task, "resume": None}
-    if multirun and not run_path.exists():
-        plan = Plan(_frozen(fresh), run_path, overrides=overrides)
-    elif multirun and checkpoint.stopped_without_checkpoint(run_path):
-        # killed with its sweep before its first checkpoint: it runs again from the start
-        why = checkpoint.stopped_without_checkpoint(run_path)
-        plan = Plan(_frozen(fresh), run_path, "restart", why, overrides=overrides)
+    run_dir = RunDir(run_file_of(resume, output_dir), "resume")
+    run_dir.check()
+    seen = run_dir.look()
+    stopped = run_dir.stopped_without_checkpoint(seen) if multirun else None
+    if multirun and (stopped or not run_dir.run_file.exists()):
+        config, policy, why = {**task, "resume": None}, "restart" if stopped else "new", stopped or ""
     else:
-        plan = _continue_or_restart(task, run_path, overrides, multirun=multirun)
-    check_tensorboard_dir(plan.config, run_path.parent, "resume")
-    if plan.policy == "resume":
-        return plan
-    validate(plan.task())
-    return dataclasses.replace(plan, initial_weights=load_initial_weights(plan.config))
-
-
-def _continue_or_restart(task: dict, run_path: Path, overrides: tuple[str, ...], *, multirun: bool) -> Plan:
-    from higbench.runner import checkpoint
-
-    resume = task["resume"]
-    empty = checkpoint.recorded_nothing(run_path)
-    if empty:
-        stored = task if multirun else _parse_stored(_stored_config(run_path, resume), resume)
-    else:
-        head = checkpoint.inspect_run(run_path, resume)
-        stored = _parse_stored(head.config_yaml, resume)
-    check_stored_targets(stored, task, resume)  # before anything of it is built
-    merged = checkpoint.resume_config(stored, task, list(overrides))
-    if empty:  # started again from its stored config: it would read the file its init_from names
+        why = run_dir.recorded_nothing(seen)
+        if not why:
+            return _continue(task, run_dir, overrides)
+        stored = task if multirun else _parse_stored(run_dir.stored_config(seen, resume), resume)
+        check_stored_targets(stored, task, resume)  # before anything of it is built
+        config, policy = resume_config(stored, task, list(overrides)), "restart"
+        # started again from its stored config: it would read the file its init_from names
         check_stored_paths(stored, list(overrides), resume)
-        return Plan(_frozen(merged), run_path, "restart", empty, overrides=overrides)
-    # continued: the weights are the checkpoint's; the stored init_from is a record, never opened
-    validate({**merged, "init_from": None})
-    state = _load_checkpoint(run_path, resume, head)
-    return Plan(_frozen(merged), run_path, "resume", checkpoint=state, overrides=overrides)
+    run_dir.check_tensorboard_dir(config)
+    return planned(config, validate(config), run_dir, policy, why, overrides)
+
+
+def _continue(task: dict, run_dir: RunDir, overrides: tuple[str, ...]) -> Plan:
+    """The run continued from its checkpoint: its stored config (with the changes resuming
+    allows), its checkpoint checked against its run file. The weights are the checkpoint's;
+    a stored ``init_from`` is a record, never opened."""
+    resume = task["resume"]
+    head = run_dir.inspect(resume)
+    stored = _parse_stored(head.config_yaml, resume)
+    check_stored_targets(stored, task, resume)  # before anything of it is built
+    merged = resume_config(stored, task, list(overrides))
+    checked = validate({**merged, "init_from": None})
+    state = checkpoint.load(head, resume)
+    run_dir.check_tensorboard_dir(merged)
+    return planned(merged, checked, run_dir, "resume", "", overrides, state)
+
+
+def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
+    """The stored config of the run, with the command-line changes that resuming allows.
+
+    ``composed``: the config Hydra composed for this invocation; ``overrides``: the task
+    overrides given on the command line. A key outside ``RESUMABLE_KEYS`` may be repeated
+    with the run's own value (re-running the same command with ``resume=...``) but not
+    changed: that would be another experiment.
+    """
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    # a key that changes no result and that an older run file lacks: conf/config.yaml's value
+    merged = {**{k: composed[k] for k in COSMETIC_KEYS if k not in stored and k in composed}, **copy.deepcopy(stored)}
+    for override in OverridesParser.create().parse_overrides(list(overrides)):
+        key, line = override.key_or_group, override.input_line
+        if key.startswith("hydra.") or key == "hydra":
+            continue
+        new = dotted_get(composed, key)
+        if key.split(".")[0] in RESUMABLE_KEYS:
+            if new is not ABSENT:
+                dotted_set(merged, key, new)
+            continue
+        old = dotted_get(stored, key)
+        if new is ABSENT or old is ABSENT or new != old:
+            shown = "<absent>" if old is ABSENT else show(old)
+            why = f"cannot change when resuming (the run has {key}={shown}); resumable keys: {', '.join(RESUMABLE_KEYS)}"
+            raise ConfigError(key, line.split("=", 1)[-1], why)
+    merged["resume"] = None
+    return merged
 
 
 def _parse_stored(yaml_text: str, resume_value) -> dict:
@@ -255,49 +259,6 @@ def _parse_stored(yaml_text: str, resume_value) -> dict:
         return parse_config(yaml_text)
     except UnreadableRunFile as exc:
         raise ConfigError("resume", resume_value, f"its stored config is refused: {exc}") from None
-
-
-def _stored_config(run_file: Path, resume_value) -> str:
-    """Config YAML of a run: from its run file, else (a file killed at creation) Hydra's copy."""
-    from higbench.runfile.reader import UnreadableRunFile, read_head
-
-    with contextlib.suppress(UnreadableRunFile):
-        stored = read_head(run_file).config_yaml
-        if stored:
-            return stored
-    saved = run_file.parent / ".hydra" / "config.yaml"
-    if saved.is_file() and not saved.is_symlink():
-        return saved.read_text()
-    raise ConfigError("resume", resume_value, f"{run_file} recorded nothing and its config is unknown (no .hydra/config.yaml)")
-
-
-# -- what a directory and a stored config may make higbench do --------------------------------
-
-
-def check_no_links(out: Path, key: str) -> None:
-    """Refuse a run directory where something higbench writes is a symbolic link."""
-    for name in WRITTEN_NAMES:
-        path = Path(out) / name
-        if path.is_symlink():
-            why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
-            raise ConfigError(key, str(out), why)
-
-
-def check_tensorboard_dir(task: Mapping, out: Path, key: str) -> None:
-    """TensorBoard asked for (``tensorboard=true`` or ``sink=tensorboard``): its directory in
-    the run dir is absent or a real directory (a link would take the event files elsewhere; a
-    file or a dangling link would fail mid-run)."""
-    from higbench.runner.sinks import side_sink_specs
-    from higbench.runner.tensorboard import TENSORBOARD_DIR
-
-    path = Path(out) / TENSORBOARD_DIR
-    if "tensorboard" not in side_sink_specs(task) or not os.path.lexists(path):
-        return
-    if path.is_symlink():
-        why = f"{path} is a symbolic link (to {os.readlink(path)}); higbench never writes through links"
-        raise ConfigError(key, str(out), why)
-    if not path.is_dir():
-        raise ConfigError(key, str(out), f"{path} exists and is not a directory; tensorboard=true writes its event files there")
 
 
 # The config groups whose files may name a class to build: where a stored config's ``_target_``s

@@ -44,15 +44,16 @@ import torch
 import torch._dynamo  # noqa: F401  torch.optim imports it lazily on the first optimizer (3-4 s here):
 
 # import it up front, so that no launcher's first run pays it inside the training clock.
-from hydra.utils import get_class
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import OmegaConf
 
+from higbench.config import RunConfig
 from higbench.dtypes import DTYPES
 from higbench.errors import ConfigError, MemoryRefusal, show
 from higbench.optim import memory_guard
 from higbench.optim.contract import uses_jacobian
 from higbench.optim.structured import mlp_factor_values
 from higbench.problems.base import LATER_DRAWS, Batch, Problem, build_problem
+from higbench.runfile.reader import RunTables
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
@@ -79,6 +80,7 @@ class RunSummary:
     path: Path
     reason: str = ""
     initial_test_loss: float = math.nan  # the test loss at step 0
+    tables: RunTables | None = None  # what its summary reads of the file, kept as it was closed
 
 
 class TrainingClock:
@@ -179,12 +181,12 @@ def check_initial_weights(model: torch.nn.Module, weights, path: str) -> None:
         raise ConfigError("init_from", path, f"network does not match (run has {theirs}, this config builds {ours})")
 
 
-def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
+def build(plan: Plan, problem: Problem) -> tuple[torch.nn.Module, Update]:
     """The network and its optimizer; a network or arguments they refuse become ConfigError."""
     try:
-        check_network_size(cfg, problem)
+        check_network_size(plan, problem)
         model = problem.build_model()
-        return model, build_update(problem, model, cfg.optimizer)
+        return model, build_update(problem, model, plan.optimizer)
     except ConfigError:
         raise
     except (ValueError, TypeError) as exc:
@@ -192,16 +194,21 @@ def build(cfg: DictConfig, problem: Problem) -> tuple[torch.nn.Module, Update]:
     except (MemoryError, RuntimeError) as exc:  # torch's allocator: a network far too large
         if not isinstance(exc, MemoryError) and "allocat" not in str(exc):
             raise
-        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
         first = " ".join(str(exc).split())[:200]
-        hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
-        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({first})") from None
+        raise MemoryRefusal(*_network_key(plan), f"the network does not fit in memory ({first})") from None
+
+
+def _network_key(plan: Plan) -> tuple[str, str]:
+    """The key and value a refusal of the network's size names: its hidden sizes, where it has them."""
+    if "hidden" in plan.problem:
+        return "problem.hidden", show(OmegaConf.to_container(plan.problem)["hidden"])
+    return "problem", show("?")
 
 
 SMALL_NETWORK_BYTES = 64 << 20  # below this a network is not what exhausts memory
 
 
-def check_network_size(cfg: DictConfig, problem: Problem) -> None:
+def check_network_size(plan: Plan, problem: Problem) -> None:
     """The network, built on the meta device (no memory), fits in the memory there is. torch's
     allocator over-commits: a network far too large is otherwise killed by the kernel mid-way."""
     try:
@@ -210,19 +217,17 @@ def check_network_size(cfg: DictConfig, problem: Problem) -> None:
     except Exception:  # noqa: BLE001 - one the meta device cannot build: the real build says what is wrong
         return
     n = sum(t.numel() for t in [*meta.parameters(), *meta.buffers()])
-    need = 4 * n * DTYPES[cfg.dtype].itemsize  # weights, gradients and an optimizer's two moments
+    need = 4 * n * DTYPES[plan.run.dtype].itemsize  # weights, gradients and an optimizer's two moments
     if need < SMALL_NETWORK_BYTES:  # comes from memory the process holds; the step's own guard sizes the rest
         return
     available, where = memory_guard.available_bytes(str(problem.device))
     if need > available:
-        key = "problem.hidden" if "hidden" in cfg.problem else "problem"
-        hidden = show(OmegaConf.to_container(cfg.problem).get("hidden", "?"))
         need_mb, have_mb = memory_guard.mb(need), memory_guard.mb(available)
         why = f"{need_mb} for {n:,} parameters (weights, gradients, optimizer state), {have_mb} is {where}"
-        raise MemoryRefusal(key, hidden, f"the network does not fit in memory ({why})")
+        raise MemoryRefusal(*_network_key(plan), f"the network does not fit in memory ({why})")
 
 
-def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
+def check_memory(plan: Plan, problem: Problem, model: torch.nn.Module, update) -> memory_guard.Estimate | None:
     """GN/HIG only: refuse a batch size whose Jacobian/inversion step cannot fit in memory."""
     if not uses_jacobian(update.optimizer):  # only the Jacobian-power family builds J (optim.contract)
         return None
@@ -232,61 +237,61 @@ def check_memory(cfg: DictConfig, problem: Problem, model: torch.nn.Module, upda
     n_params = sum(p.numel() for p in model.parameters() if p.requires_grad)
     opt = update.optimizer
     return memory_guard.check(
-        int(cfg.batch_size),
+        plan.run.batch_size,
         output_size,
         n_params,
-        dtype=cfg.dtype,
+        dtype=plan.run.dtype,
         solver=opt.group["solver"],  # resolved per batch size by the optimizer's rule (tau, truncation)
         tau=opt.group["tau"],
         truncation=opt.group["truncation"],
         precision=str(opt.group["precision"]),
         device=str(problem.device),
-        limit_mb=cfg.get("memory_limit_mb"),
+        limit_mb=plan.run.memory_limit_mb,
         jacobian="structured" if getattr(update, "structured", False) else "naive",
         krylov_steps=opt.group.get("krylov_steps", 200),
         factor_values=mlp_factor_values(model),
     )
 
 
-def check_data_memory(cfg: DictConfig, problem: Problem) -> None:
+def check_data_memory(plan: Plan, problem: Problem) -> None:
     """The validation and fresh test sets (drawn when first asked for, after this) fit in memory."""
-    sizes = {f"problem.{key}": int(cfg.problem.get(key) or 0) for key in LATER_DRAWS}
+    sizes = {f"problem.{key}": int(plan.problem[key] or 0) for key in LATER_DRAWS}
     memory_guard.check_samples(
-        {k: n for k, n in sizes.items() if n}, problem.sample_bytes(), str(problem.device), cfg.get("memory_limit_mb")
+        {k: n for k, n in sizes.items() if n}, problem.sample_bytes(), str(problem.device), plan.run.memory_limit_mb
     )
 
 
-def _setup(cfg: DictConfig, device: torch.device | None = None):
-    device = resolve_device(cfg.device) if device is None else device
-    dtype = DTYPES[cfg.dtype]
-    threads = resolve_threads(cfg.get("threads"))
+def _setup(plan: Plan, device: torch.device | None = None):
+    run = plan.run
+    device = resolve_device(run.device) if device is None else device
+    threads = resolve_threads(run.threads)
     if threads:
         torch.set_num_threads(threads)
-    torch.manual_seed(cfg.seed)
-    problem = build_problem(cfg.problem, dtype=dtype, device=device, seed=cfg.seed)
+    torch.manual_seed(run.seed)
+    problem = build_problem(plan.problem, dtype=DTYPES[run.dtype], device=device, seed=run.seed)
     return device, problem
 
 
-def _update_cost(cfg: DictConfig, device: torch.device) -> float:
+def _update_cost(plan: Plan, device: torch.device) -> float:
     """Seconds of one update of this run's optimizer and batch size on ``device`` (the least of
     ``placement.TIMED_UPDATES`` after one untimed update; inf if it cannot fit in memory there).
     Throwaway problem, network and optimizer; the caller's random streams are left as they were."""
     threads = torch.get_num_threads()
     with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
         try:
-            _device, problem = _setup(cfg, device=device)
-            model, update = build(cfg, problem)
-            warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))
-            estimate = check_memory(cfg, problem, model, update)
+            _device, problem = _setup(plan, device=device)
+            model, update = build(plan, problem)
+            warm_up(problem, model, jacobian=uses_jacobian(plan.optimizer.cls))
+            estimate = check_memory(plan, problem, model, update)
         except ConfigError:  # too large for this device's memory
             return math.inf
-        if cfg.get("threads") == "auto" and estimate is not None:
+        if plan.run.threads == "auto" and estimate is not None:
             torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
-        generator = torch.Generator().manual_seed(int(cfg.seed))
-        batches = problem.epoch(int(cfg.batch_size), generator)
+        generator = torch.Generator().manual_seed(plan.run.seed)
+        batches = problem.epoch(plan.run.batch_size, generator)
         seconds = []
         for _ in range(1 + placement.TIMED_UPDATES):
-            batch = next(batches, None) or next(problem.epoch(int(cfg.batch_size), generator))
+            batch = next(batches, None) or next(problem.epoch(plan.run.batch_size, generator))
             t0 = time.perf_counter()
             update(batch)  # synchronizes a GPU before returning
             seconds.append(time.perf_counter() - t0)
@@ -294,24 +299,24 @@ def _update_cost(cfg: DictConfig, device: torch.device) -> float:
     return min(seconds[1:])
 
 
-def choose_placement(cfg: DictConfig, state: dict | None) -> placement.Placement | None:
+def choose_placement(plan: Plan) -> placement.Placement | None:
     """``device=auto``: the measured choice (a resumed run keeps its device); else None."""
-    if cfg.device != "auto":
+    if plan.run.device != "auto":
         return None
-    if state is not None:
-        return placement.resumed(state)
-    return placement.place(lambda device: _update_cost(cfg, device))
+    if plan.checkpoint is not None:
+        return placement.resumed(plan.checkpoint)
+    return placement.place(lambda device: _update_cost(plan, device))
 
 
-def check_checkpoint(state: dict, problem: Problem, model: torch.nn.Module, update, cfg: DictConfig, run_path: Path) -> None:
+def check_checkpoint(plan: Plan, problem: Problem, model: torch.nn.Module, update) -> None:
     """A resumed run's checkpoint against the network and optimizer its stored config builds
     (``checkpoint.check_fits``); ConfigError on ``resume`` when any part of it does not fit."""
     train_set = getattr(problem, "train", None)
-    per_epoch = len(train_set) // int(cfg.batch_size) if train_set is not None else None
-    checkpoint.check_fits(state, model, update.optimizer, per_epoch, str(run_path), checkpoint.checkpoint_path(run_path))
+    per_epoch = len(train_set) // plan.run.batch_size if train_set is not None else None
+    checkpoint.check_fits(plan.checkpoint, model, update.optimizer, per_epoch, plan.run_path)
 
 
-def check_sinks(cfg: DictConfig) -> None:
+def check_sinks(cfg) -> None:
     """The side sinks the config names import as sinks, and TensorBoard's extra is installed."""
     from higbench.runner.sinks import check_side_sinks, side_sink_specs
 
@@ -322,35 +327,31 @@ def check_sinks(cfg: DictConfig) -> None:
         summary_writer_class()
 
 
-def check_build(cfg: DictConfig, initial_weights=None) -> None:
+def check_build(plan: Plan) -> None:
     """A sweep's up-front check of one distinct network (``preflight.check_sweep``): build the
     problem, network and optimizer on the CPU and run the checks that need them, writing
     nothing, so that a bad job refuses the sweep before any job runs. (A single run does these
     checks once, in ``train``, on its own objects.)"""
-    _device, problem = _setup(cfg, device=torch.device("cpu"))
-    model, update = build(cfg, problem)
-    if initial_weights is not None:
-        check_initial_weights(model, initial_weights, cfg.init_from)
-    check_sinks(cfg)
-    if resolve_device(cfg.device).type == "cpu":
-        check_memory(cfg, problem, model, update)
-        check_data_memory(cfg, problem)
+    _device, problem = _setup(plan, device=torch.device("cpu"))
+    model, update = build(plan, problem)
+    if plan.initial_weights is not None:
+        check_initial_weights(model, plan.initial_weights, plan.run.init_from)
+    check_sinks(plan.config)
+    if resolve_device(plan.run.device).type == "cpu":
+        check_memory(plan, problem, model, update)
+        check_data_memory(plan, problem)
 
 
 # -- the loop --------------------------------------------------------------------------------
 
 
-def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dict, overrides) -> RunFileWriter:
+def _open_run_file(plan: Plan, env: dict) -> RunFileWriter:
     """A new run file, or the checkpoint's file reopened at the rows it recorded."""
-    config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+    config_yaml = OmegaConf.to_yaml(OmegaConf.create(plan.task()), resolve=True)
+    run_path, state, overrides = plan.run_path, plan.checkpoint, plan.overrides
     if state is None:
-        return RunFileWriter(
-            run_path,
-            config_yaml=config_yaml,
-            overrides=overrides or [],
-            env=env,
-            meta={"problem": cfg.problem.name, "optimizer": cfg.optimizer.name},
-        )
+        meta = {"problem": plan.problem.name, "optimizer": plan.optimizer.name}
+        return RunFileWriter(run_path, config_yaml=config_yaml, overrides=list(overrides), env=env, meta=meta)
     return RunFileWriter.reopen(
         run_path,
         rows=state["rows"],
@@ -358,17 +359,13 @@ def _open_run_file(cfg: DictConfig, run_path: Path, state: dict | None, env: dic
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "from_step": state["step"],
             "wall_time": state["wall_time"],
-            "overrides": list(overrides or []),
+            "overrides": list(overrides),
         },
         config_yaml=config_yaml,
     )
 
 
-def _is_jacobian_power(opt_cfg) -> bool:
-    return uses_jacobian(get_class(opt_cfg._target_))
-
-
-def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
+def _extra_sinks(cfg, run_path: Path) -> list:
     """The side sinks the config names (the ``sink`` group; ``tensorboard=true``), beside the run file."""
     from higbench.runner.sinks import build_side_sinks, side_sink_specs
 
@@ -378,17 +375,17 @@ def _extra_sinks(cfg: DictConfig, run_path: Path) -> list:
 class TrainingRun:
     """The state of one run between updates, and what happens at updates, evaluations and checkpoints."""
 
-    def __init__(self, cfg, run_path, problem, model, update: Update, device, state, clock, file: RunFileSink, sinks):
-        self.cfg, self.run_path, self.problem, self.model, self.update = cfg, run_path, problem, model, update
+    def __init__(self, run: RunConfig, run_path, problem, model, update: Update, device, state, clock, file: RunFileSink, sinks):
+        self.cfg, self.run_path, self.problem, self.model, self.update = run, run_path, problem, model, update
         self.device, self.clock, self.file, self.sinks = device, clock, file, sinks
         self.test = problem.test_set()
         self.val = problem.val_set()  # its loss is the curve val_loss (what tuning reads)
         self.memory = MemoryMonitor(device)
         self.cpu = CpuUse(torch.get_num_threads())
-        self.shuffle = torch.Generator().manual_seed(cfg.seed)
-        self.budget_s = cfg.budget.seconds if cfg.budget.seconds is not None else math.inf
-        self.max_updates = cfg.budget.max_updates if cfg.budget.max_updates is not None else math.inf
-        self.by_updates = cfg.get("eval_unit", "seconds") == "updates"
+        self.shuffle = torch.Generator().manual_seed(run.seed)
+        self.budget_s = run.budget.seconds if run.budget.seconds is not None else math.inf
+        self.max_updates = run.budget.max_updates if run.budget.max_updates is not None else math.inf
+        self.by_updates = run.eval_unit == "updates"
         self.records_spectrum = uses_jacobian(update.optimizer)
         self.spectrum: dict = {}
         self.step, self.epoch, self.position = 0, 0, 0
@@ -535,7 +532,7 @@ class TrainingRun:
                 if not math.isfinite(final_test):
                     status, reason = "diverged", "non-finite test loss"
                     break
-            ckpt_every = self.cfg.get("checkpoint_every")
+            ckpt_every = self.cfg.checkpoint_every
             if ckpt_every is not None and self.clock() - self.last_ckpt >= ckpt_every:
                 self.save_checkpoint()
         signals.ignore()
@@ -613,42 +610,40 @@ def train(plan: Plan) -> RunSummary:
     The problem, the network and the optimizer are built once, here; the plan's inputs are
     checked against them (``init_from`` weights, a checkpoint) and the memory guard runs, all
     before the run file is created or reopened: a refusal (ConfigError) writes nothing.
-    ``Plan.for_run(cfg, run_path)`` makes the plan of a validated config in code.
+    ``Plan.for_run(cfg, run_path)`` makes the plan of a config in code.
     """
-    cfg, run_path, state = OmegaConf.create(plan.task()), Path(plan.run_path), plan.checkpoint
-    placed = choose_placement(cfg, state)
-    device, problem = _setup(cfg, device=placed.device if placed else None)
-    model, update = build(cfg, problem)
-    warmup_s = warm_up(problem, model, jacobian=_is_jacobian_power(cfg.optimizer))  # numba compiles: not training
+    cfg, run_path, state = plan.run, plan.run_path, plan.checkpoint
+    placed = choose_placement(plan)
+    device, problem = _setup(plan, device=placed.device if placed else None)
+    model, update = build(plan, problem)
+    warmup_s = warm_up(problem, model, jacobian=uses_jacobian(plan.optimizer.cls))  # numba compiles: not training
     if plan.initial_weights is not None:
         check_initial_weights(model, plan.initial_weights, cfg.init_from)
         model.load_state_dict({k: torch.as_tensor(v) for k, v in plan.initial_weights.items()})
     if state is not None:  # all of it fits this network and optimizer, before the run file is touched
-        check_checkpoint(state, problem, model, update, cfg, run_path)
-    estimate = check_memory(cfg, problem, model, update)
-    check_data_memory(cfg, problem)
-    if cfg.get("threads") == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
+        check_checkpoint(plan, problem, model, update)
+    estimate = check_memory(plan, problem, model, update)
+    check_data_memory(plan, problem)
+    if cfg.threads == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
-    check_sinks(cfg)
-    announce(cfg.get("progress", True), start_text(plan.start_config()))  # the checks passed: replaces "checking"
+    check_sinks(plan.config)
+    announce(cfg.progress, start_text(plan.start_config()))  # the checks passed: replaces "checking"
 
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     clock.pause()  # creating/reopening the file is not training
-    extra = _extra_sinks(cfg, run_path)
+    extra = _extra_sinks(plan.config, run_path)
     env = {**environment(device, plan.parallel_jobs), "warmup_s": warmup_s, **(placed.record() if placed else {})}
-    file = RunFileSink(_open_run_file(cfg, run_path, state, env, list(plan.overrides)))
+    file = RunFileSink(_open_run_file(plan, env))
     step = state["step"] if state else 0
-    name = f"{cfg.problem.name}/{cfg.optimizer.name}"
-    progress = Progress(
-        cfg.get("progress", True), cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step
-    )
-    run = TrainingRun(
-        cfg, run_path, problem, model, update, device, state, clock, file, Sinks(file, ProgressSink(progress), side=extra)
-    )
+    name = f"{plan.problem.name}/{plan.optimizer.name}"
+    progress = Progress(cfg.progress, cfg.budget.seconds, start=clock(), name=name, max_updates=cfg.budget.max_updates, step=step)
+    sinks = Sinks(file, ProgressSink(progress), side=extra)
+    run = TrainingRun(cfg, run_path, problem, model, update, device, state, clock, file, sinks)
     clock.resume()
     signals = StopSignals(parent=plan.stop_with_parent).install()
     status, reason, final_test = _run(run, signals)
     if status in ("completed", "diverged"):
         checkpoint.remove(run_path)  # nothing left to resume
     signals.restore()
-    return RunSummary(status, run.step, clock(), final_test, run_path, reason, run.initial_test_loss)
+    tables = run.file.writer.final_tables
+    return RunSummary(status, run.step, clock(), final_test, run_path, reason, run.initial_test_loss, tables)

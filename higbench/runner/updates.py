@@ -25,7 +25,7 @@ from hydra.utils import get_class
 from omegaconf import DictConfig
 from torch import nn
 
-from higbench.config import optimizer_kwargs  # the one rule for which optimizer keys are arguments
+from higbench.optim.choice import OptimizerChoice, optimizer_kwargs  # the one rule for which optimizer keys are arguments
 from higbench.optim.closure import LossClosure, NonFiniteStep
 from higbench.optim.contract import PHASES, StepReporter, leave_threads_to_run, report_of
 from higbench.problems.base import Batch, Problem
@@ -105,8 +105,12 @@ class Update:
         )
 
 
-def build_update(problem: Problem, model: nn.Module, opt_cfg: DictConfig) -> Update:
-    """The optimizer class comes from ``optimizer._target_``; its arguments from the rest."""
-    optimizer = get_class(opt_cfg._target_)(model.parameters(), **optimizer_kwargs(opt_cfg))
+def build_update(problem: Problem, model: nn.Module, opt: OptimizerChoice | DictConfig) -> Update:
+    """The optimizer of a plan (its class and arguments, resolved once), or of an ``optimizer``
+    config node (the class from ``_target_``, its arguments from the rest)."""
+    if isinstance(opt, OptimizerChoice):
+        optimizer = opt.cls(model.parameters(), **opt.kwargs)
+    else:
+        optimizer = get_class(opt._target_)(model.parameters(), **optimizer_kwargs(opt))
     leave_threads_to_run(optimizer)  # the run's `threads` key sets them (train._setup), not the optimizer
     return Update(problem, model, optimizer)

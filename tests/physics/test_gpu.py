@@ -12,6 +12,7 @@ import torch
 
 from higbench.optim.structured import solver_jacobian
 from higbench.physics import dipole, dipole_fast, oscillator, oscillator_fast
+from higbench.runner.plan import Plan
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU (none on this machine)")
 
@@ -81,7 +82,7 @@ def test_a_hig_update_on_the_gpu_equals_the_cpu_s(problem, solver):
     cfg = config(f"problem={problem}", "optimizer=hig", "dtype=float64", "batch_size=4", f"optimizer.solver={solver}", *krylov)
     params = []
     for device in (torch.device("cpu"), CUDA):
-        _device, p = train_mod._setup(cfg, device=device)
+        _device, p = train_mod._setup(Plan.for_run(cfg, "run.h5"), device=device)
         model = p.build_model()
         update = build_update(p, model, cfg.optimizer)
         batch = next(p.epoch(4, torch.Generator().manual_seed(0)))
@@ -94,7 +95,7 @@ def test_a_hig_update_on_the_gpu_equals_the_cpu_s(problem, solver):
 def test_update_cost_on_the_gpu_is_measured(problem):
     from higbench.runner import train as train_mod
 
-    cost = train_mod._update_cost(config(f"problem={problem}", "optimizer=hig", "batch_size=4"), CUDA)
+    cost = train_mod._update_cost(Plan.for_run(config(f"problem={problem}", "optimizer=hig", "batch_size=4"), "run.h5"), CUDA)
     assert 0 < cost < math.inf
 
 
@@ -107,7 +108,7 @@ def test_the_naive_jacobian_route_runs_through_the_host_solver():
     for jacobian in ("structured", "naive"):
         cfg = config("problem=oscillator", "optimizer=hig", "dtype=float64", "batch_size=4", f"optimizer.jacobian={jacobian}",
                      "optimizer.solver=svd")  # fmt: skip
-        _device, p = train_mod._setup(cfg, device=CUDA)
+        _device, p = train_mod._setup(Plan.for_run(cfg, "run.h5"), device=CUDA)
         model = p.build_model()
         update = build_update(p, model, cfg.optimizer)
         assert update(next(p.epoch(4, torch.Generator().manual_seed(0)))).finite

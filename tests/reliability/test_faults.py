@@ -48,6 +48,7 @@ from higbench.results.index import load_runs
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runfile.writer import DiskFull, RunFileWriter
 from higbench.runner import checkpoint
+from higbench.runner.rundir import EMPTY_FILE_BYTES, RunDir
 
 LONG_RUN = ["problem=toy", "optimizer=adam", "budget.seconds=30", "eval_unit=updates", "eval_every=10", *FAST]
 
@@ -312,7 +313,7 @@ def test_killed_before_first_checkpoint(tmp_path):
     w = RunFileWriter(empty_dir / "run.h5", "a: 1\n", [], env={}, meta={})
     w.append_row("curves", {"step": 0, "test_loss": 1.0})
     w.f.close()  # killed: status stays running
-    assert checkpoint.recorded_nothing(empty_dir / "run.h5")
+    assert RunDir(empty_dir / "run.h5").recorded_nothing()
 
 
 @pytest.mark.process
@@ -320,7 +321,7 @@ def test_killed_before_first_checkpoint(tmp_path):
 def test_large_unreadable_file_is_never_taken_over(tmp_path):
     d = tmp_path / "garbage"
     d.mkdir()
-    (d / "run.h5").write_bytes(b"x" * (checkpoint.EMPTY_FILE_BYTES + 1))
+    (d / "run.h5").write_bytes(b"x" * (EMPTY_FILE_BYTES + 1))
     before = sha256(d / "run.h5")
     r = run_cli(["problem=toy", "optimizer=sgd", "budget.max_updates=5", *FAST, f"hydra.run.dir={d}"], cwd=tmp_path)
     assert r.returncode == 2 and "already holds a run file" in one_error_line(r.stderr)

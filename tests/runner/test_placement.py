@@ -56,7 +56,7 @@ def test_a_resumed_run_stays_where_it_started():
 def test_update_cost_is_measured_without_touching_the_run_s_random_streams(optimizer):
     cfg = config(f"optimizer={optimizer}")
     state, threads = torch.get_rng_state(), torch.get_num_threads()
-    cost = train_mod._update_cost(cfg, CPU)
+    cost = train_mod._update_cost(Plan.for_run(cfg, "run.h5"), CPU)
     assert 0 < cost < 10
     assert torch.equal(torch.get_rng_state(), state) and torch.get_num_threads() == threads
 

@@ -44,5 +44,5 @@ def test_event_files_hold_curves_and_phase_times(optimizer, tmp_path):
 def test_missing_package_is_one_line_before_anything_is_written(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # import fails as if not installed
     with pytest.raises(ConfigError, match=r"needs the tensorboard package: pip install"):
-        train_mod.check_build(config("optimizer=adam", "tensorboard=true"))
+        train_mod.check_build(Plan.for_run(config("optimizer=adam", "tensorboard=true"), tmp_path / "run.h5"))
     assert not list(tmp_path.iterdir())
