@@ -13,10 +13,17 @@ Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewi
 ``--set [SCOPE:]KEY=VALUE`` adds an override to every job (no SCOPE), or to those of a problem,
 an optimizer or a ``problem/optimizer`` (SCOPE). The same flags re-read the runs with ``--report-only``.
 
-Per problem (its config owns the budget ``problem.league_seconds``, the targets
-``problem.targets`` and the held-out variants ``problem.held_out``; ``--seconds`` replaces the
-budget for a short league):
+Per problem (its config owns the target-setting budget ``problem.target_seconds``, the
+fallback budget ``problem.league_seconds``, the test-loss targets ``problem.targets`` and the
+held-out variants ``problem.held_out``; ``--seconds`` replaces the budget for a short league):
 
+0. target setting (AlgoPerf's way; ``--references``, default Adam and AdamW; ``''``: none): each
+   reference is tuned as in 1 and confirmed as in 2 at ``problem.target_seconds``; per task the
+   lowest median final validation loss of a reference is the *validation target*, and 3x that
+   reference's median time to it is the league's budget per run (``league.targets_from_reruns``).
+   Tuning then selects on time to the validation target (``league.choose_trial``) and the report
+   scores time to it within the budget (``league.algoperf_table``). Without references the budget
+   is ``problem.league_seconds`` and tuning reads the final validation loss;
 1. tuning: ``--studies`` studies of ``--trials`` scrambled Sobol points of each optimizer's search
    space (conf/search/<optimizer>.yaml, or SEARCHPATH/search/<optimizer>.yaml for your own) on the
    study's tuning seed; the best trial by *validation* loss at the budget is the optimizer's
@@ -295,48 +302,87 @@ def variant_overrides(variant: str) -> dict:
     return dict(item.split("=", 1) for item in variant.split())
 
 
-def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float, studies: int) -> list[Job]:
+TUNE_ROLES = ("tune", "target-tune")  # a league tuning trial; a reference's trial in the target setting
+RERUN_ROLE = league.TARGET_ROLE  # a reference's tuned setting rerun on the confirmation seeds at the target-setting budget
+
+
+def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float, studies: int, role: str = "tune") -> list[Job]:
     """Each study's trials (``league.trial_points``) on its tuning seed (``league.tuning_seed``),
-    named ``tune/<problem>/<optimizer>/<study>/<trial>``."""
+    named ``<role>/<problem>/<optimizer>/<study>/<trial>`` (role: tune, or target-tune)."""
     space = space_of(optimizer)
     jobs = []
     for study in range(studies):
         seed = league.tuning_seed(study)
         for i, trial in enumerate(league.trial_points(optimizer, space, trials, study)):
             overrides = {**base_overrides(problem, optimizer, seed, seconds), **trial}
-            jobs.append(Job("league", f"tune/{problem}/{optimizer}/{study}/{i}", overrides, seed))
+            jobs.append(Job("league", f"{role}/{problem}/{optimizer}/{study}/{i}", overrides, seed))
     return jobs
 
 
 def study_and_trial(job: Job) -> tuple[int | None, int | None]:
     parts = job.sweep.split("/")
-    return (int(parts[3]), int(parts[4])) if parts[0] == "tune" and len(parts) == 5 else (None, None)
+    return (int(parts[3]), int(parts[4])) if parts[0] in TUNE_ROLES and len(parts) == 5 else (None, None)
 
 
-def choose(jobs: list[Job]) -> dict | None:
-    """The tuned setting: the overrides of the trial with the lowest validation loss (over every
-    study's trials), read from its run files; None when no trial completed."""
+def done_runs(jobs: list[Job]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(runs, curves) of the jobs that have a run file (``load_runs``), each run with its ``task``
+    and its job's name as ``trial``."""
     from higbench.results.index import load_runs
 
     done = [j for j in jobs if j.path is not None]
     if not done:
-        return None
-    runs = load_runs([j.path for j in done])
+        return pd.DataFrame(), pd.DataFrame()
+    runs, curves = load_runs([j.path for j in done], curves=True)
     by_path = {str(Path(j.path)): j for j in done}
     runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
-    best = league.best_trial(runs)
+    return runs.assign(task=runs.apply(league.task_label, axis=1)), curves
+
+
+def choose(jobs: list[Job], target: float | None = None) -> tuple[dict | None, str]:
+    """(the tuned setting, the rule it was chosen by): the overrides of the trial that reaches the
+    validation ``target`` first (``league.choose_trial``; without a target, the lowest final
+    validation loss), over every study's trials, read from its run files; None when no trial
+    completed."""
+    runs, curves = done_runs(jobs)
+    if runs.empty:
+        return None, "no trial completed"
+    best, rule = league.choose_trial(runs, curves, target)
     if best is None:
-        return None
-    job = by_path[str(Path(best["path"]))]
+        return None, rule
+    job = next(j for j in jobs if j.path is not None and str(Path(j.path)) == str(Path(best["path"])))
     space = space_of(str(job.overrides["optimizer"]))
-    return {k: v for k, v in job.overrides.items() if k in space}
+    return {k: v for k, v in job.overrides.items() if k in space}, rule
 
 
-def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants) -> list[Job]:
+def set_targets(reruns: list[Job]) -> pd.DataFrame:
+    """Per task, the validation target and budget the references' reruns give
+    (``league.targets_from_reruns``); empty when they gave none."""
+    runs, curves = done_runs(reruns)
+    if runs.empty:
+        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), curves)
+    return league.targets_from_reruns(runs, curves)
+
+
+def target_seconds_of(problem: str, node: dict) -> float | None:
+    """The target-setting runs' budget: the problem's ``target_seconds``, else a third of its
+    ``league_seconds`` (the league's budget then comes out near it)."""
+    seconds = node.get("target_seconds") or (node.get("league_seconds") or 0) / 3
+    return float(seconds) if seconds else None
+
+
+def league_budget(targets: pd.DataFrame, problem: str) -> float | None:
+    """The league's budget per run from the target setting: the problem's own task's budget,
+    rounded up to a whole second (None: no target was set)."""
+    row = targets[targets["task"] == problem]
+    return float(math.ceil(row["budget_s"].iloc[0])) if len(row) else None
+
+
+def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants,
+                      role: str | None = None) -> list[Job]:  # fmt: skip
     """The setting (tuned, or the shipped one for ``setting=None``: the paper's where
     conf/problem_optimizer/ has the pair, else the defaults) on fresh seeds, on the problem and each
-    held-out variant."""
-    role = "confirm" if setting is not None else "paper" if has_paper_settings(problem, optimizer) else "default"
+    held-out variant (``role``: target for the references' reruns)."""
+    role = role or ("confirm" if setting is not None else "paper" if has_paper_settings(problem, optimizer) else "default")
     jobs = []
     for variant in ["", *variants]:
         for seed in seeds:
@@ -559,12 +605,30 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
     write_text(out / "league.json", json.dumps(manifest, indent=1, default=str) + "\n")
 
 
+def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dict, dict]:
+    """(validation target per task, budget per task, held-out tasks per problem) from the tables'
+    target-setting reruns, so a report from the tables alone scores as the league did. A task is
+    judged within its problem's budget (its runs ran that long); empty without reruns."""
+    if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
+        return {}, {}, {}
+    reruns = runs[runs["league_role"] == RERUN_ROLE]
+    found = league.targets_from_reruns(reruns, curves).set_index("task")
+    problem_of = dict(zip(reruns["task"], reruns["problem.name"].astype(str), strict=False))
+    budgets = {t: float(found["budget_s"].get(problem_of[t], found.loc[t, "budget_s"])) for t in found.index}
+    held_out: dict[str, list[str]] = {}
+    for task in found.index:
+        if task != problem_of[task]:
+            held_out.setdefault(problem_of[task], []).append(task)
+    return {t: float(v) for t, v in found["target"].items()}, budgets, held_out
+
+
 def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     """The scores of the roots' tables (``tables.read``: merged when several), written to ``out``."""
     runs, curves = tables.read(roots)
     spaces = all_spaces()
     try:
-        text = league.format_league(runs, curves, spaces, tuning_seeds)
+        targets, budgets, held_out = scoring_targets(runs, curves)
+        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))
@@ -588,6 +652,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--paper", default="hig,gn,adam",
                    help="optimizers also run at their shipped settings: 'NAME (paper)' rows, or 'NAME (default)' where "
                    "higbench has no paper settings for the problem (default: hig,gn,adam)")  # fmt: skip
+    p.add_argument("--references", default="adam,adamw",
+                   help="the target setting's reference optimizers, tuned and rerun at each problem's target_seconds: "
+                   "they set the validation target and the budget (default: adam,adamw; '': none, the budget is "
+                   "league_seconds and tuning reads the final validation loss)")  # fmt: skip
     p.add_argument("--trials", default="16", help="Sobol trials per study and (problem, optimizer), the same for every "
                    "optimizer; '4,toy=16': 16 on the toy (default: 16)")  # fmt: skip
     studies = "tuning studies, each its own trial points and tuning seed (default: 2)"
@@ -619,6 +687,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def references_of(args) -> list[str]:
+    return [r for r in args.references.split(",") if r]
+
+
 def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, nodes) -> dict:
     """What makes a league this league (kept in league.json; ``check_out`` compares it)."""
     per = {}
@@ -626,6 +698,7 @@ def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, 
         per[problem] = {
             "optimizers": optimizers, "paper": paper, "trials": trials.get(problem, trials.get(None)),
             "studies": args.studies, "seeds": args.seeds, "seconds": seconds_of(problem, budgets, nodes[problem]),
+            "references": references_of(args), "target_seconds": target_seconds_of(problem, nodes[problem]),
             "set": {o: extra_overrides(problem, o) for o in optimizers},
         }  # fmt: skip
     return {"root": str(root.resolve()), "problems": per}
@@ -648,13 +721,16 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
         launched = dict(o.split("=", 1) for o in LAUNCH_OVERRIDES)  # what every launched run gets unless --set says otherwise
         threads = sorted({str(j.overrides.get("threads", launched["threads"])) for j in jobs})
         tune = sum(j.sweep.startswith("tune/") for j in jobs)
-        lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({tune} tuning, {len(jobs) - tune} confirmation), "
-                     f"{span(seconds)} of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
+        setting = sum(j.sweep.startswith(("target-tune/", f"{RERUN_ROLE}/")) for j in jobs)
+        lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({setting} target setting, {tune} tuning, "
+                     f"{len(jobs) - tune - setting} confirmation), {span(seconds)} of training, hardware "
+                     f"{'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
         total_runs += len(jobs)
         total_s += seconds
     lines.append(f"[league] plan: {total_runs} runs, {span(total_s)} of training (budgets x runs), about "
                  f"{span(total_s / max(1, n_jobs))} wall clock at --jobs {n_jobs} "
-                 "(evaluations and start-up come on top)")  # fmt: skip
+                 "(evaluations and start-up come on top; the league's runs counted at league_seconds or --seconds "
+                 "until the target setting sets their budget)")  # fmt: skip
     return "\n".join(lines)
 
 
@@ -695,7 +771,7 @@ def _main(argv=None) -> int:
     tuning_seeds = [league.tuning_seed(s) for s in range(args.studies)]
     if set(seeds) & set(tuning_seeds):
         fail(f"--seeds {args.seeds}: overlaps the tuning seeds {tuning_seeds}")
-    for o in optimizers:
+    for o in dict.fromkeys([*optimizers, *references_of(args)]):
         try:
             space_of(o)  # a missing or bad search space stops the league before any run
         except ValueError as exc:
@@ -722,7 +798,9 @@ def _main(argv=None) -> int:
             node, usable = nodes[problem], [o for o in optimizers if o not in refused[problem]]
             seconds, n = seconds_of(problem, budgets, node), trials.get(problem, trials.get(None))
             variants = list(node.get("held_out") or [])[: args.variants]
-            jobs = [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
+            refs = references_of(args)
+            jobs = [j for r in refs for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants, node)]
+            jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
             jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
             jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
             planned.append((problem, jobs))
@@ -733,6 +811,35 @@ def _main(argv=None) -> int:
         safe_dir(folder, create=True)
     return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
                       launcher, overrides, protocol, argv)  # fmt: skip
+
+
+def planned_target_jobs(problem, reference, n, studies, seeds, variants, node) -> list[Job]:
+    """The target-setting jobs of one reference, as the plan counts them (its setting not yet known)."""
+    seconds = target_seconds_of(problem, node)
+    if not seconds:
+        return []
+    return [*tuning_jobs(problem, reference, n, seconds, studies, role="target-tune"),
+            *confirmation_jobs(problem, reference, {}, seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+
+
+def target_setting(problem, references, n, studies, seeds, variants, node, phase) -> tuple[list, pd.DataFrame]:
+    """The references tuned and rerun at the problem's target-setting budget (``phase`` runs or
+    finds them): ([(role, job)], targets per task from ``set_targets``)."""
+    seconds = target_seconds_of(problem, node)
+    if not references or not seconds:
+        return [], league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+    tune = {r: tuning_jobs(problem, r, n, seconds, studies, role="target-tune") for r in references}
+    flat = [j for jobs in tune.values() for j in jobs]
+    phase(flat, f"{problem} target-setting tuning")
+    chosen = {r: choose(jobs)[0] for r, jobs in tune.items()}
+    reruns = [j for r in references if chosen[r] is not None
+              for j in confirmation_jobs(problem, r, chosen[r], seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+    phase(reruns, f"{problem} target-setting reruns")
+    targets = set_targets(reruns)
+    for _, row in targets.iterrows():
+        print(f"[league] {row['task']}: validation target {row['target']:.3g} ({row['reference']}, median of "
+              f"{row['reruns']} reruns at {seconds:g} s), budget {row['budget_s']:.3g} s", file=sys.stderr)  # fmt: skip
+    return [("target-tune", j) for j in flat] + [(RERUN_ROLE, j) for j in reruns], targets
 
 
 def planned_counts(plans, paper: list[str], studies: int, seeds: int) -> tuple[int, float]:
@@ -767,7 +874,12 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         for o, why in refused[problem].items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         plans[problem] = (seconds, n, variants, usable)
+    references = references_of(args)
     total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    for problem in problems if reading_runs else []:
+        setting = [j for r in references for j in planned_target_jobs(problem, r, plans[problem][1], args.studies, seeds,
+                                                                       plans[problem][2], nodes[problem])]  # fmt: skip
+        total, runner_seconds = total + len(setting), runner_seconds + sum(job_seconds(j) for j in setting)
     progress = CountProgress(not quiet and not args.report_only, "league", total)
     runner = Runner(root, args.jobs, launcher, overrides, progress)
     runner.left_seconds = runner_seconds
@@ -782,18 +894,32 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     try:
         for problem in problems if reading_runs else []:
             seconds, n, variants, usable = plans[problem]
+            given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
+            setting_jobs, targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem],
+                                                   phase)  # fmt: skip
+            all_jobs += setting_jobs
+            derived = league_budget(targets, problem)
+            seconds = seconds if given or derived is None else derived
+            if references and derived is None:
+                print(f"[league] {problem}: the target setting gave no validation target; budget {seconds:g} s "
+                      "(--seconds or problem.league_seconds), tuning by the final validation loss", file=sys.stderr)  # fmt: skip
+            target = targets.set_index("task")["target"].get(problem) if len(targets) else None
             tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
             flat = [j for jobs in tune.values() for j in jobs]
             phase(flat, f"{problem} tuning")
-            chosen = {o: choose(jobs) for o, jobs in tune.items()}
+            picks = {o: choose(jobs, target) for o, jobs in tune.items()}
+            chosen = {o: pick[0] for o, pick in picks.items()}
             confirm = [j for o in usable if chosen[o] is not None
                        for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
             confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
             phase(confirm, f"{problem} confirmation")
-            manifest["problems"][problem] = {"seconds": seconds, "trials": n, "studies": args.studies,
+            manifest["problems"][problem] = {"seconds": seconds, "budget_from": "--seconds" if given or derived is None
+                                             else "target setting", "trials": n, "studies": args.studies,
                                              "targets": nodes[problem].get("targets"), "held_out": variants,
                                              "set": {o: extra_overrides(problem, o) for o in usable},
-                                             "chosen": chosen, "left_out": refused[problem]}  # fmt: skip
+                                             "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
+                                             "target_setting": targets.to_dict("records"),
+                                             "left_out": refused[problem]}  # fmt: skip
             all_jobs += [("tune", j) for j in flat] + [(j.sweep.split("/")[0], j) for j in confirm]
     finally:
         progress.close()

@@ -8,7 +8,8 @@ The contract with the scorer (``higbench.results.league``). ``runs.csv.gz``: one
 run, the columns of ``higbench.results.index.load_runs`` named in ``RUN_COLUMNS`` with their
 meanings there, ``path`` replaced by ``run`` (the run file's path relative to the root), and
 the league's own: ``identity`` (the job identity, ``config_id``), ``league_role`` (tune,
-confirm, paper or default: the problem's shipped settings where it has none of the paper's),
+confirm, paper or default: the problem's shipped settings where it has none of the paper's;
+target-tune and target: the target setting's reference trials and reruns),
 ``league_job`` (``tune/toy/adam/0/3``: role, problem, optimizer, study, trial; confirmation
 jobs name their variant), ``study`` and ``trial`` (tuning runs), ``task``, ``hardware``
 (``tables.hardware``) and ``env.load_1min``. ``curves.csv.gz``: one row per (run,
@@ -33,6 +34,7 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.league.files import ROOT_FILE_ERRORS, read_bytes, read_json_files, safe_dir, write_bytes
+from higbench.results.league import ROLES
 
 TABLES_DIR = "tables"
 RUNS_TABLE = "runs.csv.gz"
@@ -44,7 +46,6 @@ RUN_COLUMNS = (
     "env.git_revision", "started", "finished", "problem.targets",
 )  # fmt: skip
 CURVE_COLUMNS = ("run", "step", "wall_time", "train_loss", "val_loss", "test_loss")
-ROLES = ("tune", "confirm", "paper", "default")
 
 
 def hardware(runs: pd.DataFrame) -> pd.Series:
