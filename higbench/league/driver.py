@@ -324,15 +324,50 @@ def study_and_trial(job: Job) -> tuple[int | None, int | None]:
     return (int(parts[3]), int(parts[4])) if parts[0] in TUNE_ROLES and len(parts) == 5 else (None, None)
 
 
+class Earlier:
+    """The runs of earlier leagues (``--root`` after the first: their tables, e.g. a published
+    league's): reused like the root's own runs, read from the tables, never rerun."""
+
+    runs, curves = pd.DataFrame(), pd.DataFrame()
+
+    @classmethod
+    def read(cls, roots: list[Path]) -> None:
+        cls.runs, cls.curves = tables.read(roots) if roots else (pd.DataFrame(), pd.DataFrame())
+
+    @classmethod
+    def index(cls) -> dict:
+        """identity -> run (``jobs.IndexedRun``) of every earlier run that is done."""
+        from higbench.jobs import IndexedRun
+        from higbench.results.index import DONE_STATUSES
+
+        done = cls.runs[cls.runs["status"].isin(DONE_STATUSES)] if len(cls.runs) else cls.runs
+        return {str(r["identity"]): IndexedRun(Path(r["path"]), str(r["status"]), float(r["train_time_s"] or 0.0))
+                for _, r in done.iterrows()}  # fmt: skip
+
+    @classmethod
+    def of(cls, paths: list[str]) -> tuple[pd.DataFrame, pd.DataFrame]:
+        if cls.runs.empty or not paths:
+            return pd.DataFrame(), pd.DataFrame()
+        runs = cls.runs[cls.runs["path"].isin(paths)]
+        return runs, cls.curves[cls.curves["path"].isin(paths)].assign(path=lambda c: c["path"].astype(str))
+
+
 def done_runs(jobs: list[Job]) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(runs, curves) of the jobs that have a run file (``load_runs``), each run with its ``task``
-    and its job's name as ``trial``."""
+    """(runs, curves) of the jobs that are done: from their run files (``load_runs``), or from the
+    earlier leagues' tables (``Earlier``); each run with its ``task`` and its job's name as ``trial``."""
     from higbench.results.index import load_runs
 
     done = [j for j in jobs if j.path is not None]
     if not done:
         return pd.DataFrame(), pd.DataFrame()
-    runs, curves = load_runs([j.path for j in done], curves=True)
+    on_disk = [j.path for j in done if Path(j.path).is_file()]
+    parts = [load_runs(on_disk, curves=True)] if on_disk else []
+    parts.append(Earlier.of([str(j.path) for j in done if not Path(j.path).is_file()]))
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        return pd.DataFrame(), pd.DataFrame()
+    runs = pd.concat([p[0] for p in parts], ignore_index=True)
+    curves = pd.concat([p[1] for p in parts], ignore_index=True)
     by_path = {str(Path(j.path)): j for j in done}
     runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
     return runs.assign(task=runs.apply(league.task_label, axis=1)), curves
@@ -415,6 +450,7 @@ class Runner:
             launcher_overrides=self.overrides,
             log=_log,
             progress=False,
+            known=Earlier.index(),
         )  # fmt: skip  (the league counts its own whole)
         self.count(jobs, left)
         if left:
@@ -560,7 +596,7 @@ def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
 PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds")  # per problem; another optimizer only adds rows
 
 
-def check_out(out: Path, root: Path, protocol: dict) -> None:
+def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> None:
     """Before anything is created: ``--out`` is a folder (or absent), and if it holds a league's
     report, that league's (the same root, the same protocol for every problem both name). Another
     league's output is never overwritten silently."""
@@ -572,7 +608,7 @@ def check_out(out: Path, root: Path, protocol: dict) -> None:
     theirs = manifest.get("protocol") if isinstance(manifest, dict) else None
     if not isinstance(theirs, dict):
         fail(f"--out {out}: holds files but no league report of this command (league.json with a protocol); give another --out")
-    if theirs.get("root") != protocol["root"]:
+    if theirs.get("root") != protocol["root"] and not in_place:  # in place: a report re-scored from its own tables
         fail(f"--out {out}: holds the report of the league of another root ({theirs.get('root')}); give another --out")
     for problem, settings in (protocol.get("problems") or {}).items():
         old = (theirs.get("problems") or {}).get(problem)
@@ -598,7 +634,7 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
             shutil.rmtree(plots, ignore_errors=True)
     if len(scored):
         columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
-                   "config_id", "run", "hardware", "root"]  # fmt: skip
+                   "config_id", "run", "hardware"]  # fmt: skip
         rows = scored[[c for c in columns if c in scored]].sort_values(["task", "league_setting", "seed"])
         write_text(out / "runs.csv", rows.to_csv(index=False))
     write_text(out / "league.txt", text)
@@ -701,7 +737,20 @@ def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, 
             "references": references_of(args), "target_seconds": target_seconds_of(problem, nodes[problem]),
             "set": {o: extra_overrides(problem, o) for o in optimizers},
         }  # fmt: skip
-    return {"root": str(root.resolve()), "problems": per}
+    return {"root": shown_path(root), "problems": per}
+
+
+def run_path(path: Path, root: Path) -> str:
+    """A run's path in the manifest: relative to the root it is in (an earlier league's: as shown)."""
+    resolved = Path(path).resolve()
+    return str(resolved.relative_to(root.resolve())) if resolved.is_relative_to(root.resolve()) else shown_path(Path(path))
+
+
+def shown_path(path: Path) -> str:
+    """A path as the report records it: relative to the current folder when inside it (a
+    published report names no folder of the machine it ran on), else absolute."""
+    resolved, here = path.resolve(), Path.cwd().resolve()
+    return resolved.relative_to(here).as_posix() if resolved.is_relative_to(here) else str(resolved)
 
 
 def seconds_of(problem: str, budgets: dict, node: dict) -> float | None:
@@ -749,8 +798,6 @@ def _main(argv=None) -> int:
     args = parse_args(argv)
     roots = args.root or [Path("outputs") / "league"]
     root = roots[0]
-    if len(roots) > 1 and not args.report_only:
-        fail("--root given more than once: merging several roots' tables is --report-only's")
     out = args.out or root / "report"
     set_items, set_folders = searchpath_of_set(args.set)
     use_searchpath([*args.searchpath, *set_folders])
@@ -806,9 +853,9 @@ def _main(argv=None) -> int:
             planned.append((problem, jobs))
         print(plan_text(planned, args.jobs))
         return 0
-    check_out(out, root, protocol)
-    for folder in (root, root / "manifests", root / "figures-runs", root / "ledger"):  # a planted link: refused before work
-        safe_dir(folder, create=True)
+    check_out(out, root, protocol, in_place=args.report_only and out.resolve() in [r.resolve() for r in roots])
+    for folder in (root, root / "manifests", root / "figures-runs", root / "ledger") if not args.report_only else ():
+        safe_dir(folder, create=True)  # a planted link: refused before work
     return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
                       launcher, overrides, protocol, argv)  # fmt: skip
 
@@ -858,6 +905,7 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     from higbench.runner.progress import CountProgress
 
     root = roots[0]
+    Earlier.read([] if args.report_only else [r for r in roots[1:] if safe_dir(r / tables.TABLES_DIR)])
     reading_runs = not args.report_only or (len(roots) == 1 and safe_dir(root / "figures-runs") is not None)
     manifest: dict = {"command": " ".join(["higbench-league", *(argv if argv is not None else sys.argv[1:])]),
                       "protocol": protocol, "searchpath": [str(f) for f in search_folders()],
@@ -927,15 +975,19 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         manifest["calibration"].append(calibration())
     manifest["runs"] = [{"role": role, "job": j.sweep, "study": study_and_trial(j)[0], "trial": study_and_trial(j)[1],
                          "seed": j.seed, "identity": j.identity, "status": j.status,
-                         "path": str(Path(j.path).resolve().relative_to(root.resolve())) if j.path else None}
+                         "path": run_path(j.path, root) if j.path else None}
                         for role, j in all_jobs]  # fmt: skip
     if not args.report_only:  # kept beside the runs: a later --report-only, anywhere, reads it back
         stamp = time.strftime("%Y-%m-%dT%H-%M-%S") + f"-{os.getpid()}"
         text = json.dumps(manifest, indent=1, default=str) + "\n"
         write_text(safe_dir(root / "manifests", create=True) / f"{stamp}.json", text)
+        write_text(safe_dir(safe_dir(out, create=True) / "manifests", create=True) / f"{stamp}.json", text)  # with the tables
     if safe_dir(root / "figures-runs"):
         tables.export(root, {e["identity"]: e for e in manifest["runs"] if e["identity"]})
-    print(report(roots, out, manifest, tuning_seeds))
+    scored = [r for r in roots if safe_dir(r / tables.TABLES_DIR)]
+    if scored and [r.resolve() for r in scored] != [out.resolve()]:  # the report folder holds what it scored:
+        tables.write_merged(out, scored)  # --report-only --root OUT re-scores it alone, byte for byte
+    print(report([out] if scored else roots, out, manifest, tuning_seeds))
     missing = [j for _, j in all_jobs if not j.done]
     if missing:
         print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)

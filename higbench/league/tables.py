@@ -177,9 +177,24 @@ def export(root: Path, jobs: Mapping[str, Mapping] | None = None) -> tuple[Path,
         old_runs["problem.targets"] = old_runs["problem.targets"].map(_targets_text)
         runs_now = pd.concat([old_runs, runs_now], ignore_index=True) if len(runs_now) else old_runs
         curves_now = pd.concat([old_curves, curves_now], ignore_index=True) if len(curves_now) else old_curves
+    return _write_tables(root, runs_now, curves_now)
+
+
+def write_merged(out: Path, roots: Iterable[Path]) -> tuple[Path, Path]:
+    """The tables of ``roots`` merged into ``OUT/tables/`` (one row per run; its ``run`` as in its
+    own root): ``out`` is then a root itself, which a later league reads as its earlier runs and
+    ``--report-only --root OUT`` scores alone."""
+    runs, curves = read(roots)
+    runs = runs.drop_duplicates("identity", keep="first").drop(columns=["root", "path"], errors="ignore")
+    runs["problem.targets"] = runs["problem.targets"].map(_targets_text)
+    curves = curves[curves["run"].isin(set(runs["run"]))].drop(columns=["path"], errors="ignore")
+    return _write_tables(Path(out), runs[list(RUN_COLUMNS)], curves[list(CURVE_COLUMNS)])
+
+
+def _write_tables(root: Path, runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[Path, Path]:
     directory = safe_dir(root / TABLES_DIR, create=True)
     paths = directory / RUNS_TABLE, directory / CURVES_TABLE
-    for path, table in zip(paths, (runs_now, curves_now)):
+    for path, table in zip(paths, (runs, curves), strict=True):
         buffer = io.BytesIO()
         table.to_csv(buffer, index=False, compression={"method": "gzip", "mtime": 0})
         write_bytes(path, buffer.getvalue())

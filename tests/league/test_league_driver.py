@@ -158,7 +158,7 @@ def test_outputs_default_to_outputs_league_under_the_current_folder(tmp_path, mo
                         "--seeds", "1", "--seconds", "1"]) == 0  # fmt: skip
     assert (tmp_path / "outputs" / "league" / "report" / "league.json").is_file()
     manifest = json.loads((tmp_path / "outputs" / "league" / "report" / "league.json").read_text())
-    assert manifest["protocol"]["root"] == str((tmp_path / "outputs" / "league").resolve())
+    assert manifest["protocol"]["root"] == "outputs/league"  # relative to the current folder: no machine's path published
 
 
 def test_another_league_s_report_is_never_overwritten(tmp_path, no_runs, capsys):
@@ -437,3 +437,72 @@ def test_the_league_runs_at_the_budget_the_target_setting_derived(tmp_path, no_r
     assert {j.overrides["budget.seconds"] for jobs, _ in no_runs for j in jobs} == {3.0}
     manifest = json.loads((tmp_path / "a" / "report" / "league.json").read_text())
     assert manifest["problems"]["toy"]["budget_from"] == "target setting"
+
+
+def test_an_earlier_league_s_tables_are_reused_never_rerun(tmp_path, monkeypatch, capsys):
+    """Long leagues accumulate across machines and sessions: with a second --root holding an
+    earlier league's tables (a published one), its done runs count as done (read from the tables,
+    never launched again), its reruns set the validation target, and the new runs go to the
+    first root at the budget they give."""
+    from higbench import jobs as jobs_module
+
+    earlier = _earlier_league(tmp_path / "published")
+    launched = []
+    monkeypatch.setattr(jobs_module, "launch", lambda todo, *a, **k: launched.extend(todo))
+    monkeypatch.setattr(driver, "calibration", lambda: {})
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--root", str(tmp_path / "new"),
+            "--root", str(earlier)]  # fmt: skip
+    with pytest.raises(SystemExit, match="1 toy tuning run"):  # the new tuning run was not trained (launch faked)
+        driver.main(argv)
+    err = capsys.readouterr().err
+    # reruns reach the target 0.005 at 1, 2, 3, 4, 5 s: median 3 s, budget 9 s
+    assert "toy: validation target 0.005 (adam, median of 5 reruns at 10 s), budget 9 s" in err
+    assert {j.sweep.split("/")[0] for j in launched} == {"tune"}  # nothing of the earlier league ran again
+    assert {j.overrides["budget.seconds"] for j in launched} == {9.0}
+
+
+def test_a_published_league_re_scores_byte_for_byte_from_its_own_tables(tmp_path, capsys):
+    """The report folder holds the tables it scored: --report-only on it writes the same report."""
+    published = _earlier_league(tmp_path / "published", confirm=True)
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--report-only"]  # fmt: skip
+    assert driver.main([*argv, "--root", str(published), "--out", str(tmp_path / "report")]) == 0
+    report = tmp_path / "report"
+    first = {p.name: p.read_bytes() for p in [*report.glob("*.txt"), *report.glob("*.csv"), *(report / "tables").glob("*")]}
+    assert "AlgoPerf: seconds to the validation target" in first["league.txt"].decode()
+    assert driver.main([*argv, "--root", str(report), "--out", str(report)]) == 0
+    again = {p.name: p.read_bytes() for p in [*report.glob("*.txt"), *report.glob("*.csv"), *(report / "tables").glob("*")]}
+    assert again == first and set(first) == {"league.txt", "runs.csv", "runs.csv.gz", "curves.csv.gz"}
+
+
+def _earlier_league(earlier: Path, confirm: bool = False) -> Path:
+    """Hand-made tables of a league: adam's target-setting trial and 5 reruns on the toy (at the
+    toy's target_seconds, the identities the driver gives them), each reaching the validation loss
+    0.004 at 1, 1, 2, 3, 4, 5 s; with ``confirm``, also 5 confirmation runs of the tuned setting."""
+    from higbench import jobs as jobs_module
+
+    trials = driver.tuning_jobs("toy", "adam", 1, 10.0, 1, role="target-tune")
+    setting = {k: v for k, v in trials[0].overrides.items() if k in driver.space_of("adam")}
+    reruns = driver.confirmation_jobs("toy", "adam", setting, range(5), 10.0, [], role=driver.RERUN_ROLE)
+    jobs_module.resolve([*trials, *reruns], {})
+    rows, curves = [], []
+    for i, (job, reach_s) in enumerate(zip([*trials, *reruns], [1.0, 1.0, 2.0, 3.0, 4.0, 5.0], strict=True)):
+        role = job.sweep.split("/")[0]
+        rows.append({"run": f"old/{i}/run.h5", "identity": job.identity, "config_id": job.identity,
+                     "league_role": role, "league_job": job.sweep,
+                     "seed": job.seed, "problem.name": "toy", "task": "toy", "optimizer.name": "adam", "overrides": "",
+                     "status": "completed", "final_val_loss": 0.005, "final_test_loss": 0.005, "train_time_s": 10.0,
+                     "steps": 100})  # fmt: skip
+        curves += [{"run": f"old/{i}/run.h5", "step": s, "wall_time": float(s), "val_loss": 0.004 if s >= reach_s else 0.5}
+                   for s in range(1, 11)]  # fmt: skip
+    for seed in range(5 if confirm else 0):
+        run = f"new/{seed}/run.h5"
+        rows.append({**rows[-1], "run": run, "identity": f"confirm-{seed}", "config_id": f"confirm-{seed}",
+                     "league_role": "confirm", "seed": seed,
+                     "league_job": "confirm/toy/base/adam", "final_test_loss": 0.006 + seed / 1000})  # fmt: skip
+        curves += [{"run": run, "step": s, "wall_time": float(s), "val_loss": 0.004 if s >= 2 + seed else 0.5,
+                    "test_loss": 0.5} for s in range(1, 11)]  # fmt: skip
+    runs = pd.DataFrame(rows).reindex(columns=list(tables.RUN_COLUMNS))
+    tables._write_tables(earlier, runs, pd.DataFrame(curves).reindex(columns=list(tables.CURVE_COLUMNS)))
+    return earlier
