@@ -641,14 +641,21 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
     write_text(out / "league.json", json.dumps(manifest, indent=1, default=str) + "\n")
 
 
+def found_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """The target setting of the tables' reruns (``league.targets_from_reruns``; empty without)."""
+    if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
+        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+    return league.targets_from_reruns(runs[runs["league_role"] == RERUN_ROLE], curves)
+
+
 def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dict, dict]:
     """(validation target per task, budget per task, held-out tasks per problem) from the tables'
     target-setting reruns, so a report from the tables alone scores as the league did. A task is
     judged within its problem's budget (its runs ran that long); empty without reruns."""
-    if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
+    found = found_targets(runs, curves).set_index("task")
+    if found.empty:
         return {}, {}, {}
     reruns = runs[runs["league_role"] == RERUN_ROLE]
-    found = league.targets_from_reruns(reruns, curves).set_index("task")
     problem_of = dict(zip(reruns["task"], reruns["problem.name"].astype(str), strict=False))
     budgets = {t: float(found["budget_s"].get(problem_of[t], found.loc[t, "budget_s"])) for t in found.index}
     held_out: dict[str, list[str]] = {}
@@ -665,6 +672,7 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     try:
         targets, budgets, held_out = scoring_targets(runs, curves)
         text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
+        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text])
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))
@@ -717,6 +725,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--launcher-set", action="append", default=[], metavar="KEY=VALUE",
                    help="a hydra.launcher.KEY override: partition=gpu, timeout_min=60, gpus_per_node=1, "
                    "array_parallelism=32; repeatable")  # fmt: skip
+    p.add_argument(
+        "--targets-only",
+        action="store_true",
+        help="run the target setting only (the references' tuning and reruns): a league's first piece",
+    )
     p.add_argument("--plan", action="store_true", help="print the runs, training hours and hardware per task; run nothing")
     only = "train nothing; score the tables under --root (no run files needed)"
     p.add_argument("--report-only", action="store_true", help=only)
@@ -841,12 +854,19 @@ def _main(argv=None) -> int:
     refused = {p: {o: why for o in optimizers if (why := refusal(p, o, with_set=False))} for p in problems}
     if args.plan:
         planned = []
+        Earlier.read([r for r in roots[1:] if safe_dir(r / tables.TABLES_DIR)])
+        derived = scoring_targets(Earlier.runs, Earlier.curves)[1] if len(Earlier.runs) else {}
         for problem in problems:
             node, usable = nodes[problem], [o for o in optimizers if o not in refused[problem]]
             seconds, n = seconds_of(problem, budgets, node), trials.get(problem, trials.get(None))
+            if problem not in budgets and None not in budgets and problem in derived:  # an earlier target setting's
+                seconds = float(math.ceil(derived[problem]))
             variants = list(node.get("held_out") or [])[: args.variants]
             refs = references_of(args)
             jobs = [j for r in refs for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants, node)]
+            if args.targets_only:
+                planned.append((problem, jobs))
+                continue
             jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
             jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
             jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
@@ -924,6 +944,8 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         plans[problem] = (seconds, n, variants, usable)
     references = references_of(args)
     total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    if args.targets_only:
+        total, runner_seconds = 0, 0.0
     for problem in problems if reading_runs else []:
         setting = [j for r in references for j in planned_target_jobs(problem, r, plans[problem][1], args.studies, seeds,
                                                                        plans[problem][2], nodes[problem])]  # fmt: skip
@@ -946,6 +968,9 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
             setting_jobs, targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem],
                                                    phase)  # fmt: skip
             all_jobs += setting_jobs
+            if args.targets_only:
+                manifest["problems"][problem] = {"target_setting": targets.to_dict("records"), "references": references}
+                continue
             derived = league_budget(targets, problem)
             seconds = seconds if given or derived is None else derived
             if references and derived is None:

@@ -503,6 +503,22 @@ def targets_from_reruns(reruns: pd.DataFrame, curves: pd.DataFrame, factor: floa
     return pd.DataFrame(rows, columns=["task", "reference", "target", "budget_s", "reruns", "medians", "seconds_to_target"])
 
 
+def format_targets(found: pd.DataFrame) -> str:
+    """The target setting as text: per task the reference, the validation target (the lowest median
+    final validation loss of a reference over its reruns), every reference's median, and the budget
+    with the reference's seconds to the target on each rerun (inf: not reached)."""
+    if found.empty:
+        return "target setting: no validation targets (no reference reruns in the tables)"
+    lines = ["target setting (validation targets and budgets, AlgoPerf's way): per task the reference with the lowest "
+             "median final validation loss over its reruns; the budget is 3x its median seconds to that target"]  # fmt: skip
+    for _, row in found.iterrows():
+        medians = ", ".join(f"{o} {m:.3g}" for o, m in sorted(row["medians"].items()))
+        seconds = ", ".join("inf" if not math.isfinite(t) else f"{t:.3g}" for t in row["seconds_to_target"])
+        lines.append(f"  {row['task']}: target {row['target']:.4g} ({row['reference']}; medians: {medians}), budget "
+                     f"{row['budget_s']:.3g} s (seconds to target per rerun: {seconds})")  # fmt: skip
+    return "\n".join(lines)
+
+
 def time_to_target(curve: pd.DataFrame | None, status: str, target: float, budget: float) -> float:
     """Training-clock seconds at which one run's validation loss first reaches ``target``; inf
     when it never does within ``budget``, or the run diverged before (scored one way: worst)."""

@@ -506,3 +506,17 @@ def _earlier_league(earlier: Path, confirm: bool = False) -> Path:
     runs = pd.DataFrame(rows).reindex(columns=list(tables.RUN_COLUMNS))
     tables._write_tables(earlier, runs, pd.DataFrame(curves).reindex(columns=list(tables.CURVE_COLUMNS)))
     return earlier
+
+
+def test_targets_only_runs_the_target_setting_alone_and_the_plan_uses_an_earlier_one(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0"]  # fmt: skip
+    assert driver.main([*argv, "--targets-only", "--root", str(tmp_path / "a")]) == 0
+    assert {j.sweep.split("/")[0] for jobs, _ in no_runs for j in jobs} == {"target-tune"}
+    published = _earlier_league(tmp_path / "published")
+    capsys.readouterr()
+    assert driver.main([*argv, "--plan", "--root", str(tmp_path / "b"), "--root", str(published)]) == 0
+    # 6 target-setting runs at 10 s (the toy's target_seconds); 2 trials and 2 x 5 confirmations at the earlier
+    # target setting's budget, 9 s: 60 + 12 x 9 = 168 s
+    # (3 min; at league_seconds, 30 s, it would be 60 + 12 x 30 = 420 s, 7 min)
+    assert "toy: 18 runs (6 target setting, 2 tuning, 10 confirmation), 3 min of training" in capsys.readouterr().out
