@@ -8,6 +8,8 @@ examples:
   higbench-league --problems poisson --set poisson/hig:device=cuda      # HIG on a GPU
   higbench-league --launcher submitit_slurm --launcher-set partition=gpu --launcher-set timeout_min=60
   higbench-league --report-only --root runs-a --root runs-b             # merge two machines' tables, train nothing
+  higbench-league --problems toy --root outputs/league --root docs/results/league/cpu \
+      --out docs/results/league/cpu                                     # add a piece to a published league
 
 Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewise ``--seconds``;
 ``--set [SCOPE:]KEY=VALUE`` adds an override to every job (no SCOPE), or to those of a problem,
@@ -39,7 +41,10 @@ held-out variants ``problem.held_out``; ``--seconds`` replaces the budget for a 
 
 Every run is an ordinary higbench run launched through ``higbench.jobs`` into ``--root``; a run
 already there (same identity) is reused, so a killed league resumes and a new optimizer adds only
-its own runs.
+its own runs. A league too long for one sitting runs in pieces: ``--root NEW --root PUBLISHED``
+reuses every run in the published tables and adds the new ones, and the report folder (``--out``)
+holds the merged tables it scored, so it is the next piece's ``PUBLISHED`` and re-scores alone
+(``--report-only --root OUT --out OUT``, byte for byte).
 """
 
 from __future__ import annotations
@@ -598,8 +603,9 @@ PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds")  # per problem; anothe
 
 def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> None:
     """Before anything is created: ``--out`` is a folder (or absent), and if it holds a league's
-    report, that league's (the same root, the same protocol for every problem both name). Another
-    league's output is never overwritten silently."""
+    report, that league's (the same root, or ``in_place``: ``--out`` is itself a ``--root``, a
+    published league extended or re-scored; the same protocol for every problem both name).
+    Another league's output is never overwritten silently."""
     if os.path.lexists(out) and (os.path.islink(out) or not out.is_dir()):
         fail(f"--out {out}: {'a symbolic link' if os.path.islink(out) else 'an existing file'}; --out names a folder")
     if not out.is_dir() or not any(out.iterdir()):
@@ -608,7 +614,7 @@ def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> 
     theirs = manifest.get("protocol") if isinstance(manifest, dict) else None
     if not isinstance(theirs, dict):
         fail(f"--out {out}: holds files but no league report of this command (league.json with a protocol); give another --out")
-    if theirs.get("root") != protocol["root"] and not in_place:  # in place: a report re-scored from its own tables
+    if theirs.get("root") != protocol["root"] and not in_place:  # in place: a league extended or re-scored from its tables
         fail(f"--out {out}: holds the report of the league of another root ({theirs.get('root')}); give another --out")
     for problem, settings in (protocol.get("problems") or {}).items():
         old = (theirs.get("problems") or {}).get(problem)
@@ -716,7 +722,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
     p.add_argument("--root", type=Path, action="append", default=None,
                    help="where the runs and their tables go (and are reused from); default outputs/league in the "
-                   "current folder; repeat with --report-only to merge the tables of several roots")  # fmt: skip
+                   "current folder; repeat: the first gets the new runs, the others are earlier leagues' tables "
+                   "(a published league), whose done runs are reused, never rerun; with --report-only, merged")  # fmt: skip
     p.add_argument("--out", type=Path, default=None, help="league.txt, league.json, runs.csv, profile.png (default: ROOT/report)")
     p.add_argument("--jobs", type=int, default=1, help="runs at once on this machine (1: the budgets are not shared)")
     p.add_argument("--launcher", choices=LAUNCHERS, default=None,
@@ -873,7 +880,7 @@ def _main(argv=None) -> int:
             planned.append((problem, jobs))
         print(plan_text(planned, args.jobs))
         return 0
-    check_out(out, root, protocol, in_place=args.report_only and out.resolve() in [r.resolve() for r in roots])
+    check_out(out, root, protocol, in_place=out.resolve() in [r.resolve() for r in roots])
     for folder in (root, root / "manifests", root / "figures-runs", root / "ledger") if not args.report_only else ():
         safe_dir(folder, create=True)  # a planted link: refused before work
     return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
