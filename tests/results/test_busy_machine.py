@@ -43,7 +43,9 @@ def test_closing_lines_of_a_run_say_the_machine_was_busy(tmp_path):
     cfg = OmegaConf.create({"problem": {"name": "toy", "targets": [1e-2]}, "optimizer": {"name": "hig"}})
     for share, said in ((0.33, True), (0.97, False)):
         path = _with_cpu(write_run(tmp_path / f"{share}/run.h5", optimizer="hig"), share)
-        summary = types.SimpleNamespace(status="completed", steps=20, wall_time=1.5, final_test_loss=0.005, reason="", path=path)
+        summary = types.SimpleNamespace(
+            status="completed", steps=20, wall_time=1.5, final_test_loss=0.005, reason="", path=path, tables=None
+        )
         lines = summary_lines(summary, cfg)
         busy = [line for line in lines if "of a core" in line]
         assert busy == (
