@@ -334,8 +334,8 @@ def _fake_run(t, loss, **cols):
 
 
 def test_claim_helpers_crossing_time_and_plateau():
-    from higbench.claims.paper import energy_ratio, plateau_seconds
     from higbench.claims.rules import crossing_time, final, loss_at
+    from higbench.paper.dipole import energy_ratio, plateau_seconds
 
     adam = _fake_run([0, 100, 200, 300], [1.0, 1e-3, 1e-4, 1e-4])
     hig = _fake_run([0, 100, 200, 300], [1.0, 1e-2, 1e-5, 1e-7])
@@ -386,7 +386,7 @@ def test_paper_preset_runs_the_experiment_configs_grids(experiment):
 
 
 def test_table2_paper_column_is_the_per_pair_defaults():
-    from higbench.figures.tables import paper_table2
+    from higbench.paper.tables import paper_table2
 
     assert paper_table2("adam") == "512 / 3e-4 / -" and paper_table2("gn") == "128 / - / 1e-6"
     assert paper_table2("hig") == "128 / 1 / 1e-6" and paper_table2("rmsprop") == "512 / 1e-4 / -"
