@@ -15,7 +15,8 @@ import re
 from functools import cache
 from types import ModuleType
 
-from higbench.claims.rules import CAUSES, CLAIMS, Claim, by_id  # noqa: F401 - CAUSES: the registry's vocabulary
+from higbench.claims import rules
+from higbench.claims.rules import CAUSES, Claim, by_id  # noqa: F401 - CAUSES: the registry's vocabulary
 from higbench.figures.spec import Figure
 
 PACKAGE = "higbench.paper"
@@ -45,7 +46,7 @@ def figures() -> dict[str, Figure]:
 
 def claims() -> dict[str, Claim]:
     """Every claim, in the report's order: family by family, each in its declaration order."""
-    return by_id([c for m in families() for c in CLAIMS if c.measure.__module__ == m.__name__], "claim")
+    return by_id([c for m in families() for c in rules.CLAIMS if c.measure.__module__ == m.__name__], "claim")
 
 
 def untested() -> list[tuple[str, str]]:
