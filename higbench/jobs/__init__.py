@@ -41,7 +41,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cache
@@ -510,6 +510,7 @@ def run_missing(
     launcher_overrides: Sequence[str] = (),
     log=print,
     progress: bool = True,
+    known: Mapping[str, IndexedRun] | None = None,
 ) -> list[Job]:
     """The one reuse rule for a set of jobs (the figures' rounds, the league, the bench scripts):
     resolve them against the runs root's index, launch those not done (a stopped run with a
@@ -521,20 +522,23 @@ def run_missing(
     launcher: ``basic``, ``joblib`` (``n_jobs`` workers), ``submitit_local``, ``submitit_slurm``
     (one job array per call) or a ``Launcher``; launcher_overrides: its settings as
     ``KEY=VALUE`` (``partition=gpu``, ``timeout_min=90``, or ``hydra.launcher.KEY=VALUE``),
-    checked before anything runs (``LauncherError``: one line naming the key)."""
+    checked before anything runs (``LauncherError``: one line naming the key). known: runs done
+    elsewhere (identity -> run; a league's earlier tables): reused like the root's own, never rerun;
+    a run of the root itself takes precedence."""
     launcher = as_launcher(launcher, launcher_overrides)
     runs_root = Path(runs_root)
     ledger = Ledger(runs_root)
     launched: set[str] = set()
-    resolve(jobs, run_index(runs_root))
+    resolve(jobs, {**(known or {}), **run_index(runs_root)})
     mark_final(jobs, ledger)
     todo = [j for j in jobs if launchable(j)]
-    log(f"[jobs] {sum(j.done for j in jobs)} of {len(jobs)} run(s) already done under {runs_root}")
+    elsewhere = " or in the earlier tables" if known else ""
+    log(f"[jobs] {sum(j.done for j in jobs)} of {len(jobs)} run(s) already done under {runs_root}{elsewhere}")
     while todo:  # a job once per call; again only if it was another worker's, and that worker died
         held = {j.identity for j in todo if j.identity and ledger.live_holder(j.identity) is not None}
         launch(todo, runs_root, n_jobs=n_jobs, launcher=launcher, log=log, progress=progress)
         launched.update(j.identity for j in todo if j.identity not in held)
-        resolve(jobs, run_index(runs_root))
+        resolve(jobs, {**(known or {}), **run_index(runs_root)})
         mark_final(jobs, ledger)
         todo = [j for j in jobs if launchable(j) and j.identity not in launched]
     return [j for j in jobs if not j.done]

@@ -8,15 +8,24 @@ examples:
   higbench-league --problems poisson --set poisson/hig:device=cuda      # HIG on a GPU
   higbench-league --launcher submitit_slurm --launcher-set partition=gpu --launcher-set timeout_min=60
   higbench-league --report-only --root runs-a --root runs-b             # merge two machines' tables, train nothing
+  higbench-league --problems toy --root outputs/league --root docs/results/league/cpu \
+      --out docs/results/league/cpu                                     # add a piece to a published league
 
 Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewise ``--seconds``;
 ``--set [SCOPE:]KEY=VALUE`` adds an override to every job (no SCOPE), or to those of a problem,
 an optimizer or a ``problem/optimizer`` (SCOPE). The same flags re-read the runs with ``--report-only``.
 
-Per problem (its config owns the budget ``problem.league_seconds``, the targets
-``problem.targets`` and the held-out variants ``problem.held_out``; ``--seconds`` replaces the
-budget for a short league):
+Per problem (its config owns the target-setting budget ``problem.target_seconds``, the
+fallback budget ``problem.league_seconds``, the test-loss targets ``problem.targets`` and the
+held-out variants ``problem.held_out``; ``--seconds`` replaces the budget for a short league):
 
+0. target setting (AlgoPerf's way; ``--references``, default Adam and AdamW; ``''``: none): each
+   reference is tuned as in 1 and confirmed as in 2 at ``problem.target_seconds``; per task the
+   lowest median final validation loss of a reference is the *validation target*, and 3x that
+   reference's median time to it is the league's budget per run (``league.targets_from_reruns``).
+   Tuning then selects on time to the validation target (``league.choose_trial``) and the report
+   scores time to it within the budget (``league.algoperf_table``). Without references the budget
+   is ``problem.league_seconds`` and tuning reads the final validation loss;
 1. tuning: ``--studies`` studies of ``--trials`` scrambled Sobol points of each optimizer's search
    space (conf/search/<optimizer>.yaml, or SEARCHPATH/search/<optimizer>.yaml for your own) on the
    study's tuning seed; the best trial by *validation* loss at the budget is the optimizer's
@@ -32,7 +41,10 @@ budget for a short league):
 
 Every run is an ordinary higbench run launched through ``higbench.jobs`` into ``--root``; a run
 already there (same identity) is reused, so a killed league resumes and a new optimizer adds only
-its own runs.
+its own runs. A league too long for one sitting runs in pieces: ``--root NEW --root PUBLISHED``
+reuses every run in the published tables and adds the new ones, and the report folder (``--out``)
+holds the merged tables it scored, so it is the next piece's ``PUBLISHED`` and re-scores alone
+(``--report-only --root OUT --out OUT``, byte for byte).
 """
 
 from __future__ import annotations
@@ -295,48 +307,122 @@ def variant_overrides(variant: str) -> dict:
     return dict(item.split("=", 1) for item in variant.split())
 
 
-def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float, studies: int) -> list[Job]:
+TUNE_ROLES = ("tune", "target-tune")  # a league tuning trial; a reference's trial in the target setting
+RERUN_ROLE = league.TARGET_ROLE  # a reference's tuned setting rerun on the confirmation seeds at the target-setting budget
+
+
+def tuning_jobs(problem: str, optimizer: str, trials: int, seconds: float, studies: int, role: str = "tune") -> list[Job]:
     """Each study's trials (``league.trial_points``) on its tuning seed (``league.tuning_seed``),
-    named ``tune/<problem>/<optimizer>/<study>/<trial>``."""
+    named ``<role>/<problem>/<optimizer>/<study>/<trial>`` (role: tune, or target-tune)."""
     space = space_of(optimizer)
     jobs = []
     for study in range(studies):
         seed = league.tuning_seed(study)
         for i, trial in enumerate(league.trial_points(optimizer, space, trials, study)):
             overrides = {**base_overrides(problem, optimizer, seed, seconds), **trial}
-            jobs.append(Job("league", f"tune/{problem}/{optimizer}/{study}/{i}", overrides, seed))
+            jobs.append(Job("league", f"{role}/{problem}/{optimizer}/{study}/{i}", overrides, seed))
     return jobs
 
 
 def study_and_trial(job: Job) -> tuple[int | None, int | None]:
     parts = job.sweep.split("/")
-    return (int(parts[3]), int(parts[4])) if parts[0] == "tune" and len(parts) == 5 else (None, None)
+    return (int(parts[3]), int(parts[4])) if parts[0] in TUNE_ROLES and len(parts) == 5 else (None, None)
 
 
-def choose(jobs: list[Job]) -> dict | None:
-    """The tuned setting: the overrides of the trial with the lowest validation loss (over every
-    study's trials), read from its run files; None when no trial completed."""
+class Earlier:
+    """The runs of earlier leagues (``--root`` after the first: their tables, e.g. a published
+    league's): reused like the root's own runs, read from the tables, never rerun."""
+
+    runs, curves = pd.DataFrame(), pd.DataFrame()
+
+    @classmethod
+    def read(cls, roots: list[Path]) -> None:
+        cls.runs, cls.curves = tables.read(roots) if roots else (pd.DataFrame(), pd.DataFrame())
+
+    @classmethod
+    def index(cls) -> dict:
+        """identity -> run (``jobs.IndexedRun``) of every earlier run that is done."""
+        from higbench.jobs import IndexedRun
+        from higbench.results.index import DONE_STATUSES
+
+        done = cls.runs[cls.runs["status"].isin(DONE_STATUSES)] if len(cls.runs) else cls.runs
+        return {str(r["identity"]): IndexedRun(Path(r["path"]), str(r["status"]), float(r["train_time_s"] or 0.0))
+                for _, r in done.iterrows()}  # fmt: skip
+
+    @classmethod
+    def of(cls, paths: list[str]) -> tuple[pd.DataFrame, pd.DataFrame]:
+        if cls.runs.empty or not paths:
+            return pd.DataFrame(), pd.DataFrame()
+        runs = cls.runs[cls.runs["path"].isin(paths)]
+        return runs, cls.curves[cls.curves["path"].isin(paths)].assign(path=lambda c: c["path"].astype(str))
+
+
+def done_runs(jobs: list[Job]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(runs, curves) of the jobs that are done: from their run files (``load_runs``), or from the
+    earlier leagues' tables (``Earlier``); each run with its ``task`` and its job's name as ``trial``."""
     from higbench.results.index import load_runs
 
     done = [j for j in jobs if j.path is not None]
     if not done:
-        return None
-    runs = load_runs([j.path for j in done])
+        return pd.DataFrame(), pd.DataFrame()
+    on_disk = [j.path for j in done if Path(j.path).is_file()]
+    parts = [load_runs(on_disk, curves=True)] if on_disk else []
+    parts.append(Earlier.of([str(j.path) for j in done if not Path(j.path).is_file()]))
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        return pd.DataFrame(), pd.DataFrame()
+    runs = pd.concat([p[0] for p in parts], ignore_index=True)
+    curves = pd.concat([p[1] for p in parts], ignore_index=True)
     by_path = {str(Path(j.path)): j for j in done}
     runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
-    best = league.best_trial(runs)
+    return runs.assign(task=runs.apply(league.task_label, axis=1)), curves
+
+
+def choose(jobs: list[Job], target: float | None = None) -> tuple[dict | None, str]:
+    """(the tuned setting, the rule it was chosen by): the overrides of the trial that reaches the
+    validation ``target`` first (``league.choose_trial``; without a target, the lowest final
+    validation loss), over every study's trials, read from its run files; None when no trial
+    completed."""
+    runs, curves = done_runs(jobs)
+    if runs.empty:
+        return None, "no trial completed"
+    best, rule = league.choose_trial(runs, curves, target)
     if best is None:
-        return None
-    job = by_path[str(Path(best["path"]))]
+        return None, rule
+    job = next(j for j in jobs if j.path is not None and str(Path(j.path)) == str(Path(best["path"])))
     space = space_of(str(job.overrides["optimizer"]))
-    return {k: v for k, v in job.overrides.items() if k in space}
+    return {k: v for k, v in job.overrides.items() if k in space}, rule
 
 
-def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants) -> list[Job]:
+def set_targets(reruns: list[Job]) -> pd.DataFrame:
+    """Per task, the validation target and budget the references' reruns give
+    (``league.targets_from_reruns``); empty when they gave none."""
+    runs, curves = done_runs(reruns)
+    if runs.empty:
+        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), curves)
+    return league.targets_from_reruns(runs, curves)
+
+
+def target_seconds_of(problem: str, node: dict) -> float | None:
+    """The target-setting runs' budget: the problem's ``target_seconds``, else a third of its
+    ``league_seconds`` (the league's budget then comes out near it)."""
+    seconds = node.get("target_seconds") or (node.get("league_seconds") or 0) / 3
+    return float(seconds) if seconds else None
+
+
+def league_budget(targets: pd.DataFrame, problem: str) -> float | None:
+    """The league's budget per run from the target setting: the problem's own task's budget,
+    rounded up to a whole second (None: no target was set)."""
+    row = targets[targets["task"] == problem]
+    return float(math.ceil(row["budget_s"].iloc[0])) if len(row) else None
+
+
+def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float, variants,
+                      role: str | None = None) -> list[Job]:  # fmt: skip
     """The setting (tuned, or the shipped one for ``setting=None``: the paper's where
     conf/problem_optimizer/ has the pair, else the defaults) on fresh seeds, on the problem and each
-    held-out variant."""
-    role = "confirm" if setting is not None else "paper" if has_paper_settings(problem, optimizer) else "default"
+    held-out variant (``role``: target for the references' reruns)."""
+    role = role or ("confirm" if setting is not None else "paper" if has_paper_settings(problem, optimizer) else "default")
     jobs = []
     for variant in ["", *variants]:
         for seed in seeds:
@@ -369,6 +455,7 @@ class Runner:
             launcher_overrides=self.overrides,
             log=_log,
             progress=False,
+            known=Earlier.index(),
         )  # fmt: skip  (the league counts its own whole)
         self.count(jobs, left)
         if left:
@@ -514,10 +601,11 @@ def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
 PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds")  # per problem; another optimizer only adds rows
 
 
-def check_out(out: Path, root: Path, protocol: dict) -> None:
+def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> None:
     """Before anything is created: ``--out`` is a folder (or absent), and if it holds a league's
-    report, that league's (the same root, the same protocol for every problem both name). Another
-    league's output is never overwritten silently."""
+    report, that league's (the same root, or ``in_place``: ``--out`` is itself a ``--root``, a
+    published league extended or re-scored; the same protocol for every problem both name).
+    Another league's output is never overwritten silently."""
     if os.path.lexists(out) and (os.path.islink(out) or not out.is_dir()):
         fail(f"--out {out}: {'a symbolic link' if os.path.islink(out) else 'an existing file'}; --out names a folder")
     if not out.is_dir() or not any(out.iterdir()):
@@ -526,7 +614,7 @@ def check_out(out: Path, root: Path, protocol: dict) -> None:
     theirs = manifest.get("protocol") if isinstance(manifest, dict) else None
     if not isinstance(theirs, dict):
         fail(f"--out {out}: holds files but no league report of this command (league.json with a protocol); give another --out")
-    if theirs.get("root") != protocol["root"]:
+    if theirs.get("root") != protocol["root"] and not in_place:  # in place: a league extended or re-scored from its tables
         fail(f"--out {out}: holds the report of the league of another root ({theirs.get('root')}); give another --out")
     for problem, settings in (protocol.get("problems") or {}).items():
         old = (theirs.get("problems") or {}).get(problem)
@@ -552,11 +640,35 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
             shutil.rmtree(plots, ignore_errors=True)
     if len(scored):
         columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
-                   "config_id", "run", "hardware", "root"]  # fmt: skip
+                   "config_id", "run", "hardware"]  # fmt: skip
         rows = scored[[c for c in columns if c in scored]].sort_values(["task", "league_setting", "seed"])
         write_text(out / "runs.csv", rows.to_csv(index=False))
     write_text(out / "league.txt", text)
     write_text(out / "league.json", json.dumps(manifest, indent=1, default=str) + "\n")
+
+
+def found_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """The target setting of the tables' reruns (``league.targets_from_reruns``; empty without)."""
+    if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
+        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+    return league.targets_from_reruns(runs[runs["league_role"] == RERUN_ROLE], curves)
+
+
+def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dict, dict]:
+    """(validation target per task, budget per task, held-out tasks per problem) from the tables'
+    target-setting reruns, so a report from the tables alone scores as the league did. A task is
+    judged within its problem's budget (its runs ran that long); empty without reruns."""
+    found = found_targets(runs, curves).set_index("task")
+    if found.empty:
+        return {}, {}, {}
+    reruns = runs[runs["league_role"] == RERUN_ROLE]
+    problem_of = dict(zip(reruns["task"], reruns["problem.name"].astype(str), strict=False))
+    budgets = {t: float(found["budget_s"].get(problem_of[t], found.loc[t, "budget_s"])) for t in found.index}
+    held_out: dict[str, list[str]] = {}
+    for task in found.index:
+        if task != problem_of[task]:
+            held_out.setdefault(problem_of[task], []).append(task)
+    return {t: float(v) for t, v in found["target"].items()}, budgets, held_out
 
 
 def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
@@ -564,7 +676,9 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     runs, curves = tables.read(roots)
     spaces = all_spaces()
     try:
-        text = league.format_league(runs, curves, spaces, tuning_seeds)
+        targets, budgets, held_out = scoring_targets(runs, curves)
+        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
+        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text])
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))
@@ -588,6 +702,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--paper", default="hig,gn,adam",
                    help="optimizers also run at their shipped settings: 'NAME (paper)' rows, or 'NAME (default)' where "
                    "higbench has no paper settings for the problem (default: hig,gn,adam)")  # fmt: skip
+    p.add_argument("--references", default="adam,adamw",
+                   help="the target setting's reference optimizers, tuned and rerun at each problem's target_seconds: "
+                   "they set the validation target and the budget (default: adam,adamw; '': none, the budget is "
+                   "league_seconds and tuning reads the final validation loss)")  # fmt: skip
     p.add_argument("--trials", default="16", help="Sobol trials per study and (problem, optimizer), the same for every "
                    "optimizer; '4,toy=16': 16 on the toy (default: 16)")  # fmt: skip
     studies = "tuning studies, each its own trial points and tuning seed (default: 2)"
@@ -604,7 +722,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
     p.add_argument("--root", type=Path, action="append", default=None,
                    help="where the runs and their tables go (and are reused from); default outputs/league in the "
-                   "current folder; repeat with --report-only to merge the tables of several roots")  # fmt: skip
+                   "current folder; repeat: the first gets the new runs, the others are earlier leagues' tables "
+                   "(a published league), whose done runs are reused, never rerun; with --report-only, merged")  # fmt: skip
     p.add_argument("--out", type=Path, default=None, help="league.txt, league.json, runs.csv, profile.png (default: ROOT/report)")
     p.add_argument("--jobs", type=int, default=1, help="runs at once on this machine (1: the budgets are not shared)")
     p.add_argument("--launcher", choices=LAUNCHERS, default=None,
@@ -613,10 +732,19 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--launcher-set", action="append", default=[], metavar="KEY=VALUE",
                    help="a hydra.launcher.KEY override: partition=gpu, timeout_min=60, gpus_per_node=1, "
                    "array_parallelism=32; repeatable")  # fmt: skip
+    p.add_argument(
+        "--targets-only",
+        action="store_true",
+        help="run the target setting only (the references' tuning and reruns): a league's first piece",
+    )
     p.add_argument("--plan", action="store_true", help="print the runs, training hours and hardware per task; run nothing")
     only = "train nothing; score the tables under --root (no run files needed)"
     p.add_argument("--report-only", action="store_true", help=only)
     return p.parse_args(argv)
+
+
+def references_of(args) -> list[str]:
+    return [r for r in args.references.split(",") if r]
 
 
 def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, nodes) -> dict:
@@ -626,9 +754,23 @@ def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, 
         per[problem] = {
             "optimizers": optimizers, "paper": paper, "trials": trials.get(problem, trials.get(None)),
             "studies": args.studies, "seeds": args.seeds, "seconds": seconds_of(problem, budgets, nodes[problem]),
+            "references": references_of(args), "target_seconds": target_seconds_of(problem, nodes[problem]),
             "set": {o: extra_overrides(problem, o) for o in optimizers},
         }  # fmt: skip
-    return {"root": str(root.resolve()), "problems": per}
+    return {"root": shown_path(root), "problems": per}
+
+
+def run_path(path: Path, root: Path) -> str:
+    """A run's path in the manifest: relative to the root it is in (an earlier league's: as shown)."""
+    resolved = Path(path).resolve()
+    return str(resolved.relative_to(root.resolve())) if resolved.is_relative_to(root.resolve()) else shown_path(Path(path))
+
+
+def shown_path(path: Path) -> str:
+    """A path as the report records it: relative to the current folder when inside it (a
+    published report names no folder of the machine it ran on), else absolute."""
+    resolved, here = path.resolve(), Path.cwd().resolve()
+    return resolved.relative_to(here).as_posix() if resolved.is_relative_to(here) else str(resolved)
 
 
 def seconds_of(problem: str, budgets: dict, node: dict) -> float | None:
@@ -648,13 +790,16 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
         launched = dict(o.split("=", 1) for o in LAUNCH_OVERRIDES)  # what every launched run gets unless --set says otherwise
         threads = sorted({str(j.overrides.get("threads", launched["threads"])) for j in jobs})
         tune = sum(j.sweep.startswith("tune/") for j in jobs)
-        lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({tune} tuning, {len(jobs) - tune} confirmation), "
-                     f"{span(seconds)} of training, hardware {'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
+        setting = sum(j.sweep.startswith(("target-tune/", f"{RERUN_ROLE}/")) for j in jobs)
+        lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({setting} target setting, {tune} tuning, "
+                     f"{len(jobs) - tune - setting} confirmation), {span(seconds)} of training, hardware "
+                     f"{'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
         total_runs += len(jobs)
         total_s += seconds
     lines.append(f"[league] plan: {total_runs} runs, {span(total_s)} of training (budgets x runs), about "
                  f"{span(total_s / max(1, n_jobs))} wall clock at --jobs {n_jobs} "
-                 "(evaluations and start-up come on top)")  # fmt: skip
+                 "(evaluations and start-up come on top; the league's runs counted at league_seconds or --seconds "
+                 "until the target setting sets their budget)")  # fmt: skip
     return "\n".join(lines)
 
 
@@ -673,8 +818,6 @@ def _main(argv=None) -> int:
     args = parse_args(argv)
     roots = args.root or [Path("outputs") / "league"]
     root = roots[0]
-    if len(roots) > 1 and not args.report_only:
-        fail("--root given more than once: merging several roots' tables is --report-only's")
     out = args.out or root / "report"
     set_items, set_folders = searchpath_of_set(args.set)
     use_searchpath([*args.searchpath, *set_folders])
@@ -695,7 +838,7 @@ def _main(argv=None) -> int:
     tuning_seeds = [league.tuning_seed(s) for s in range(args.studies)]
     if set(seeds) & set(tuning_seeds):
         fail(f"--seeds {args.seeds}: overlaps the tuning seeds {tuning_seeds}")
-    for o in optimizers:
+    for o in dict.fromkeys([*optimizers, *references_of(args)]):
         try:
             space_of(o)  # a missing or bad search space stops the league before any run
         except ValueError as exc:
@@ -718,21 +861,59 @@ def _main(argv=None) -> int:
     refused = {p: {o: why for o in optimizers if (why := refusal(p, o, with_set=False))} for p in problems}
     if args.plan:
         planned = []
+        Earlier.read([r for r in roots[1:] if safe_dir(r / tables.TABLES_DIR)])
+        derived = scoring_targets(Earlier.runs, Earlier.curves)[1] if len(Earlier.runs) else {}
         for problem in problems:
             node, usable = nodes[problem], [o for o in optimizers if o not in refused[problem]]
             seconds, n = seconds_of(problem, budgets, node), trials.get(problem, trials.get(None))
+            if problem not in budgets and None not in budgets and problem in derived:  # an earlier target setting's
+                seconds = float(math.ceil(derived[problem]))
             variants = list(node.get("held_out") or [])[: args.variants]
-            jobs = [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
+            refs = references_of(args)
+            jobs = [j for r in refs for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants, node)]
+            if args.targets_only:
+                planned.append((problem, jobs))
+                continue
+            jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
             jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
             jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
             planned.append((problem, jobs))
         print(plan_text(planned, args.jobs))
         return 0
-    check_out(out, root, protocol)
-    for folder in (root, root / "manifests", root / "figures-runs", root / "ledger"):  # a planted link: refused before work
-        safe_dir(folder, create=True)
+    check_out(out, root, protocol, in_place=out.resolve() in [r.resolve() for r in roots])
+    for folder in (root, root / "manifests", root / "figures-runs", root / "ledger") if not args.report_only else ():
+        safe_dir(folder, create=True)  # a planted link: refused before work
     return run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
                       launcher, overrides, protocol, argv)  # fmt: skip
+
+
+def planned_target_jobs(problem, reference, n, studies, seeds, variants, node) -> list[Job]:
+    """The target-setting jobs of one reference, as the plan counts them (its setting not yet known)."""
+    seconds = target_seconds_of(problem, node)
+    if not seconds:
+        return []
+    return [*tuning_jobs(problem, reference, n, seconds, studies, role="target-tune"),
+            *confirmation_jobs(problem, reference, {}, seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+
+
+def target_setting(problem, references, n, studies, seeds, variants, node, phase) -> tuple[list, pd.DataFrame]:
+    """The references tuned and rerun at the problem's target-setting budget (``phase`` runs or
+    finds them): ([(role, job)], targets per task from ``set_targets``)."""
+    seconds = target_seconds_of(problem, node)
+    if not references or not seconds:
+        return [], league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+    tune = {r: tuning_jobs(problem, r, n, seconds, studies, role="target-tune") for r in references}
+    flat = [j for jobs in tune.values() for j in jobs]
+    phase(flat, f"{problem} target-setting tuning")
+    chosen = {r: choose(jobs)[0] for r, jobs in tune.items()}
+    reruns = [j for r in references if chosen[r] is not None
+              for j in confirmation_jobs(problem, r, chosen[r], seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+    phase(reruns, f"{problem} target-setting reruns")
+    targets = set_targets(reruns)
+    for _, row in targets.iterrows():
+        print(f"[league] {row['task']}: validation target {row['target']:.3g} ({row['reference']}, median of "
+              f"{row['reruns']} reruns at {seconds:g} s), budget {row['budget_s']:.3g} s", file=sys.stderr)  # fmt: skip
+    return [("target-tune", j) for j in flat] + [(RERUN_ROLE, j) for j in reruns], targets
 
 
 def planned_counts(plans, paper: list[str], studies: int, seeds: int) -> tuple[int, float]:
@@ -751,6 +932,7 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     from higbench.runner.progress import CountProgress
 
     root = roots[0]
+    Earlier.read([] if args.report_only else [r for r in roots[1:] if safe_dir(r / tables.TABLES_DIR)])
     reading_runs = not args.report_only or (len(roots) == 1 and safe_dir(root / "figures-runs") is not None)
     manifest: dict = {"command": " ".join(["higbench-league", *(argv if argv is not None else sys.argv[1:])]),
                       "protocol": protocol, "searchpath": [str(f) for f in search_folders()],
@@ -767,7 +949,14 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         for o, why in refused[problem].items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         plans[problem] = (seconds, n, variants, usable)
+    references = references_of(args)
     total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    if args.targets_only:
+        total, runner_seconds = 0, 0.0
+    for problem in problems if reading_runs else []:
+        setting = [j for r in references for j in planned_target_jobs(problem, r, plans[problem][1], args.studies, seeds,
+                                                                       plans[problem][2], nodes[problem])]  # fmt: skip
+        total, runner_seconds = total + len(setting), runner_seconds + sum(job_seconds(j) for j in setting)
     progress = CountProgress(not quiet and not args.report_only, "league", total)
     runner = Runner(root, args.jobs, launcher, overrides, progress)
     runner.left_seconds = runner_seconds
@@ -782,18 +971,35 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     try:
         for problem in problems if reading_runs else []:
             seconds, n, variants, usable = plans[problem]
+            given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
+            setting_jobs, targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem],
+                                                   phase)  # fmt: skip
+            all_jobs += setting_jobs
+            if args.targets_only:
+                manifest["problems"][problem] = {"target_setting": targets.to_dict("records"), "references": references}
+                continue
+            derived = league_budget(targets, problem)
+            seconds = seconds if given or derived is None else derived
+            if references and derived is None:
+                print(f"[league] {problem}: the target setting gave no validation target; budget {seconds:g} s "
+                      "(--seconds or problem.league_seconds), tuning by the final validation loss", file=sys.stderr)  # fmt: skip
+            target = targets.set_index("task")["target"].get(problem) if len(targets) else None
             tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
             flat = [j for jobs in tune.values() for j in jobs]
             phase(flat, f"{problem} tuning")
-            chosen = {o: choose(jobs) for o, jobs in tune.items()}
+            picks = {o: choose(jobs, target) for o, jobs in tune.items()}
+            chosen = {o: pick[0] for o, pick in picks.items()}
             confirm = [j for o in usable if chosen[o] is not None
                        for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
             confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
             phase(confirm, f"{problem} confirmation")
-            manifest["problems"][problem] = {"seconds": seconds, "trials": n, "studies": args.studies,
+            manifest["problems"][problem] = {"seconds": seconds, "budget_from": "--seconds" if given or derived is None
+                                             else "target setting", "trials": n, "studies": args.studies,
                                              "targets": nodes[problem].get("targets"), "held_out": variants,
                                              "set": {o: extra_overrides(problem, o) for o in usable},
-                                             "chosen": chosen, "left_out": refused[problem]}  # fmt: skip
+                                             "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
+                                             "target_setting": targets.to_dict("records"),
+                                             "left_out": refused[problem]}  # fmt: skip
             all_jobs += [("tune", j) for j in flat] + [(j.sweep.split("/")[0], j) for j in confirm]
     finally:
         progress.close()
@@ -801,15 +1007,19 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         manifest["calibration"].append(calibration())
     manifest["runs"] = [{"role": role, "job": j.sweep, "study": study_and_trial(j)[0], "trial": study_and_trial(j)[1],
                          "seed": j.seed, "identity": j.identity, "status": j.status,
-                         "path": str(Path(j.path).resolve().relative_to(root.resolve())) if j.path else None}
+                         "path": run_path(j.path, root) if j.path else None}
                         for role, j in all_jobs]  # fmt: skip
     if not args.report_only:  # kept beside the runs: a later --report-only, anywhere, reads it back
         stamp = time.strftime("%Y-%m-%dT%H-%M-%S") + f"-{os.getpid()}"
         text = json.dumps(manifest, indent=1, default=str) + "\n"
         write_text(safe_dir(root / "manifests", create=True) / f"{stamp}.json", text)
+        write_text(safe_dir(safe_dir(out, create=True) / "manifests", create=True) / f"{stamp}.json", text)  # with the tables
     if safe_dir(root / "figures-runs"):
         tables.export(root, {e["identity"]: e for e in manifest["runs"] if e["identity"]})
-    print(report(roots, out, manifest, tuning_seeds))
+    scored = [r for r in roots if safe_dir(r / tables.TABLES_DIR)]
+    if scored and [r.resolve() for r in scored] != [out.resolve()]:  # the report folder holds what it scored:
+        tables.write_merged(out, scored)  # --report-only --root OUT re-scores it alone, byte for byte
+    print(report([out] if scored else roots, out, manifest, tuning_seeds))
     missing = [j for _, j in all_jobs if not j.done]
     if missing:
         print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)

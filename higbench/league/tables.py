@@ -8,7 +8,8 @@ The contract with the scorer (``higbench.results.league``). ``runs.csv.gz``: one
 run, the columns of ``higbench.results.index.load_runs`` named in ``RUN_COLUMNS`` with their
 meanings there, ``path`` replaced by ``run`` (the run file's path relative to the root), and
 the league's own: ``identity`` (the job identity, ``config_id``), ``league_role`` (tune,
-confirm, paper or default: the problem's shipped settings where it has none of the paper's),
+confirm, paper or default: the problem's shipped settings where it has none of the paper's;
+target-tune and target: the target setting's reference trials and reruns),
 ``league_job`` (``tune/toy/adam/0/3``: role, problem, optimizer, study, trial; confirmation
 jobs name their variant), ``study`` and ``trial`` (tuning runs), ``task``, ``hardware``
 (``tables.hardware``) and ``env.load_1min``. ``curves.csv.gz``: one row per (run,
@@ -33,6 +34,7 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.league.files import ROOT_FILE_ERRORS, read_bytes, read_json_files, safe_dir, write_bytes
+from higbench.results.league import ROLES
 
 TABLES_DIR = "tables"
 RUNS_TABLE = "runs.csv.gz"
@@ -44,7 +46,6 @@ RUN_COLUMNS = (
     "env.git_revision", "started", "finished", "problem.targets",
 )  # fmt: skip
 CURVE_COLUMNS = ("run", "step", "wall_time", "train_loss", "val_loss", "test_loss")
-ROLES = ("tune", "confirm", "paper", "default")
 
 
 def hardware(runs: pd.DataFrame) -> pd.Series:
@@ -176,9 +177,24 @@ def export(root: Path, jobs: Mapping[str, Mapping] | None = None) -> tuple[Path,
         old_runs["problem.targets"] = old_runs["problem.targets"].map(_targets_text)
         runs_now = pd.concat([old_runs, runs_now], ignore_index=True) if len(runs_now) else old_runs
         curves_now = pd.concat([old_curves, curves_now], ignore_index=True) if len(curves_now) else old_curves
+    return _write_tables(root, runs_now, curves_now)
+
+
+def write_merged(out: Path, roots: Iterable[Path]) -> tuple[Path, Path]:
+    """The tables of ``roots`` merged into ``OUT/tables/`` (one row per run; its ``run`` as in its
+    own root): ``out`` is then a root itself, which a later league reads as its earlier runs and
+    ``--report-only --root OUT`` scores alone."""
+    runs, curves = read(roots)
+    runs = runs.drop_duplicates("identity", keep="first").drop(columns=["root", "path"], errors="ignore")
+    runs["problem.targets"] = runs["problem.targets"].map(_targets_text)
+    curves = curves[curves["run"].isin(set(runs["run"]))].drop(columns=["path"], errors="ignore")
+    return _write_tables(Path(out), runs[list(RUN_COLUMNS)], curves[list(CURVE_COLUMNS)])
+
+
+def _write_tables(root: Path, runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[Path, Path]:
     directory = safe_dir(root / TABLES_DIR, create=True)
     paths = directory / RUNS_TABLE, directory / CURVES_TABLE
-    for path, table in zip(paths, (runs_now, curves_now)):
+    for path, table in zip(paths, (runs, curves), strict=True):
         buffer = io.BytesIO()
         table.to_csv(buffer, index=False, compression={"method": "gzip", "mtime": 0})
         write_bytes(path, buffer.getvalue())

@@ -33,7 +33,10 @@ What the problem is judged by lives in its YAML file and is read through the pro
 recorded or shipped config without a problem built: ``higbench.results.targets``):
 
 * ``targets``: the test-loss targets of the time-to-target tables, the profile and the league;
-* ``league_seconds``: the league's training-clock budget per run.
+* ``league_seconds``: the league's training-clock budget per run where no target-setting runs
+  set one;
+* ``target_seconds``: the budget of the league's target-setting runs (its budget is then 3x the
+  reference optimizer's median time to the validation target).
 """
 
 from __future__ import annotations
@@ -82,6 +85,7 @@ class ProblemConfig:
     # (each an override list, e.g. "problem.gamma=0.001").
     targets: Optional[list[float]] = value(None, gt=0, identity=False)  # noqa: UP045
     league_seconds: Optional[float] = value(None, gt=0, identity=False)  # noqa: UP045
+    target_seconds: Optional[float] = value(None, gt=0, identity=False)  # noqa: UP045
     held_out: Optional[list[str]] = value(None, identity=False)  # noqa: UP045
 
 

@@ -41,7 +41,8 @@ TAU_MAX = 4.0  # AlgoPerf's: a setting more than 4x slower than the fastest scor
 VALIDATION_METRIC = "final_val_loss"  # what tuning reads; never a test-loss column (tests check it)
 TEST_METRIC = "final_test_loss"  # read once, for the table
 HIG = "hig"
-ROLES = ("tune", "confirm", "paper", "default")  # league_role of a run, where the driver records it
+ROLES = ("tune", "confirm", "paper", "default", "target-tune", "target")  # league_role, where the driver records it
+TARGET_ROLE = "target"  # a target-setting rerun: a reference optimizer's tuned setting at the target-setting budget
 SCORED_ROLES = ("confirm", "paper", "default")
 TUNING_SEED_BASE = 1000  # tuning seeds are 1000 + study; confirmation seeds stay below
 MAX_STUDIES = 1000
@@ -473,6 +474,49 @@ def budget_from_target(reference_seconds_to_target: Sequence[float], factor: flo
     if not math.isfinite(median):
         raise ValueError("budget: the reference reached its own target on fewer than half its reruns")
     return factor * median
+
+
+def targets_from_reruns(reruns: pd.DataFrame, curves: pd.DataFrame, factor: float = 3.0) -> pd.DataFrame:
+    """Per task, from its target-setting reruns (rows with ``task``, ``optimizer.name``, ``status``,
+    ``final_val_loss`` and the curves' join key): the reference whose median final validation loss
+    is lowest, that median as the validation target (``validation_target``: at least
+    ``MIN_TARGET_RERUNS`` reruns per reference), and the budget, ``factor`` x that reference's
+    median training-clock seconds to its own target (``budget_from_target``). One row per task:
+    task, reference, target, budget_s, reruns, every reference's median, the seconds per rerun.
+    A task whose references give no finite target is left out (the report says so)."""
+    key = "run" if "run" in curves and "run" in reruns else "path"
+    by_run = dict(tuple(curves.groupby(key, observed=True))) if len(curves) else {}
+    rows = []
+    for task, group in reruns.groupby("task", sort=True):
+        losses = {str(o): stats.scored_loss(g[VALIDATION_METRIC], g["status"]) for o, g in group.groupby("optimizer.name")}
+        try:
+            reference, target = validation_target(losses)
+        except ValueError as exc:
+            warnings.warn(f"task {task}: no validation target ({exc})", stacklevel=2)
+            continue
+        ref = group[group["optimizer.name"] == reference]
+        seconds = [time_to_target(by_run.get(r[key]), r["status"], target, math.inf) for _, r in ref.iterrows()]
+        rows.append({"task": task, "reference": reference, "target": target,
+                     "budget_s": budget_from_target(seconds, factor), "reruns": len(ref),
+                     "medians": {o: float(np.median(x)) for o, x in losses.items()},
+                     "seconds_to_target": [float(s) for s in seconds]})  # fmt: skip
+    return pd.DataFrame(rows, columns=["task", "reference", "target", "budget_s", "reruns", "medians", "seconds_to_target"])
+
+
+def format_targets(found: pd.DataFrame) -> str:
+    """The target setting as text: per task the reference, the validation target (the lowest median
+    final validation loss of a reference over its reruns), every reference's median, and the budget
+    with the reference's seconds to the target on each rerun (inf: not reached)."""
+    if found.empty:
+        return "target setting: no validation targets (no reference reruns in the tables)"
+    lines = ["target setting (validation targets and budgets, AlgoPerf's way): per task the reference with the lowest "
+             "median final validation loss over its reruns; the budget is 3x its median seconds to that target"]  # fmt: skip
+    for _, row in found.iterrows():
+        medians = ", ".join(f"{o} {m:.3g}" for o, m in sorted(row["medians"].items()))
+        seconds = ", ".join("inf" if not math.isfinite(t) else f"{t:.3g}" for t in row["seconds_to_target"])
+        lines.append(f"  {row['task']}: target {row['target']:.4g} ({row['reference']}; medians: {medians}), budget "
+                     f"{row['budget_s']:.3g} s (seconds to target per rerun: {seconds})")  # fmt: skip
+    return "\n".join(lines)
 
 
 def time_to_target(curve: pd.DataFrame | None, status: str, target: float, budget: float) -> float:

@@ -158,7 +158,7 @@ def test_outputs_default_to_outputs_league_under_the_current_folder(tmp_path, mo
                         "--seeds", "1", "--seconds", "1"]) == 0  # fmt: skip
     assert (tmp_path / "outputs" / "league" / "report" / "league.json").is_file()
     manifest = json.loads((tmp_path / "outputs" / "league" / "report" / "league.json").read_text())
-    assert manifest["protocol"]["root"] == str((tmp_path / "outputs" / "league").resolve())
+    assert manifest["protocol"]["root"] == "outputs/league"  # relative to the current folder: no machine's path published
 
 
 def test_another_league_s_report_is_never_overwritten(tmp_path, no_runs, capsys):
@@ -203,7 +203,8 @@ def test_a_user_s_problem_and_search_space_through_searchpath(tmp_path, monkeypa
     assert driver.main([*argv, "--optimizers", "adam,mysgd", "--paper", "adam"]) == 0
     launched = [j for jobs, _ in no_runs for j in jobs]
     assert {j.overrides["problem"] for j in launched} == {"heat"}
-    assert {j.sweep.split("/")[0] for j in launched} == {"tune", "default"}  # no tuned setting (faked runs): defaults only
+    # no tuned setting (faked runs): the references' trials, the trials, and the defaults only
+    assert {j.sweep.split("/")[0] for j in launched} == {"target-tune", "tune", "default"}
     assert any(j.overrides["optimizer"] == "mysgd" and "optimizer.lr" in j.overrides for j in launched)
 
 
@@ -217,7 +218,8 @@ def test_shipped_settings_are_paper_only_where_higbench_has_the_paper_s():
 
 
 def test_launcher_flags_reach_run_missing(tmp_path, no_runs):
-    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "2", "--seeds", "1",
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--references", "",
+            "--trials", "1", "--studies", "2", "--seeds", "1",
             "--seconds", "1", "--root", str(tmp_path), "--launcher", "submitit_slurm", "--launcher-set", "partition=gpu",
             "--launcher-set", "timeout_min=30", "--set", "progress=false"]  # fmt: skip
     assert driver.main(argv) == 0
@@ -230,7 +232,8 @@ def test_launcher_flags_reach_run_missing(tmp_path, no_runs):
 
 
 def test_a_launcher_setting_submitit_has_not_is_one_line_before_any_run(tmp_path, no_runs, capsys):
-    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1",
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--references", "",
+            "--trials", "1", "--studies", "1", "--seeds", "1",
             "--seconds", "1", "--root", str(tmp_path / "runs"), "--launcher", "submitit_slurm",
             "--launcher-set", "partiton=gpu"]  # fmt: skip
     assert driver.main(argv) == 2
@@ -270,9 +273,11 @@ def test_the_plan_counts_runs_and_hours_and_runs_nothing(tmp_path, no_runs, caps
             "--plan"]  # fmt: skip
     assert driver.main(argv) == 0
     out = capsys.readouterr().out
-    # tuning 2 x 3 x 2 = 12; confirmation (2 tuned + 1 paper) x (base + 1 variant) x 5 seeds = 30
-    assert "toy: 42 runs (12 tuning, 30 confirmation), 42 min of training, hardware cpu threads=1" in out
-    assert "about 21 min wall clock at --jobs 2" in out
+    # target setting: 2 references (adam, adamw) x (3 x 2 trials + (base + 1 variant) x 5 reruns) = 32, at the toy's
+    # target_seconds (10 s); tuning 2 x 3 x 2 = 12; confirmation (2 tuned + 1 paper) x (base + 1 variant) x 5 seeds = 30
+    # training: 32 x 10 s + 42 x 60 s = 2840 s
+    assert "toy: 74 runs (32 target setting, 12 tuning, 30 confirmation), 47 min of training, hardware cpu threads=1" in out
+    assert "about 24 min wall clock at --jobs 2" in out
     assert not no_runs and not (tmp_path / "runs").exists()
 
 
@@ -289,7 +294,8 @@ def test_help_lists_the_flags_with_examples(capsys):
 
 
 def test_progress_counts_runs_and_is_quiet_under_progress_false(tmp_path, no_runs, capsys):
-    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "2", "--studies", "1", "--seeds", "1",
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--references", "",
+            "--trials", "2", "--studies", "1", "--seeds", "1",
             "--seconds", "3", "--variants", "0"]  # fmt: skip
     assert driver.main([*argv, "--root", str(tmp_path / "a")]) == 0
     err = capsys.readouterr().err
@@ -318,7 +324,8 @@ def test_set_hydra_searchpath_is_the_searchpath_flag():
 def test_a_list_in_set_reaches_the_jobs_as_a_list_not_a_quoted_string(tmp_path, no_runs):
     """`--set optimizer.betas=[0.8,0.99]` was kept as text and rendered `optimizer.betas='[0.8,0.99]'`:
     every job failed (Adam compared a float with a str) and the league said the same command continues."""
-    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds", "1",
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--references", "",
+            "--trials", "1", "--studies", "1", "--seeds", "1",
             "--seconds", "1", "--root", str(tmp_path), "--set", "adam:optimizer.betas=[0.8,0.99]",
             "--set", "progress=false"]  # fmt: skip
     assert driver.main(argv) == 0
@@ -345,3 +352,171 @@ def test_a_planted_manifests_link_in_a_new_root_is_refused_before_the_calibratio
     assert driver.main(argv) == 2
     assert "a symbolic link" in capsys.readouterr().err
     assert not calibrated and not no_runs and not any((tmp_path / "victim").iterdir())
+
+
+# -- the target setting (issue 46: validation targets and budgets from reference reruns) ------
+
+
+def _reruns(task: str, problem: str, finals: dict[str, list[float]], reach_at: dict[str, list[float]]):
+    """Hand-made reruns: per reference its final validation losses, and the second at which each
+    rerun's validation curve first drops to 0.01 (inf: never)."""
+    runs, curves = [], []
+    for optimizer, losses in finals.items():
+        for i, loss in enumerate(losses):
+            run = f"{task}/{optimizer}/{i}"
+            runs.append({"run": run, "task": task, "problem.name": problem, "optimizer.name": optimizer,
+                         "status": "completed", "final_val_loss": loss, "league_role": "target"})  # fmt: skip
+            at = reach_at.get(optimizer, [float("inf")] * len(losses))[i]
+            for t in (0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0):
+                curves.append({"run": run, "step": int(t * 10), "wall_time": t,
+                               "val_loss": 0.005 if t >= at else 0.5})  # fmt: skip
+    return pd.DataFrame(runs), pd.DataFrame(curves)
+
+
+def test_the_validation_target_is_the_best_reference_s_median_and_the_budget_three_times_its_time():
+    # adam's median final 0.01 beats adamw's 0.02; adam's reruns reach 0.01 at 1, 2, 3 s and two never:
+    # the median time is 3 s, the budget 9 s
+    runs, curves = _reruns("toy", "toy", {"adam": [0.005, 0.008, 0.01, 0.03, 0.04], "adamw": [0.02] * 5},
+                           {"adam": [1.0, 2.0, 3.0, float("inf"), float("inf")]})  # fmt: skip
+    found = driver.league.targets_from_reruns(runs, curves)
+    row = found.iloc[0]
+    assert (row["task"], row["reference"], row["target"], row["budget_s"]) == ("toy", "adam", 0.01, 9.0)
+    assert row["medians"] == {"adam": 0.01, "adamw": 0.02} and row["reruns"] == 5
+    assert driver.league_budget(found, "toy") == 9.0 and driver.league_budget(found, "dipole") is None
+
+
+def test_a_reference_with_fewer_than_five_reruns_sets_no_target():
+    runs, curves = _reruns("toy", "toy", {"adam": [0.01] * 4}, {"adam": [1.0] * 4})
+    with pytest.warns(UserWarning, match="adam has 4 reruns; need at least 5"):
+        assert driver.league.targets_from_reruns(runs, curves).empty
+
+
+def test_the_report_finds_targets_budgets_and_gates_in_the_tables_alone():
+    """--report-only scores from the tables: the reruns there give each task its target; a held-out
+    variant is judged within its problem's budget (its runs ran that long) and is a gate."""
+    base = _reruns("toy", "toy", {"adam": [0.01] * 5}, {"adam": [2.0] * 5})
+    variant = _reruns("toy gamma=0.01", "toy", {"adam": [0.02] * 5}, {"adam": [5.0] * 5})
+    runs, curves = (pd.concat([a, b], ignore_index=True) for a, b in zip(base, variant, strict=True))
+    targets, budgets, held_out = driver.scoring_targets(runs, curves)
+    assert targets == {"toy": 0.01, "toy gamma=0.01": 0.02}
+    assert budgets == {"toy": 6.0, "toy gamma=0.01": 6.0} and held_out == {"toy": ["toy gamma=0.01"]}
+    assert driver.scoring_targets(runs.assign(league_role="confirm"), curves) == ({}, {}, {})
+
+
+def test_tuning_selects_the_trial_that_reaches_the_validation_target_first(monkeypatch):
+    """Trial 0 ends lower (0.001) but reaches 0.01 at 5 s; trial 1 ends at 0.008 and reaches it at 1 s,
+    and has the better test loss only by construction elsewhere: with a target trial 1 wins,
+    without one (no target setting) the lowest final validation loss, trial 0."""
+    jobs = [driver.Job("league", f"tune/toy/adam/0/{i}", {"problem": "toy", "optimizer": "adam", "optimizer.lr": lr},
+                       1000, path=Path(f"/runs/{i}/run.h5")) for i, lr in enumerate((0.1, 0.01))]  # fmt: skip
+    runs = pd.DataFrame({"path": [str(j.path) for j in jobs], "trial": [j.sweep for j in jobs], "status": "completed",
+                         "final_val_loss": [0.001, 0.008], "final_test_loss": [0.5, 0.0001]})  # fmt: skip
+    curves = pd.DataFrame({"path": [str(jobs[0].path)] * 2 + [str(jobs[1].path)] * 2, "step": [1, 2, 1, 2],
+                           "wall_time": [1.0, 5.0, 1.0, 5.0], "val_loss": [0.5, 0.001, 0.009, 0.008]})  # fmt: skip
+    monkeypatch.setattr(driver, "done_runs", lambda js: (runs, curves))
+    setting, rule = driver.choose(jobs, target=0.01)
+    assert setting == {"optimizer.lr": 0.01} and rule.startswith("time to the validation target 0.01")
+    setting, rule = driver.choose(jobs)
+    assert setting == {"optimizer.lr": 0.1} and rule.startswith("final validation loss")
+
+
+def test_the_league_runs_at_the_budget_the_target_setting_derived(tmp_path, no_runs, monkeypatch):
+    """The target setting's budget (ceil of 3x the reference's median time) is every league run's
+    budget, and tuning is given the validation target; --seconds, when given, is the budget."""
+    found = pd.DataFrame([{"task": "toy", "reference": "adam", "target": 0.01, "budget_s": 7.2, "reruns": 5,
+                           "medians": {}, "seconds_to_target": []}])  # fmt: skip
+    monkeypatch.setattr(driver, "target_setting", lambda *a, **k: ([], found))
+    targets_seen = []
+    monkeypatch.setattr(driver, "choose", lambda jobs, target=None: (targets_seen.append(target), (None, "none"))[1])
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "adam", "--trials", "1", "--studies", "1", "--seeds",
+            "1", "--variants", "0"]  # fmt: skip
+    assert driver.main([*argv, "--root", str(tmp_path / "a")]) == 0
+    assert {j.overrides["budget.seconds"] for jobs, _ in no_runs for j in jobs} == {8.0} and targets_seen == [0.01]
+    no_runs.clear()
+    assert driver.main([*argv, "--seconds", "3", "--root", str(tmp_path / "b")]) == 0
+    assert {j.overrides["budget.seconds"] for jobs, _ in no_runs for j in jobs} == {3.0}
+    manifest = json.loads((tmp_path / "a" / "report" / "league.json").read_text())
+    assert manifest["problems"]["toy"]["budget_from"] == "target setting"
+
+
+def test_an_earlier_league_s_tables_are_reused_never_rerun(tmp_path, monkeypatch, capsys):
+    """Long leagues accumulate across machines and sessions: with a second --root holding an
+    earlier league's tables (a published one), its done runs count as done (read from the tables,
+    never launched again), its reruns set the validation target, and the new runs go to the
+    first root at the budget they give."""
+    from higbench import jobs as jobs_module
+
+    earlier = _earlier_league(tmp_path / "published")
+    launched = []
+    monkeypatch.setattr(jobs_module, "launch", lambda todo, *a, **k: launched.extend(todo))
+    monkeypatch.setattr(driver, "calibration", lambda: {})
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--root", str(tmp_path / "new"),
+            "--root", str(earlier)]  # fmt: skip
+    with pytest.raises(SystemExit, match="1 toy tuning run"):  # the new tuning run was not trained (launch faked)
+        driver.main(argv)
+    err = capsys.readouterr().err
+    # reruns reach the target 0.005 at 1, 2, 3, 4, 5 s: median 3 s, budget 9 s
+    assert "toy: validation target 0.005 (adam, median of 5 reruns at 10 s), budget 9 s" in err
+    assert {j.sweep.split("/")[0] for j in launched} == {"tune"}  # nothing of the earlier league ran again
+    assert {j.overrides["budget.seconds"] for j in launched} == {9.0}
+
+
+def test_a_published_league_re_scores_byte_for_byte_from_its_own_tables(tmp_path, capsys):
+    """The report folder holds the tables it scored: --report-only on it writes the same report."""
+    published = _earlier_league(tmp_path / "published", confirm=True)
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--report-only"]  # fmt: skip
+    assert driver.main([*argv, "--root", str(published), "--out", str(tmp_path / "report")]) == 0
+    report = tmp_path / "report"
+    first = {p.name: p.read_bytes() for p in [*report.glob("*.txt"), *report.glob("*.csv"), *(report / "tables").glob("*")]}
+    assert "AlgoPerf: seconds to the validation target" in first["league.txt"].decode()
+    assert driver.main([*argv, "--root", str(report), "--out", str(report)]) == 0
+    again = {p.name: p.read_bytes() for p in [*report.glob("*.txt"), *report.glob("*.csv"), *(report / "tables").glob("*")]}
+    assert again == first and set(first) == {"league.txt", "runs.csv", "runs.csv.gz", "curves.csv.gz"}
+
+
+def _earlier_league(earlier: Path, confirm: bool = False) -> Path:
+    """Hand-made tables of a league: adam's target-setting trial and 5 reruns on the toy (at the
+    toy's target_seconds, the identities the driver gives them), each reaching the validation loss
+    0.004 at 1, 1, 2, 3, 4, 5 s; with ``confirm``, also 5 confirmation runs of the tuned setting."""
+    from higbench import jobs as jobs_module
+
+    trials = driver.tuning_jobs("toy", "adam", 1, 10.0, 1, role="target-tune")
+    setting = {k: v for k, v in trials[0].overrides.items() if k in driver.space_of("adam")}
+    reruns = driver.confirmation_jobs("toy", "adam", setting, range(5), 10.0, [], role=driver.RERUN_ROLE)
+    jobs_module.resolve([*trials, *reruns], {})
+    rows, curves = [], []
+    for i, (job, reach_s) in enumerate(zip([*trials, *reruns], [1.0, 1.0, 2.0, 3.0, 4.0, 5.0], strict=True)):
+        role = job.sweep.split("/")[0]
+        rows.append({"run": f"old/{i}/run.h5", "identity": job.identity, "config_id": job.identity,
+                     "league_role": role, "league_job": job.sweep,
+                     "seed": job.seed, "problem.name": "toy", "task": "toy", "optimizer.name": "adam", "overrides": "",
+                     "status": "completed", "final_val_loss": 0.005, "final_test_loss": 0.005, "train_time_s": 10.0,
+                     "steps": 100})  # fmt: skip
+        curves += [{"run": f"old/{i}/run.h5", "step": s, "wall_time": float(s), "val_loss": 0.004 if s >= reach_s else 0.5}
+                   for s in range(1, 11)]  # fmt: skip
+    for seed in range(5 if confirm else 0):
+        run = f"new/{seed}/run.h5"
+        rows.append({**rows[-1], "run": run, "identity": f"confirm-{seed}", "config_id": f"confirm-{seed}",
+                     "league_role": "confirm", "seed": seed,
+                     "league_job": "confirm/toy/base/adam", "final_test_loss": 0.006 + seed / 1000})  # fmt: skip
+        curves += [{"run": run, "step": s, "wall_time": float(s), "val_loss": 0.004 if s >= 2 + seed else 0.5,
+                    "test_loss": 0.5} for s in range(1, 11)]  # fmt: skip
+    runs = pd.DataFrame(rows).reindex(columns=list(tables.RUN_COLUMNS))
+    tables._write_tables(earlier, runs, pd.DataFrame(curves).reindex(columns=list(tables.CURVE_COLUMNS)))
+    return earlier
+
+
+def test_targets_only_runs_the_target_setting_alone_and_the_plan_uses_an_earlier_one(tmp_path, no_runs, capsys):
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0"]  # fmt: skip
+    assert driver.main([*argv, "--targets-only", "--root", str(tmp_path / "a")]) == 0
+    assert {j.sweep.split("/")[0] for jobs, _ in no_runs for j in jobs} == {"target-tune"}
+    published = _earlier_league(tmp_path / "published")
+    capsys.readouterr()
+    assert driver.main([*argv, "--plan", "--root", str(tmp_path / "b"), "--root", str(published)]) == 0
+    # 6 target-setting runs at 10 s (the toy's target_seconds); 2 trials and 2 x 5 confirmations at the earlier
+    # target setting's budget, 9 s: 60 + 12 x 9 = 168 s
+    # (3 min; at league_seconds, 30 s, it would be 60 + 12 x 30 = 420 s, 7 min)
+    assert "toy: 18 runs (6 target setting, 2 tuning, 10 confirmation), 3 min of training" in capsys.readouterr().out
