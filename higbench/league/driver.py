@@ -373,7 +373,7 @@ def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> 
     for problem, settings in (protocol.get("problems") or {}).items():
         old = (theirs.get("problems") or {}).get(problem)
         old = old if isinstance(old, dict) else {}
-        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and old[k] != settings[k]]
+        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and k in settings and old[k] != settings[k]]
         if diff:
             diff = ", ".join(diff)
             fail(f"--out {out}: holds a league of another protocol for {problem} ({diff}); give another --out or --root")

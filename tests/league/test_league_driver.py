@@ -530,3 +530,13 @@ def test_the_targets_do_not_move_with_a_piece_s_seed_count(tmp_path, no_runs, ca
             "--studies", "1", "--variants", "0", "--targets-only", "--plan", "--root", str(tmp_path)]  # fmt: skip
     assert driver.main([*argv, "--seeds", "10"]) == 0
     assert "toy: 6 runs (6 target setting" in capsys.readouterr().out  # 1 trial + 5 reruns, not 10
+
+
+def test_a_targets_only_piece_and_a_full_piece_share_a_report_folder(tmp_path, no_runs):
+    """Pieces of one league write one report folder: a --targets-only piece records only the keys
+    that set the targets, and comparing it with a full piece's protocol was a KeyError traceback."""
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--root", str(tmp_path / "r")]  # fmt: skip
+    assert driver.main(argv) == 0
+    assert driver.main([*argv, "--targets-only"]) == 0
+    assert driver.main(argv) == 0
