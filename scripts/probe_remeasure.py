@@ -11,7 +11,7 @@ files. Where the plotted data count time only (oscillator runs evaluate by time)
 counts come from the row that was measured on the run files (stated in the row). A claim whose
 measurement needs more than the plotted data hold gets only the values that can be measured
 added to its stored row (``EXTEND``). The figures drawn from curves alone are drawn again by this
-revision's plotting code (``committed.REDRAWABLE``; their plotted data come out the same). A fresh
+revision's plotting code (``committed.redrawable()``; their plotted data come out the same). A fresh
 `python -m higbench.figures` build measures every claim from its run files and replaces all of this.
 """
 
@@ -21,10 +21,10 @@ import argparse
 import json
 from pathlib import Path
 
-from higbench.claims.paper import gn_small_tau_by_time
-from higbench.claims.report import write_report
 from higbench.figures import registry
-from higbench.figures.committed import REDRAWABLE, extend, redraw, remeasure, store
+from higbench.figures.committed import extend, redraw, redrawable, remeasure, store
+from higbench.figures.report import write_report
+from higbench.paper.ablation import gn_small_tau_by_time
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 # Claims whose measurement changed and which the plotted data hold entirely.
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.dry_run:
             store(args.out, row)
     if not args.dry_run and not args.no_redraw:
-        for fid in REDRAWABLE:
+        for fid in redrawable():
             print(redraw(args.out, fid))
     if not args.dry_run:
         print(write_report(args.out, list(registry.figures())))

@@ -5,7 +5,7 @@ read one seed. This probe trains the four runs toy-6 reads (γ=0.01: Adam and HI
 GN, each at the toy's defaults, the paper's settings) for seeds 0, 1 and 2, for a fixed number of
 updates (not seconds: the trajectories do not depend on this CPU or its load), evaluating every
 ``UPDATES // 250`` updates, and measures each run's trajectory with toy-6's own functions
-(``higbench.claims.paper``): the share of the distance to the target along y_2 left at the end,
+(``higbench.paper.toy``): the share of the distance to the target along y_2 left at the end,
 and the aim at the target after GN's initial phase (each seed's GN run sets it for that seed).
 
     python scripts/probe_toy_trajectories.py                # 12 short runs, two at a time
@@ -20,7 +20,7 @@ from __future__ import annotations
 import pandas as pd
 import probe_runs
 
-from higbench.claims.paper import aim_at_target, initial_phase_end, y2_gap_left
+from higbench.paper.toy import aim_at_target, initial_phase_end, y2_gap_left
 from higbench.problems.toy import target_function
 from higbench.runfile.reader import load_logs
 

@@ -12,8 +12,8 @@ Source, in this order:
    baseline_rss_mb; ``cuda_peak_mb`` on a GPU). CPU RSS is not the paper's GPU memory; the
    numbers are for comparison between rows.
 
-Both the figures' tables (``higbench.figures.tables``) and the claims on them
-(``higbench.claims.paper``) read a table through ``timing_frame``; optimizers keep their
+Both the figures' tables and the claims on them (``higbench.paper.tables``) read a
+table through ``timing_frame``; optimizers keep their
 config names here ("adam", "hig").
 """
 

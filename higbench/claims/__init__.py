@@ -1,4 +1,5 @@
-"""What the report judges: the paper's claims (``paper``: rule, evidence and cause of each),
-the vocabulary they are written in (``rules``), the authors' reference numbers (``reference``)
-and the REPORT.md writer (``report``). Below ``higbench.figures``, which draws the runs the
-claims read and calls ``rules.judge`` and ``report.write_report``."""
+"""The vocabulary the paper's claims are written in (``rules``: ``@claim``, ``Cause``, the
+verdict and its gates, the values read from runs, the paper's numbers) and the authors'
+reference numbers (``reference``). The claims themselves live beside their figures, one
+module per family in ``higbench.paper``; the figures' machinery judges them and writes
+REPORT.md (``higbench.figures.report``)."""

@@ -9,9 +9,9 @@ training clock: it includes TensorFlow's graph tracing (about 32 s for Adam and 
 HIG before the first update finishes). Losses are test losses per data point. No code or
 text of that repository is copied here.
 
-``higbench.figures.oscillator`` draws higbench's oscillator runs beside these points
-(figure ``ref_oscillator``), and the report and the claims (``higbench.claims.paper``)
-compare them.
+``higbench.paper.oscillator`` draws higbench's oscillator runs beside these points
+(figure ``ref_oscillator``), and the report (``higbench.figures.report``) and the claims
+(``higbench.paper``) compare them.
 """
 
 from __future__ import annotations

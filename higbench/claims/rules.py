@@ -1,4 +1,4 @@
-"""Claims as data: the vocabulary ``higbench.claims.paper`` declares each claim of the paper in
+"""Claims as data: the vocabulary the family modules of ``higbench.paper`` declare each claim of the paper in
 (``@claim``: the paper's statement and value, the rule and the measurement its verdict is
 decided on, the budget and seeds it needs to show, and its root cause stated from evidence,
 ``Cause``), the verdict of a claim's row (``judge``, ``finish``), the helpers the measurements

@@ -85,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     from higbench.figures import registry
 
     if args.report_only:
-        from higbench.claims.report import write_report
         from higbench.claims.rules import ResultsFileError
+        from higbench.figures.report import write_report
 
         if not Path(args.out).is_dir():
             print(f"higbench-figures: error: --out={args.out}: no such directory (nothing to report from)", file=sys.stderr)

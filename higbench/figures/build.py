@@ -15,10 +15,10 @@ from functools import cache
 from pathlib import Path
 
 from higbench.bench.tables import ensure_bench
-from higbench.claims.report import write_report
 from higbench.claims.rules import judge
 from higbench.figures import plot, registry
 from higbench.figures.data import FigureData
+from higbench.figures.report import write_report
 from higbench.figures.spec import UPDATES_ONLY, Figure, Preset, expand
 from higbench.jobs import Job, Launcher, job_seconds, launch, resolve, run_index
 
@@ -198,7 +198,7 @@ def build(
     _revision()  # read before the build writes its outputs, which would make a clean checkout look modified
     figures = registry.select(ids)
     result = BuildResult()
-    if run and bench and preset not in UPDATES_ONLY and any(f.id in ("table3", "table4", "table5") for f in figures):
+    if run and bench and preset not in UPDATES_ONLY and any(f.bench for f in figures):
         ensure_bench(runs_root, log)  # before the tables declare their runs
     builder = Builder(preset, runs_root, out_dir, jobs=jobs, launcher=launcher, log=log)
     Path(out_dir).mkdir(parents=True, exist_ok=True)

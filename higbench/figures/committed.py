@@ -244,10 +244,13 @@ def store(out_dir: Path, row: dict) -> Path:
     return path
 
 
-# Figures whose every panel is drawn from what the plotted data hold (curves; fig. 1's neurons, fig. 7's epoch axis,
-# the trajectories of 2a, 3a, 4a and the reference comparison need the run files).
-REDRAWABLE = ("fig2b", "fig2c", "fig3b", "fig3c", "fig4b", "fig4c", "fig5", "fig6", "fig8", "fig9", "fig10", "fig11")
-REDRAWABLE += ("fig12", "fig13")
+def redrawable() -> list[str]:
+    """The figures whose every panel is drawn from what the plotted data hold (``Figure.redrawable``:
+    curves; fig. 1's neurons, fig. 7's epoch axis, the trajectories of 2a, 3a, 4a and the reference
+    comparison need the run files), in the paper's order."""
+    from higbench.figures import registry
+
+    return [fid for fid, f in registry.figures().items() if f.redrawable]
 
 
 def redraw(out_dir: Path, fid: str) -> Path:
@@ -259,8 +262,8 @@ def redraw(out_dir: Path, fid: str) -> Path:
     from higbench.figures.data import FigureData
     from higbench.figures.spec import Preset
 
-    if fid not in REDRAWABLE:
-        raise ValueError(f"{fid}: drawn from what the run files hold, not the plotted data (redrawable: {REDRAWABLE})")
+    if fid not in (ids := redrawable()):
+        raise ValueError(f"{fid}: drawn from what the run files hold, not the plotted data (redrawable: {', '.join(ids)})")
     committed = CommittedFigure.load(out_dir, fid)
 
     class Data(FigureData):

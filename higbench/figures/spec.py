@@ -154,6 +154,10 @@ class Figure:
     kind: str = "figure"
     notes: Callable[[Preset], list[str]] | None = None  # deviations from the paper at a preset
     sharey: bool = False
+    # Every panel drawn from its plotted data (<id>.csv) alone, so ``committed.redraw`` can draw it
+    # again without the run files (not: neurons, trajectories and fields, an epoch axis, update times).
+    redrawable: bool = False
+    bench: bool = False  # reads the benchmark's table (tables 3-5): a build runs the benchmark first where it is missing
 
     def runs(self, preset: Preset) -> list[Sweep]:
         return for_preset(self.sweeps(preset) if callable(self.sweeps) else self.sweeps, preset)

@@ -351,7 +351,8 @@ def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
 # -- outputs ----------------------------------------------------------------------------------
 
 
-PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds")  # per problem; another optimizer only adds rows
+PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds", "references", "target_seconds")  # per problem; another
+# optimizer only adds rows
 
 
 def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> None:
@@ -372,7 +373,7 @@ def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> 
     for problem, settings in (protocol.get("problems") or {}).items():
         old = (theirs.get("problems") or {}).get(problem)
         old = old if isinstance(old, dict) else {}
-        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and old[k] != settings[k]]
+        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and k in settings and old[k] != settings[k]]
         if diff:
             diff = ", ".join(diff)
             fail(f"--out {out}: holds a league of another protocol for {problem} ({diff}); give another --out or --root")
@@ -504,6 +505,10 @@ def protocol_of(args, root: Path, problems, optimizers, paper, trials, budgets, 
     """What makes a league this league (kept in league.json; ``check_out`` compares it)."""
     per = {}
     for problem in problems:
+        if args.targets_only:  # what sets the targets; the league's own keys are the next piece's
+            per[problem] = {"references": references_of(args), "target_seconds": target_seconds_of(problem, nodes[problem]),
+                            "trials": trials.get(problem, trials.get(None)), "studies": args.studies}  # fmt: skip
+            continue
         per[problem] = {
             "optimizers": optimizers, "paper": paper, "trials": trials.get(problem, trials.get(None)),
             "studies": args.studies, "seeds": args.seeds, "seconds": seconds_of(problem, budgets, nodes[problem]),
@@ -640,13 +645,19 @@ def _main(argv=None) -> int:
                       launcher, overrides, protocol, argv)  # fmt: skip
 
 
+def rerun_seeds(seeds: list[int]) -> list[int]:
+    """The target setting's reruns: the first ``MIN_TARGET_RERUNS`` confirmation seeds, whatever
+    --seeds a piece uses, so that a problem's targets do not move with its seed count."""
+    return list(seeds)[: league.MIN_TARGET_RERUNS]
+
+
 def planned_target_jobs(problem, reference, n, studies, seeds, variants, node) -> list[Job]:
     """The target-setting jobs of one reference, as the plan counts them (its setting not yet known)."""
     seconds = target_seconds_of(problem, node)
     if not seconds:
         return []
     return [*tuning_jobs(problem, reference, n, seconds, studies, role="target-tune"),
-            *confirmation_jobs(problem, reference, {}, seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+            *confirmation_jobs(problem, reference, {}, rerun_seeds(seeds), seconds, variants, role=RERUN_ROLE)]  # fmt: skip
 
 
 def target_setting(problem, references, n, studies, seeds, variants, node, phase) -> tuple[list, pd.DataFrame]:
@@ -659,8 +670,9 @@ def target_setting(problem, references, n, studies, seeds, variants, node, phase
     flat = [j for jobs in tune.values() for j in jobs]
     phase(flat, f"{problem} target-setting tuning")
     chosen = {r: choose(jobs)[0] for r, jobs in tune.items()}
+    first = rerun_seeds(seeds)
     reruns = [j for r in references if chosen[r] is not None
-              for j in confirmation_jobs(problem, r, chosen[r], seeds, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
+              for j in confirmation_jobs(problem, r, chosen[r], first, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
     phase(reruns, f"{problem} target-setting reruns")
     targets = set_targets(reruns)
     for _, row in targets.iterrows():

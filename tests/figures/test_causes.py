@@ -15,10 +15,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from higbench.claims.paper import GD_FAMILY
-from higbench.claims.report import collect, write_report
 from higbench.claims.rules import CAUSES, PAPER, Cause, contradictions, evidence, finish, last_half_trend
 from higbench.figures import registry
+from higbench.figures.report import collect, write_report
+from higbench.paper.oscillator import GD_FAMILY
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 # Every cause a claim may state: its first, then its alternatives (``otherwise``) as "poi-1/1", ...
@@ -34,9 +34,12 @@ def _fields(template: str) -> set[str]:
     return {name for _, name, _, _ in string.Formatter().parse(template) if name}
 
 
-def test_every_claim_is_declared_in_one_module_apart_from_the_figures():
-    """Rule, evidence and cause of every claim live in higbench.claims.paper (the figures only draw)."""
-    assert {c.measure.__module__ for c in registry.claims().values()} == {"higbench.claims.paper"}
+def test_every_claim_is_declared_beside_its_figure():
+    """Rule, evidence and cause of every claim live in the family module that declares its first figure
+    (``higbench.paper.<family>``: settings, figures and claims side by side; the machinery only draws)."""
+    declared_in = {f.id: m.__name__ for m in registry.families() for f in m.FIGURES}
+    for c in registry.claims().values():
+        assert c.measure.__module__ == declared_in[c.figures[0]], c.id
 
 
 @pytest.mark.parametrize("cid", sorted(CAUSE))
@@ -163,7 +166,7 @@ def test_poisson_hig_at_the_papers_batch_has_the_run_length_as_its_cause():
 
 
 def test_per_update_trend_is_a_line_in_log_updates():
-    from higbench.claims.paper import per_update_trend
+    from higbench.paper.poisson import per_update_trend
 
     steps = list(range(0, 65))
     losses = [1.0] + [10 ** (-0.5 * np.log2(n)) for n in steps[1:]]  # half a decade per doubling from update 1 on
@@ -293,7 +296,7 @@ def test_poisson_hig_from_a_deep_pretraining_has_its_own_cause():
 def test_poi2_is_the_papers_words_not_a_factor_of_two():
     """Fails on the old rule (HIG's final <= half of Adam's): the committed poi-2a row, where HIG's first update drops
     the loss, HIG then falls faster and ends 1.6x below Adam, is `reproduced` by its rule (the seed gate caps it)."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     row = {r["id"]: r for r in collect(RESULTS)}["poi-2a"]
     v = row["values"]
@@ -346,7 +349,7 @@ def test_poi3_asks_adam_after_hig_to_give_back_hig_s_lead_at_once_and_at_its_end
 def test_poi3a_committed_reads_tail_medians():
     """Fails on the old rule (HIG's last value, no restart jump): the committed poi-3a row's HIG ends at its tail
     median 0.0143, below its last value 0.0158, and Adam's own restart jump (+16%) is taken off."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     v = {r["id"]: r for r in collect(RESULTS)}["poi-3a"]["values"]
     assert v["hig_tail"] == pytest.approx(0.0143, abs=5e-5) and v["hig_final"] > v["hig_tail"]
@@ -397,7 +400,7 @@ def test_new_claims_on_synthetic_runs():
 def test_y_space_progress_is_to_the_target_and_aim_is_at_it():
     """Fails on the old rule (net displacement along y_2): a path that overshoots the target along y_2 has moved
     far but left a gap; one that stops at the target has moved less and left none."""
-    from higbench.claims.paper import aim_at_target, initial_phase_end, y2_gap_left
+    from higbench.paper.toy import aim_at_target, initial_phase_end, y2_gap_left
 
     target = np.array([0.0, -0.2])
     overshoot = np.array([[0.0, 0.0], [0.0, -0.3], [0.0, -0.28]])
@@ -420,7 +423,7 @@ def test_y_space_progress_is_to_the_target_and_aim_is_at_it():
     ],
 )
 def test_toy6_rule_compares_without_thresholds_of_its_own(values, verdict):
-    from higbench.claims.paper import toy6_rule
+    from higbench.paper.toy import toy6_rule
 
     _, full, partly = toy6_rule(values | {"seeds_read": 3})
     assert (full, partly) == verdict
@@ -429,7 +432,7 @@ def test_toy6_rule_compares_without_thresholds_of_its_own(values, verdict):
 def test_toy6_committed_reads_progress_to_the_target_over_the_seeds_with_a_trajectory():
     """Fails on the old rule (Adam's net displacement 0.28 against HIG's 0.19: `not`): Adam leaves 0.36 of its way to
     the target along y_2, HIG 0.08; one seed has a committed trajectory, so the seed gate reads `partly`."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     row = {r["id"]: r for r in collect(RESULTS)}["toy-6"]
     v = row["values"]
@@ -468,7 +471,7 @@ def test_a_probe_contradicting_the_cause_turns_it_open():
 def test_spd3_ratio_is_judged_on_the_gpu_too():
     """Fails on the old rule (the CPU's ratio alone, 2.7x off: reproduced): with the committed GPU run (29x against
     the paper's 1250x) spd-3 is `partly`, cause hardware; spd-4 (1.45x on the GPU, 0.87x here) stays reproduced."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     rows = {r["id"]: r for r in collect(RESULTS)}
     assert rows["spd-3"]["values"]["ratio"] / rows["spd-3"]["values"]["paper_ratio"] < 3  # the old rule passed
@@ -480,8 +483,8 @@ def test_spd3_ratio_is_judged_on_the_gpu_too():
 def test_spd2_fits_the_growth_exponent_net_of_the_constant():
     """Fails on the old rule (total-memory ratio <= 4x, `reproduced`): on a ~70 MB constant any route's ratio is small;
     net of it the paper's memory grows as b^1.95 and higbench's whole-Jacobian route as b^1.1, so `not`."""
-    from higbench.claims.paper import growth_exponent
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
+    from higbench.paper.tables import growth_exponent
 
     assert growth_exponent((169.0, 676.0, 2640.0)) == pytest.approx(1.95, abs=0.01)  # the paper's table 3
     assert growth_exponent((70 + 32.0, 70 + 64.0, 70 + 128.0)) == pytest.approx(1.0)  # linear on a constant
@@ -514,7 +517,7 @@ def test_cnn3_compares_times_to_the_same_levels_past_the_start_up():
 def test_poi5_compares_the_smallest_eta_adam_with_hig():
     """Fails on the old rule (a ranking inside Adam's grid): the paper's "advantages in absolute convergence per time"
     is the smallest-η Adam against HIG; HIG's log-time slope is compared with that Adam run's."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     times = [float(t) for t in range(1, 101)]
     small = _Run([10 / t**0.3 for t in times], times=times, **{"optimizer.lr": 1e-4})
@@ -534,7 +537,7 @@ def test_poi5_compares_the_smallest_eta_adam_with_hig():
 def test_dip1_counts_the_plateau_in_updates():
     """Fails on the old rule (>= 10 s of this CPU's clock): the committed dip-1 row, Adam 2,437 updates in the band
     against HIG's 10 over 3 seeds, lasting 8 s here, is reproduced."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     row = {r["id"]: r for r in collect(RESULTS)}["dip-1"]
     assert row["values"]["adam_plateau_s"] < 10 and row["verdict"] == "reproduced", row["why"]
@@ -619,7 +622,7 @@ def test_osc3_compares_like_with_like_and_names_the_systematic_gap(monkeypatch, 
 def test_abl3_cause_is_one_seed_whose_trend_points_away():
     """Fails on the old cause (budget): GN's only seed at small τ is its best there and completes in single precision
     too, so the trend points away from the paper's divergence; one surviving seed cannot say more."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     row = {r["id"]: r for r in collect(RESULTS)}["abl-3"]
     assert row["cause"][0] == "seeds" and "points away" in row["cause"][1]
@@ -770,7 +773,7 @@ def test_rows_added_for_statements_without_one_on_synthetic_runs():
     passes and fails where it should, on hand-made runs and tables."""
     import pandas as pd
 
-    from higbench.claims import paper
+    from higbench.paper import dipole as paper
 
     class ByOpt(_Fig):
         def runs(self, sweep=None, optimizer__name=None, **where):
@@ -840,7 +843,7 @@ def test_toy6_quotes_the_three_seed_trajectory_probe(monkeypatch, tmp_path):
     import pandas as pd
 
     from higbench.claims import rules
-    from higbench.claims.paper import toy_trajectories_probe
+    from higbench.paper.toy import toy_trajectories_probe
 
     rows = []
     for seed, (adam_left, hig_left) in enumerate([(0.4, 0.1), (0.3, 0.05), (0.02, 0.08)]):

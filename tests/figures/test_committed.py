@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from higbench.claims.report import sidecars
 from higbench.figures import registry
 from higbench.figures.committed import CommittedFigure, parse_overrides, remeasure
+from higbench.figures.report import sidecars
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 # Claims measured from the run files whose measurement this revision kept: the same text and verdict again.

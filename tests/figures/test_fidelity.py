@@ -129,7 +129,7 @@ def test_fig13_rule_compares_tau_at_equal_updates():
 def test_every_published_partly_or_not_names_its_cause():
     """Each committed claim row that is not reproduced says why, as REPORT.md shows it: a cause of
     the registry's vocabulary with its text, or ``open`` with what its runs lack (never empty)."""
-    from higbench.claims.report import collect
+    from higbench.figures.report import collect
 
     rows = collect(Path(__file__).resolve().parents[2] / "docs" / "results")
     for c in rows:
@@ -140,7 +140,7 @@ def test_every_published_partly_or_not_names_its_cause():
 
 def test_report_judges_the_stored_rows_again_and_shows_the_reference(tmp_path):
     from higbench.claims.reference import OSCILLATOR_CURVES, UPDATE_SECONDS
-    from higbench.claims.report import write_report
+    from higbench.figures.report import write_report
 
     claim = {
         "id": "osc-4", "figures": ["fig2b"], "statement": "s", "paper": "p", "measured": "m", "budget": "240 s",

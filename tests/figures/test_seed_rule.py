@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 
-from higbench.claims.report import collect, sidecars
 from higbench.claims.rules import (
     NO_RUNS,
     NOT,
@@ -22,6 +21,7 @@ from higbench.claims.rules import (
     sidecar_seeds,
 )
 from higbench.figures import registry
+from higbench.figures.report import collect, sidecars
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 # Single-seed comparisons the committed report read as `reproduced` under the per-claim `min_seeds` it had.

@@ -520,3 +520,23 @@ def test_targets_only_runs_the_target_setting_alone_and_the_plan_uses_an_earlier
     # target setting's budget, 9 s: 60 + 12 x 9 = 168 s
     # (3 min; at league_seconds, 30 s, it would be 60 + 12 x 30 = 420 s, 7 min)
     assert "toy: 18 runs (6 target setting, 2 tuning, 10 confirmation), 3 min of training" in capsys.readouterr().out
+
+
+def test_the_targets_do_not_move_with_a_piece_s_seed_count(tmp_path, no_runs, capsys):
+    """A toy piece at 10 confirmation seeds (runs of 30 s or less) reruns the references on the
+    first 5 only: the same reruns, the same targets, as the 5-seed target setting published."""
+    assert driver.rerun_seeds(list(range(10))) == [0, 1, 2, 3, 4]
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--variants", "0", "--targets-only", "--plan", "--root", str(tmp_path)]  # fmt: skip
+    assert driver.main([*argv, "--seeds", "10"]) == 0
+    assert "toy: 6 runs (6 target setting" in capsys.readouterr().out  # 1 trial + 5 reruns, not 10
+
+
+def test_a_targets_only_piece_and_a_full_piece_share_a_report_folder(tmp_path, no_runs):
+    """Pieces of one league write one report folder: a --targets-only piece records only the keys
+    that set the targets, and comparing it with a full piece's protocol was a KeyError traceback."""
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--root", str(tmp_path / "r")]  # fmt: skip
+    assert driver.main(argv) == 0
+    assert driver.main([*argv, "--targets-only"]) == 0
+    assert driver.main(argv) == 0

@@ -13,7 +13,6 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from higbench.claims.paper import UNTESTED, claims
 from higbench.claims.reference import OSCILLATOR_CURVES, SOURCE, UPDATE_SECONDS
 from higbench.claims.rules import (
     REQUIRED_SEEDS,
@@ -27,6 +26,7 @@ from higbench.claims.rules import (
     sidecar_seeds,
 )
 from higbench.display import fmt, md_table
+from higbench.figures import registry
 
 HEADER = """# Reproduction report
 
@@ -67,7 +67,7 @@ def collect(out_dir: Path) -> list[dict]:
     infos = sidecars(out_dir)
     rows = {c["id"]: c for info in infos.values() for c in info.get("claims", [])}
     out = []
-    for cid, c in claims().items():
+    for cid, c in registry.claims().items():
         if cid in rows:
             counted = sidecar_seeds((infos[f] for f in c.figures if f in infos), c.reads)  # the runs its rule reads
             seeds = seeds_read(counted, rows[cid].get("values") or {})
@@ -173,7 +173,7 @@ def _figure_row(fid: str, info: dict | None) -> list[str]:
 
 def untested_section() -> list[str]:
     """The paper's statements no row tests, each with the reason."""
-    return ["", "## Statements of the paper no row tests", "", *(f"- {what}: {why}." for what, why in UNTESTED)]
+    return ["", "## Statements of the paper no row tests", "", *(f"- {what}: {why}." for what, why in registry.untested())]
 
 
 def seed_section() -> list[str]:
