@@ -53,7 +53,6 @@ import argparse
 import json
 import math
 import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -64,7 +63,7 @@ from higbench.cards import league_optimizers
 from higbench.jobs import LAUNCH_OVERRIDES, Job, as_launcher, job_seconds, resolve, run_index, run_missing
 from higbench.jobs.ledger import FINAL_STATUSES
 from higbench.league import tables
-from higbench.league.files import ROOT_FILE_ERRORS, read_json_files, safe_dir, write_text
+from higbench.league.files import ROOT_FILE_ERRORS, safe_dir, write_text
 from higbench.league.protocol import (  # noqa: F401  (re-exported: the league's names, one import away)
     EVALUATIONS,
     EXTRA,
@@ -96,6 +95,18 @@ from higbench.league.protocol import (  # noqa: F401  (re-exported: the league's
     tuning_jobs,
     use_searchpath,
     variant_overrides,
+)
+from higbench.league.report import (  # noqa: F401  (re-exported)
+    PROTOCOL_KEYS,
+    calibration,
+    check_out,
+    found_targets,
+    hardware,
+    machine,
+    recorded_calibrations,
+    report,
+    scoring_targets,
+    write_report,
 )
 from higbench.results import league
 
@@ -260,188 +271,6 @@ def launcher_overrides(items: list[str]) -> list[str]:
             fail(f"--launcher-set {item}: expected KEY=VALUE (partition=gpu, timeout_min=60, array_parallelism=32)")
         out.append(f"{key if key.startswith('hydra.') else 'hydra.launcher.' + key}={value}")
     return out
-
-
-# -- the machine ------------------------------------------------------------------------------
-
-
-def calibration() -> dict:
-    """One fixed benchmark, so that tables from different machines can be read side by side:
-    the best of 5 timings of 50 float32 256x256 matrix products and one float64 256x256 SVD,
-    on one thread; with the load average at the time."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    gen = torch.Generator().manual_seed(0)
-    a = torch.randn(256, 256, generator=gen)
-    m = torch.randn(256, 256, generator=gen, dtype=torch.float64)
-    matmul, svd = [], []
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for _ in range(50):
-            a @ a
-        matmul.append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        torch.linalg.svd(m)
-        svd.append(time.perf_counter() - t0)
-    torch.set_num_threads(threads)
-    return {"when": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "matmul_50x256_s": min(matmul), "svd_256_f64_s": min(svd),
-            "loadavg": list(os.getloadavg()), "cpu_count": os.cpu_count()}  # fmt: skip
-
-
-hardware = tables.hardware
-
-
-def machine(runs: pd.DataFrame) -> list[dict]:
-    """Per problem and hardware, what the runs had of the machine: their CPU share (CPU seconds
-    over wall seconds per thread; 1 = a core of their own), the 1-minute load average at their end,
-    threads, revisions and when they trained. Values that are not what they should be (a file from
-    elsewhere) are left out, never a crash."""
-    if runs.empty:
-        return []
-
-    def column(group: pd.DataFrame, name: str) -> pd.Series:
-        return group[name] if name in group else pd.Series(dtype=object)
-
-    def number(group: pd.DataFrame, name: str) -> pd.Series:
-        return pd.to_numeric(column(group, name), errors="coerce").dropna()
-
-    groups = []
-    where_all = runs["hardware"] if "hardware" in runs else hardware(runs)
-    for (problem, where), group in runs.groupby([runs["problem.name"].astype(str), where_all], sort=True):
-        share = number(group, "env.cpu_share")
-        if "env.load_1min" in group:
-            load = number(group, "env.load_1min")
-        else:
-            load = column(group, "env.load_at_finish").map(tables.load_1min).dropna()
-        threads = number(group, "env.torch_threads").astype(int)
-        when = [str(v) for v in (*column(group, "started").dropna(), *column(group, "finished").dropna())]
-        groups.append({
-            "problem": problem, "hardware": where, "runs": len(group),
-            "cpu_share_median": round(float(share.median()), 3) if len(share) else None,
-            "cpu_share_range": [round(float(share.min()), 3), round(float(share.max()), 3)] if len(share) else None,
-            "load_1min_median": round(float(load.median()), 2) if len(load) else None,
-            "threads_per_run": sorted({int(t) for t in threads}),
-            "revisions": sorted(set(column(group, "env.git_revision").dropna().astype(str).str[:12])),
-            "trained": [min(when), max(when)] if when else None,
-        })  # fmt: skip
-    return groups
-
-
-def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
-    """The calibrations earlier league invocations wrote beside their runs (``ROOT/manifests/``,
-    or a league.json they left under the root, as a run on another machine brings back), each
-    with where it was read (the report's own ``out`` left out). Never through a link, never a FIFO;
-    a file that is not a manifest is skipped with one line."""
-    found = []
-    for root in roots:
-        manifests = sorted((root / "manifests").glob("*.json")) if safe_dir(root / "manifests") else []
-        paths = [p for p in sorted({*manifests, *root.rglob("league.json")}) if not p.parent.resolve() == out.resolve()]
-        for path, content in read_json_files(paths):
-            entries = content.get("calibration") if isinstance(content, dict) else None
-            if not isinstance(entries, list):
-                if entries is not None:
-                    print(f"[league] skipped {path}: its calibration is not a list", file=sys.stderr)
-                continue
-            found += [{**entry, "file": str(path.relative_to(root))} for entry in entries if isinstance(entry, dict)]
-    return found
-
-
-# -- outputs ----------------------------------------------------------------------------------
-
-
-PROTOCOL_KEYS = ("trials", "studies", "seeds", "seconds", "references", "target_seconds")  # per problem; another
-# optimizer only adds rows
-
-
-def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> None:
-    """Before anything is created: ``--out`` is a folder (or absent), and if it holds a league's
-    report, that league's (the same root, or ``in_place``: ``--out`` is itself a ``--root``, a
-    published league extended or re-scored; the same protocol for every problem both name).
-    Another league's output is never overwritten silently."""
-    if os.path.lexists(out) and (os.path.islink(out) or not out.is_dir()):
-        fail(f"--out {out}: {'a symbolic link' if os.path.islink(out) else 'an existing file'}; --out names a folder")
-    if not out.is_dir() or not any(out.iterdir()):
-        return
-    manifest = next((c for _, c in read_json_files([out / "league.json"])), None)
-    theirs = manifest.get("protocol") if isinstance(manifest, dict) else None
-    if not isinstance(theirs, dict):
-        fail(f"--out {out}: holds files but no league report of this command (league.json with a protocol); give another --out")
-    if theirs.get("root") != protocol["root"] and not in_place:  # in place: a league extended or re-scored from its tables
-        fail(f"--out {out}: holds the report of the league of another root ({theirs.get('root')}); give another --out")
-    for problem, settings in (protocol.get("problems") or {}).items():
-        old = (theirs.get("problems") or {}).get(problem)
-        old = old if isinstance(old, dict) else {}
-        diff = [f"{k} {old[k]} -> {settings[k]}" for k in PROTOCOL_KEYS if k in old and k in settings and old[k] != settings[k]]
-        if diff:
-            diff = ", ".join(diff)
-            fail(f"--out {out}: holds a league of another protocol for {problem} ({diff}); give another --out or --root")
-
-
-def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, reached: pd.DataFrame) -> None:
-    """league.txt, league.json, runs.csv and the profile figure into ``out`` (links refused)."""
-    safe_dir(out, create=True)
-    if len(reached):  # the profile needs targets (a problem of your own may declare none)
-        # drawn apart, then moved in: a link planted in out is replaced, not written through
-        plots = out / f".plots-{os.getpid()}"
-        shutil.rmtree(plots, ignore_errors=True)
-        plots.mkdir()
-        try:
-            for path in league.plot_league(reached, league.interval_table(scored, reached), plots):
-                os.replace(path, out / path.name)
-        finally:
-            shutil.rmtree(plots, ignore_errors=True)
-    if len(scored):
-        columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
-                   "config_id", "run", "hardware"]  # fmt: skip
-        rows = scored[[c for c in columns if c in scored]].sort_values(["task", "league_setting", "seed"])
-        write_text(out / "runs.csv", rows.to_csv(index=False))
-    write_text(out / "league.txt", text)
-    write_text(out / "league.json", json.dumps(manifest, indent=1, default=str) + "\n")
-
-
-def found_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
-    """The target setting of the tables' reruns (``league.targets_from_reruns``; empty without)."""
-    if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
-        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
-    return league.targets_from_reruns(runs[runs["league_role"] == RERUN_ROLE], curves)
-
-
-def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dict, dict]:
-    """(validation target per task, budget per task, held-out tasks per problem) from the tables'
-    target-setting reruns, so a report from the tables alone scores as the league did. A task is
-    judged within its problem's budget (its runs ran that long); empty without reruns."""
-    found = found_targets(runs, curves).set_index("task")
-    if found.empty:
-        return {}, {}, {}
-    reruns = runs[runs["league_role"] == RERUN_ROLE]
-    problem_of = dict(zip(reruns["task"], reruns["problem.name"].astype(str), strict=False))
-    budgets = {t: float(found["budget_s"].get(problem_of[t], found.loc[t, "budget_s"])) for t in found.index}
-    held_out: dict[str, list[str]] = {}
-    for task in found.index:
-        if task != problem_of[task]:
-            held_out.setdefault(problem_of[task], []).append(task)
-    return {t: float(v) for t, v in found["target"].items()}, budgets, held_out
-
-
-def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
-    """The scores of the roots' tables (``tables.read``: merged when several), written to ``out``."""
-    runs, curves = tables.read(roots)
-    spaces = all_spaces()
-    try:
-        targets, budgets, held_out = scoring_targets(runs, curves)
-        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
-        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text])
-        scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
-    except ValueError as exc:
-        fail(str(exc))
-    manifest["machine"] = machine(runs)
-    manifest["recorded_calibration"] = recorded_calibrations(roots, out)
-    lines = ["machine: " + ", ".join(f"{k} {v}" for k, v in group.items()) for group in manifest["machine"]]
-    text = "\n".join([*lines, text])
-    write_report(out, text, manifest, scored, reached)
-    return text
 
 
 # -- the command ------------------------------------------------------------------------------
