@@ -184,7 +184,7 @@ def set_targets(reruns: list[Job]) -> pd.DataFrame:
     (``league.targets_from_reruns``); empty when they gave none."""
     runs, curves = done_runs(reruns)
     if runs.empty:
-        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), curves)
+        return league.no_targets()
     return league.targets_from_reruns(runs, curves)
 
 
@@ -494,7 +494,7 @@ def target_setting(problem, references, n, studies, seeds, variants, node, phase
     finds them): ([(role, job)], targets per task from ``set_targets``)."""
     seconds = target_seconds_of(problem, node)
     if not references or not seconds:
-        return [], league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+        return [], league.no_targets()
     tune = {r: tuning_jobs(problem, r, n, seconds, studies, role="target-tune") for r in references}
     flat = [j for jobs in tune.values() for j in jobs]
     phase(flat, f"{problem} target-setting tuning")

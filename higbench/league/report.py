@@ -164,7 +164,7 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
 def found_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
     """The target setting of the tables' reruns (``league.targets_from_reruns``; empty without)."""
     if "league_role" not in runs or not (runs["league_role"] == RERUN_ROLE).any():
-        return league.targets_from_reruns(pd.DataFrame(columns=["task", "optimizer.name"]), pd.DataFrame())
+        return league.no_targets()
     return league.targets_from_reruns(runs[runs["league_role"] == RERUN_ROLE], curves)
 
 

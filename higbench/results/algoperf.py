@@ -81,6 +81,14 @@ def budget_from_target(reference_seconds_to_target: Sequence[float], factor: flo
     return factor * median
 
 
+TARGET_COLUMNS = ["task", "reference", "target", "budget_s", "reruns", "medians", "seconds_to_target"]
+
+
+def no_targets() -> pd.DataFrame:
+    """The target setting of no reruns: ``targets_from_reruns``' frame with no task."""
+    return pd.DataFrame(columns=TARGET_COLUMNS)
+
+
 def targets_from_reruns(reruns: pd.DataFrame, curves: pd.DataFrame, factor: float = 3.0) -> pd.DataFrame:
     """Per task, from its target-setting reruns (rows with ``task``, ``optimizer.name``, ``status``,
     ``final_val_loss`` and the curves' join key): the reference whose median final validation loss
@@ -105,7 +113,7 @@ def targets_from_reruns(reruns: pd.DataFrame, curves: pd.DataFrame, factor: floa
                      "budget_s": budget_from_target(seconds, factor), "reruns": len(ref),
                      "medians": {o: float(np.median(x)) for o, x in losses.items()},
                      "seconds_to_target": [float(s) for s in seconds]})  # fmt: skip
-    return pd.DataFrame(rows, columns=["task", "reference", "target", "budget_s", "reruns", "medians", "seconds_to_target"])
+    return pd.DataFrame(rows, columns=TARGET_COLUMNS)
 
 
 def format_targets(found: pd.DataFrame) -> str:

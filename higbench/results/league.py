@@ -43,6 +43,7 @@ from higbench.results.algoperf import (  # noqa: F401  (re-exported: the league'
     budget_from_target,
     format_targets,
     integrated_score,
+    no_targets,
     reach,
     targets_from_reruns,
     time_to_target,
