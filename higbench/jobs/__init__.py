@@ -37,6 +37,7 @@ import copy
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -401,8 +402,32 @@ def _run_multirun(jobs_file: Path, sweep_dir: Path, extra: list[str]) -> str:
         cmd = multirun_command(jobs_file, sweep_dir, extra)
         out.write(" ".join(cmd) + "\n\n")
         out.flush()
-        proc = subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, env=_checkout_env())
+        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=_checkout_env())
+        try:
+            proc.wait()
+        except KeyboardInterrupt:
+            close_on_interrupt(proc)
+            raise
     return "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
+
+
+CLOSE_S = 60.0  # how long a stopped driver waits for its run to write its last rows and checkpoint
+
+
+def close_on_interrupt(proc: subprocess.Popen) -> None:
+    """The driver was stopped (Ctrl-C reaches the whole process group; SIGTERM only the driver):
+    the running job gets one SIGINT, if Ctrl-C did not already reach it, and time to stop after its
+    update and close its run file (resumable), rather than subprocess.run's kill after 0.25 s."""
+    try:
+        proc.wait(timeout=2.0)
+        return
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=CLOSE_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def _run_array(jobs_file: Path, sweep_dir: Path, n: int, launcher: Launcher, extra: list[str]) -> str:

@@ -44,7 +44,8 @@ already there (same identity) is reused, so a killed league resumes and a new op
 its own runs. A league too long for one sitting runs in pieces: ``--root NEW --root PUBLISHED``
 reuses every run in the published tables and adds the new ones, and the report folder (``--out``)
 holds the merged tables it scored, so it is the next piece's ``PUBLISHED`` and re-scores alone
-(``--report-only --root OUT --out OUT``, byte for byte).
+(``--report-only --root OUT --out OUT``, byte for byte). Ctrl-C or SIGTERM stops a piece after its
+running job closes its run; the runs done so far still go to the tables of the root and ``--out``.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -391,14 +393,24 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
 
 
 def main(argv=None) -> int:
+    previous = signal.signal(signal.SIGTERM, stop_on_sigterm)
     try:
         return _main(argv)
+    except KeyboardInterrupt as exc:  # its line is printed: what was kept, and how to continue
+        return 128 + int(signal.SIGTERM if str(exc) == "SIGTERM" else signal.SIGINT)
     except LeagueError as exc:
         print(str(exc), file=sys.stderr)
         return 2
     except ROOT_FILE_ERRORS as exc:
         print(f"league: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def stop_on_sigterm(signum, frame):
+    """A scheduler's SIGTERM stops the league as Ctrl-C does: the runs done so far go to the tables."""
+    raise KeyboardInterrupt("SIGTERM")
 
 
 def _main(argv=None) -> int:
@@ -489,25 +501,25 @@ def planned_target_jobs(problem, reference, n, studies, seeds, variants, node) -
             *confirmation_jobs(problem, reference, {}, rerun_seeds(seeds), seconds, variants, role=RERUN_ROLE)]  # fmt: skip
 
 
-def target_setting(problem, references, n, studies, seeds, variants, node, phase) -> tuple[list, pd.DataFrame]:
+def target_setting(problem, references, n, studies, seeds, variants, node, phase) -> pd.DataFrame:
     """The references tuned and rerun at the problem's target-setting budget (``phase`` runs or
-    finds them): ([(role, job)], targets per task from ``set_targets``)."""
+    finds them, and records them): targets per task from ``set_targets``."""
     seconds = target_seconds_of(problem, node)
     if not references or not seconds:
-        return [], league.no_targets()
+        return league.no_targets()
     tune = {r: tuning_jobs(problem, r, n, seconds, studies, role="target-tune") for r in references}
     flat = [j for jobs in tune.values() for j in jobs]
-    phase(flat, f"{problem} target-setting tuning")
+    phase([("target-tune", j) for j in flat], f"{problem} target-setting tuning")
     chosen = {r: choose(jobs)[0] for r, jobs in tune.items()}
     first = rerun_seeds(seeds)
     reruns = [j for r in references if chosen[r] is not None
               for j in confirmation_jobs(problem, r, chosen[r], first, seconds, variants, role=RERUN_ROLE)]  # fmt: skip
-    phase(reruns, f"{problem} target-setting reruns")
+    phase([(RERUN_ROLE, j) for j in reruns], f"{problem} target-setting reruns")
     targets = set_targets(reruns)
     for _, row in targets.iterrows():
         print(f"[league] {row['task']}: validation target {row['target']:.3g} ({row['reference']}, median of "
               f"{row['reruns']} reruns at {seconds:g} s), budget {row['budget_s']:.3g} s", file=sys.stderr)  # fmt: skip
-    return [("target-tune", j) for j in flat] + [(RERUN_ROLE, j) for j in reruns], targets
+    return targets
 
 
 def planned_counts(plans, paper: list[str], studies: int, seeds: int) -> tuple[int, float]:
@@ -556,19 +568,22 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     runner.left_seconds = runner_seconds
     progress.update(0, runner.left_seconds / args.jobs)
 
-    def phase(jobs: list[Job], name: str) -> None:
+    def phase(role_jobs: list[tuple[str, Job]], name: str) -> None:
+        """Runs (or, --report-only, finds) a phase's jobs, recorded first: a phase that stops
+        (Ctrl-C, SIGTERM, a failed run) still hands the runs it finished to the tables."""
+        all_jobs.extend(role_jobs)
+        jobs = [j for _, j in role_jobs]
         if args.report_only:
             resolve(jobs, run_index(root))
         else:
             runner.run(jobs, name)
 
+    stopped: BaseException | None = None
     try:
         for problem in problems if reading_runs else []:
             seconds, n, variants, usable = plans[problem]
             given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
-            setting_jobs, targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem],
-                                                   phase)  # fmt: skip
-            all_jobs += setting_jobs
+            targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem], phase)
             if args.targets_only:
                 manifest["problems"][problem] = {"target_setting": targets.to_dict("records"), "references": references}
                 continue
@@ -580,13 +595,13 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
             target = targets.set_index("task")["target"].get(problem) if len(targets) else None
             tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
             flat = [j for jobs in tune.values() for j in jobs]
-            phase(flat, f"{problem} tuning")
+            phase([("tune", j) for j in flat], f"{problem} tuning")
             picks = {o: choose(jobs, target) for o, jobs in tune.items()}
             chosen = {o: pick[0] for o, pick in picks.items()}
             confirm = [j for o in usable if chosen[o] is not None
                        for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
             confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
-            phase(confirm, f"{problem} confirmation")
+            phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
             manifest["problems"][problem] = {"seconds": seconds, "budget_from": "--seconds" if given or derived is None
                                              else "target setting", "trials": n, "studies": args.studies,
                                              "targets": nodes[problem].get("targets"), "held_out": variants,
@@ -594,7 +609,11 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
                                              "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
                                              "target_setting": targets.to_dict("records"),
                                              "left_out": refused[problem]}  # fmt: skip
-            all_jobs += [("tune", j) for j in flat] + [(j.sweep.split("/")[0], j) for j in confirm]
+    except (KeyboardInterrupt, SystemExit) as exc:  # SIGINT, SIGTERM (``stop_on_sigterm``), a phase not done
+        stopped = exc
+        manifest["stopped"] = str(exc) or type(exc).__name__
+        if not args.report_only:  # the runs that finished while the phase was stopped
+            resolve([j for _, j in all_jobs], {**Earlier.index(), **run_index(root)})
     finally:
         progress.close()
     if not args.report_only:
@@ -617,4 +636,9 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     missing = [j for _, j in all_jobs if not j.done]
     if missing:
         print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)
+    if stopped is not None:
+        done = sum(j.done for _, j in all_jobs)
+        print(f"[league] stopped ({manifest['stopped']}): the {done} run(s) done so far are in the tables of {root} "
+              f"and {out}; the same command continues, reusing them", file=sys.stderr)  # fmt: skip
+        raise stopped
     return 0

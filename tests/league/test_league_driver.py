@@ -425,7 +425,7 @@ def test_the_league_runs_at_the_budget_the_target_setting_derived(tmp_path, no_r
     budget, and tuning is given the validation target; --seconds, when given, is the budget."""
     found = pd.DataFrame([{"task": "toy", "reference": "adam", "target": 0.01, "budget_s": 7.2, "reruns": 5,
                            "medians": {}, "seconds_to_target": []}])  # fmt: skip
-    monkeypatch.setattr(driver, "target_setting", lambda *a, **k: ([], found))
+    monkeypatch.setattr(driver, "target_setting", lambda *a, **k: found)
     targets_seen = []
     monkeypatch.setattr(driver, "choose", lambda jobs, target=None: (targets_seen.append(target), (None, "none"))[1])
     argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "adam", "--trials", "1", "--studies", "1", "--seeds",
@@ -540,3 +540,55 @@ def test_a_targets_only_piece_and_a_full_piece_share_a_report_folder(tmp_path, n
     assert driver.main(argv) == 0
     assert driver.main([*argv, "--targets-only"]) == 0
     assert driver.main(argv) == 0
+
+
+@pytest.mark.process  # one real run: the tables read what it wrote
+def test_a_stopped_league_keeps_the_runs_it_finished_and_the_same_command_continues(tmp_path, monkeypatch, capsys):
+    """Ctrl-C (or SIGTERM, or a failed run) in the middle of a phase: the runs finished so far are
+    written to the tables of the root and of the report folder, with their roles, and the manifest
+    says it stopped; the same command then launches only what is left. One real toy run of 1 s."""
+    from higbench import jobs as jobs_module
+
+    real = driver.run_missing
+
+    def stopped_after_one(jobs, root, **kw):
+        real(jobs[:1], root, **kw)  # one trial trains, then the user presses Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(driver, "run_missing", stopped_after_one)
+    monkeypatch.setattr(driver, "calibration", lambda: {})
+    root, out = tmp_path / "root", tmp_path / "report"
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "", "--paper", "", "--trials", "3",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--seconds", "1",
+            "--root", str(root), "--out", str(out)]  # fmt: skip
+    assert driver.main(argv) == 128 + signal.SIGINT
+    assert "stopped (KeyboardInterrupt): the 1 run(s) done so far are in the tables" in capsys.readouterr().err
+    for folder in (root, out):
+        runs, _ = tables.read(folder)
+        assert list(runs["league_role"]) == ["tune"] and list(runs["status"]) == ["completed"]
+    (manifest,) = (root / "manifests").glob("*.json")
+    assert json.loads(manifest.read_text())["stopped"] == "KeyboardInterrupt"
+    done = set(tables.read(root)[0]["identity"])
+    launched = []
+    monkeypatch.setattr(driver, "run_missing", real)
+    monkeypatch.setattr(jobs_module, "launch", lambda todo, *a, **k: launched.extend(todo))
+    with pytest.raises(SystemExit, match="2 toy tuning run"):  # the two trials left (launch faked: not trained)
+        driver.main(argv)
+    assert len(launched) == 2 and not {j.identity for j in launched} & done
+
+
+@pytest.mark.process  # the job is a process: the point
+def test_a_stopped_driver_gives_its_running_job_time_to_close_its_run(tmp_path):
+    """SIGTERM reaches the driver alone: its job gets SIGINT and time to close its run file (what
+    the run does on SIGINT), not subprocess.run's kill after a quarter of a second."""
+    import subprocess
+    import sys
+
+    from higbench.jobs import close_on_interrupt
+
+    closed = tmp_path / "closed"
+    job = ("import pathlib, time\ntry:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
+           f"    pathlib.Path({str(closed)!r}).write_text('rows written')\n    raise SystemExit(130)\n")  # fmt: skip
+    proc = subprocess.Popen([sys.executable, "-c", job])
+    close_on_interrupt(proc)
+    assert proc.returncode == 130 and closed.read_text() == "rows written"
