@@ -261,8 +261,14 @@ def _run_job(plan: Plan, multirun: bool) -> float:
     start = plan.start_config()
     # A launcher's worker (joblib) is a process of its own: if the sweep's parent is killed
     # alone (a scheduler's SIGTERM to its pid), the worker's run stops cleanly, resumable,
-    # instead of training on, orphaned; and the worker then exits instead of lingering.
+    # instead of training on, orphaned; and the worker then exits instead of lingering. The
+    # same for a sweep a driver launched (the league, the figures: DRIVER_ENV names it), which
+    # would otherwise go on through its jobs list with no driver to read the results.
+    from higbench.runner.train import DRIVER_ENV
+
     parent = None if invocation().main else os.getppid()
+    if parent is None and os.environ.get(DRIVER_ENV) == str(os.getppid()):
+        parent = os.getppid()
     summary = _train(plan, parent)
     # The file is closed with its status: a stop signal now must not end the process with
     # 128+signal while the file says completed. Ignored while reporting (and, for a single

@@ -392,8 +392,11 @@ def jobs_listing(jobs: Sequence[Job], sweep_dir: Path, ledger_root: Path | None)
 
 
 def _checkout_env() -> dict[str, str]:
+    from higbench.runner.train import DRIVER_ENV  # the sweep stops when this driver is gone
+
     env = dict(os.environ)  # the checkout on the path: higbench and its hydra_plugins (the job-list sweeper)
     env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_PARENT), *filter(None, [env.get("PYTHONPATH")])])
+    env[DRIVER_ENV] = str(os.getpid())
     return env
 
 

@@ -65,6 +65,7 @@ from higbench.runner.updates import Update, build_update
 from higbench.runner.warmup import warm_up
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+DRIVER_ENV = "HIGBENCH_DRIVER_PID"  # set by a driver (league, figures) for the sweeps it launches: their parent
 
 
 class Interrupted(Exception):

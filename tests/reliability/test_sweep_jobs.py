@@ -189,6 +189,38 @@ def test_sigterm_to_a_joblib_sweeps_parent_alone_leaves_no_worker_training(tmp_p
     _complete_sweep(tmp_path, sweep, [*args, "budget.max_updates=200", "resume=true"], updates=200)
 
 
+@pytest.mark.slow
+def test_a_sweep_a_driver_launched_stops_when_the_driver_is_gone(tmp_path):
+    """The league's driver killed alone (a scheduler's SIGTERM, SIGKILL): the sweep it launched
+    (basic launcher, jobs in one process) stops its run cleanly instead of going on through its
+    jobs list with no driver to read them; it went on, orphaned, before."""
+    import time
+
+    import psutil
+    from rel_helpers import table_rows
+
+    sweep = tmp_path / "sweep"
+    args = ["-m", "problem=toy", "optimizer=adam", "optimizer.lr=0.001,0.002", "budget.max_updates=100000", "budget.seconds=null"]
+    args += ["eval_unit=updates", "eval_every=20", "progress=false", "threads=1", "hydra.sweep.subdir=${hydra.job.num}"]
+    args += [f"hydra.sweep.dir={sweep}"]
+    driver = (f"import os, subprocess, sys, time\nfrom higbench.jobs import _checkout_env\n"
+              f"p = subprocess.Popen([sys.executable, '-m', 'higbench.cli', *{args!r}], env=_checkout_env(),\n"
+              f"                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+              f"print(p.pid, flush=True)\ntime.sleep(3600)\n")  # fmt: skip
+    proc = subprocess.Popen([sys.executable, "-c", driver], cwd=tmp_path, env=cli_env(), stdout=subprocess.PIPE, text=True)
+    sweep_proc = psutil.Process(int(proc.stdout.readline()))
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and table_rows(sweep / "0" / "run.h5") < 2:
+        assert sweep_proc.is_running() and proc.poll() is None
+        time.sleep(0.1)
+    proc.kill()  # the driver alone
+    proc.wait(timeout=10)
+    _gone, alive = psutil.wait_procs([sweep_proc], timeout=60)
+    assert not alive, "the sweep went on after its driver was killed"
+    assert read_head(sweep / "0" / "run.h5").status == "interrupted"
+    assert not (sweep / "1" / "run.h5").exists()  # the next job never started
+
+
 def _complete_sweep(tmp_path: Path, sweep: Path, argv: list[str], updates: int) -> None:
     """Run ``higbench argv`` (the sweep's completing command) as a process: exit 0, and both jobs
     completed with at least ``updates`` updates."""
