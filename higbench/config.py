@@ -196,7 +196,7 @@ def validate(cfg: DictConfig | dict) -> Checked:
 
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
-    # init_from's file is read (and checked) once, by the plan: higbench.runner.plan.load_initial_weights
+    # init_from's file is read (and checked) once, by the plan: higbench.runner.rundir.final_weights
     return Checked(top, {**problem, **data["problem"]}, optimizer)  # the problem's node, its defaults filled in
 
 

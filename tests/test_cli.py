@@ -294,13 +294,13 @@ def test_the_key_lists_are_derived_from_the_schema():
     from higbench import config
     from higbench.jobs import LAUNCH_OVERRIDES
     from higbench.results import index
-    from higbench.runner import plan
+    from higbench.runner import stored
 
     with initialize_config_dir(config_dir=config.config_dir(), version_base="1.3"):
         composed = compose("config", return_hydra_config=True)
     excluded = list(composed.hydra.job.config.override_dirname.exclude_keys)  # from the schema, resolved
     assert sorted(excluded) == sorted(config.JOB_DIR_EXCLUDED_KEYS), "conf/config.yaml exclude_keys differ from the schema"
-    assert index.COSMETIC_KEYS is config.COSMETIC_KEYS and plan.RESUMABLE_KEYS is config.RESUMABLE_KEYS
+    assert index.COSMETIC_KEYS is config.COSMETIC_KEYS and stored.RESUMABLE_KEYS is config.RESUMABLE_KEYS
     assert set(config.COSMETIC_KEYS) <= set(config.RESUMABLE_KEYS)  # what changes no result may change on resume
     assert {o.split("=")[0] for o in LAUNCH_OVERRIDES} <= set(config.COSMETIC_KEYS), "figures launch with identity keys"
     assert "seed" not in config.COSMETIC_KEYS and "batch_size" in config.SIZING_KEYS

@@ -292,10 +292,10 @@ def test_side_sinks_are_checked_without_building_them(ext):
     module = ext.module("row_counter", ROW_COUNTER)
     good = OmegaConf.create({"tensorboard": True, "sink": {"counts": {"_target_": f"{module}.RowCounter"}}})
     assert list(side_sink_specs(good)) == ["counts", "tensorboard"]
-    check_side_sinks(good)
+    check_side_sinks(side_sink_specs(good))
     assert not list(ext.root.rglob("*.txt"))  # nothing built, nothing written
     with pytest.raises(ConfigError, match=r"^sink\.bad\._target_=os\.path: is not a higbench"):
-        check_side_sinks(OmegaConf.create({"sink": {"bad": {"_target_": "os.path"}}}))
+        check_side_sinks(side_sink_specs(OmegaConf.create({"sink": {"bad": {"_target_": "os.path"}}})))
 
 
 @pytest.mark.parametrize(

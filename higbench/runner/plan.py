@@ -3,11 +3,12 @@
 ``make_plan`` turns a composed config and the job's output directory into a ``Plan``, an
 immutable value with typed parts: ``run`` (the top-level keys as a ``config.RunConfig``),
 ``problem`` (its config node), ``optimizer`` (its class and checked arguments, resolved once
-by ``config.validate``) and ``dir`` (the ``RunDir``, ``runner.rundir``: every question about
-what the directory already holds is answered there). Everything a run reads from disk is read
-here, once, before anything is written: the stored config of a run to continue, its checkpoint
-(checked whole against its schema and its run file's ``run_id``), the ``init_from`` run's
-final weights. ``runner.train.train(plan)`` then builds the problem, the network and the
+by ``config.validate``), ``sinks`` (the side sinks it names) and ``dir`` (the ``RunDir``,
+``runner.rundir``: every question about what the directory already holds is answered there,
+one call per kind of run). Everything a run reads from disk is read here, once, before
+anything is written: the stored config of a run to continue (``runner.stored``), its
+checkpoint (checked whole against its schema and its run file's ``run_id``), the ``init_from``
+run's final weights. ``runner.train.train(plan)`` then builds the problem, the network and the
 optimizer once, checks these inputs against them (shapes, memory) before its run file exists,
 and trains.
 
@@ -19,18 +20,15 @@ What an existing directory means (the output policy):
   before its first update or checkpoint); it is moved aside and the run starts again.
 * ``keep``: a sweep job whose directory already holds a run that is not continued.
 
-A stored config is someone else's file: it may never make higbench build a callable that no
-higbench config registers (``check_stored_targets``) nor open a file the user did not name
-on this command line (``check_stored_paths``); a resumed run may change only the keys the
-schema marks resumable (``resume_config``).
+A stored config is someone else's file: ``runner.stored.stored_task`` makes it the task a
+resumed run trains, refusing what it may never make higbench do (build a callable no higbench
+config registers, open a file the user did not name) and keys resuming may not change.
 """
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import dataclasses
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from types import MappingProxyType
@@ -38,15 +36,16 @@ from typing import Any, Literal
 
 from omegaconf import DictConfig, OmegaConf
 
-from higbench.config import COSMETIC_KEYS, RESUMABLE_KEYS, Checked, RunConfig, typed, validate
-from higbench.errors import ABSENT, ConfigError, dotted_get, dotted_set, given_value, show
+from higbench.config import Checked, RunConfig, typed, validate
+from higbench.errors import ConfigError
 from higbench.optim.choice import OptimizerChoice
 from higbench.runfile.reader import RUN_FILE
 from higbench.runner import checkpoint
-from higbench.runner.rundir import RunDir, run_file_of
+from higbench.runner.rundir import RunDir, final_weights, run_file_of
+from higbench.runner.sinks import side_sink_specs
+from higbench.runner.stored import stored_task
 
 Policy = Literal["new", "resume", "restart", "keep"]
-PATH_KEYS = ("init_from",)  # config keys naming a file higbench opens
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,6 +63,7 @@ class Plan:
     run: RunConfig | None = None
     problem: DictConfig | None = None
     optimizer: OptimizerChoice | None = None
+    sinks: Mapping[str, Any] = dataclasses.field(default_factory=dict)  # its side sinks: NAME -> {_target_, args}
     initial_weights: Mapping[str, Any] | None = None
     checkpoint: Mapping[str, Any] | None = None
     overrides: tuple[str, ...] = ()  # the command line's task overrides (the run file records them)
@@ -111,223 +111,43 @@ class Plan:
 
 
 def planned(
-    task: dict, checked: Checked, run_dir: RunDir, policy: Policy = "new", why: str = "", overrides=(), state=None
+    task: dict, checked: Checked, run_dir: RunDir, policy: Policy = "new", why: str = "", overrides=(), state=None, sinks=None
 ) -> Plan:
-    """A plan to train: its typed parts, and its ``init_from`` weights unless it continues."""
+    """A plan to train: its typed parts (``sinks``: its side sinks, resolved here unless given),
+    and its ``init_from`` run's final weights unless it continues from a checkpoint."""
+    init_from = task.get("init_from") if state is None else None
+    weights = final_weights(init_from, task["problem"]["name"]) if init_from else None
+    sinks = side_sink_specs(task) if sinks is None else sinks
     problem = OmegaConf.create(dict(checked.problem), flags={"readonly": True})
-    weights = load_initial_weights(task) if state is None else None
-    parts = dict(run=checked.run, problem=problem, optimizer=checked.optimizer, initial_weights=weights, checkpoint=state)
-    return Plan(MappingProxyType(task), run_dir, policy, why, **parts, overrides=tuple(overrides))
-
-
-# -- inputs, read once -----------------------------------------------------------------------
-
-
-def load_initial_weights(task: Mapping) -> dict | None:
-    """``init_from``: the final weights of an existing, readable, finished run of the same
-    problem (ConfigError otherwise). Their shapes are checked against the network in
-    ``runner.train`` once it is built, still before anything is written."""
-    import numpy as np
-
-    from higbench.runfile.reader import UnreadableRunFile, read_head, run_file_path
-
-    path = task.get("init_from")
-    if not path:
-        return None
-    problem_name = task["problem"]["name"]
-    p = run_file_path(path)
-    if not p.is_file():
-        raise ConfigError("init_from", path, "no such run file")
-    try:
-        head = read_head(p, with_weights=True)
-    except UnreadableRunFile as exc:
-        raise ConfigError("init_from", path, str(exc).split(": ", 1)[-1]) from None
-    if not head.has_weights:
-        raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
-    if head.problem and head.problem != problem_name:
-        raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
-    if head.status == "diverged":  # its weights, finite or not, are where it failed
-        raise ConfigError("init_from", path, "run diverged; a diverged run cannot start another")
-    bad = sorted(k for k, v in head.weights.items() if not np.isfinite(v).all())
-    if bad:
-        why = f"final weights hold NaN or inf ({', '.join(bad)}); a diverged run cannot start another"
-        raise ConfigError("init_from", path, why)
-    return head.weights
-
-
-# -- the decision -----------------------------------------------------------------------------
+    parts = dict(run=checked.run, problem=problem, optimizer=checked.optimizer, sinks=MappingProxyType(sinks))
+    inputs = dict(initial_weights=weights, checkpoint=state)
+    return Plan(MappingProxyType(task), run_dir, policy, why, **parts, **inputs, overrides=tuple(overrides))
 
 
 def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool, checked: Checked | None = None) -> Plan:
     """The one decision about a job (ConfigError when it must not run): its policy, its
-    config and its inputs. ``task``: the composed config; ``checked``: its validation, where
-    done already (a sweep's jobs, validated up front)."""
-    output_dir, overrides = Path(output_dir), tuple(overrides)
-    if task.get("resume"):
-        return _resume_plan(task, output_dir, overrides, multirun=multirun)
-    checked = checked or validate(task)
-    run_dir = RunDir(output_dir / RUN_FILE)
-    run_dir.check()
-    run_dir.check_tensorboard_dir(task)
-    if not os.path.lexists(run_dir.run_file):
-        return planned(task, checked, run_dir, overrides=overrides)
-    empty = run_dir.recorded_nothing(run_dir.look())
-    if empty:
-        return planned(task, checked, run_dir, "restart", empty, overrides)
-    if multirun:  # a sweep run again into its directory: its runs stay as they are
-        why = "already holds a run (resume=true completes interrupted and failed jobs)"
-        return Plan(MappingProxyType(task), run_dir, "keep", why, overrides=overrides)
-    raise run_dir.refuse(
-        f"already holds a run file ({RUN_FILE}); refusing to overwrite it "
-        f"(resume={output_dir} continues it, or pick a new hydra.run.dir)"
-    )
-
-
-def _resume_plan(task: dict, output_dir: Path, overrides: tuple[str, ...], *, multirun: bool) -> Plan:
-    """``resume=``: continue the run from its checkpoint, or start it again when it recorded
-    nothing; a sweep job that never started, or stopped before its first checkpoint, starts now."""
-    resume = task["resume"]
-    run_dir = RunDir(run_file_of(resume, output_dir), "resume")
-    run_dir.check()
-    seen = run_dir.look()
-    stopped = run_dir.stopped_without_checkpoint(seen) if multirun else None
-    if multirun and (stopped or not run_dir.run_file.exists()):
-        config, policy, why = {**task, "resume": None}, "restart" if stopped else "new", stopped or ""
+    config and its inputs, each asked of its owner once. ``task``: the composed config;
+    ``checked``: its validation, where done already (a sweep's jobs, validated up front)."""
+    output_dir, overrides, state = Path(output_dir), tuple(overrides), None
+    resume = task.get("resume")
+    if not resume:
+        config, checked = task, checked or validate(task)
+        sinks = side_sink_specs(config)
+        run_dir = RunDir(output_dir / RUN_FILE)
+        found = run_dir.fresh_start(multirun, tensorboard="tensorboard" in sinks)
+        if found.policy == "keep":
+            return Plan(MappingProxyType(task), run_dir, "keep", found.why, overrides=overrides)
     else:
-        why = run_dir.recorded_nothing(seen)
-        if not why:
-            return _continue(task, run_dir, overrides)
-        stored = task if multirun else _parse_stored(run_dir.stored_config(seen, resume), resume)
-        check_stored_targets(stored, task, resume)  # before anything of it is built
-        config, policy = resume_config(stored, task, list(overrides)), "restart"
-        # started again from its stored config: it would read the file its init_from names
-        check_stored_paths(stored, list(overrides), resume)
-    run_dir.check_tensorboard_dir(config)
-    return planned(config, validate(config), run_dir, policy, why, overrides)
-
-
-def _continue(task: dict, run_dir: RunDir, overrides: tuple[str, ...]) -> Plan:
-    """The run continued from its checkpoint: its stored config (with the changes resuming
-    allows), its checkpoint checked against its run file. The weights are the checkpoint's;
-    a stored ``init_from`` is a record, never opened."""
-    resume = task["resume"]
-    head = run_dir.inspect(resume)
-    stored = _parse_stored(head.config_yaml, resume)
-    check_stored_targets(stored, task, resume)  # before anything of it is built
-    merged = resume_config(stored, task, list(overrides))
-    checked = validate({**merged, "init_from": None})
-    state = checkpoint.load(head, resume)
-    run_dir.check_tensorboard_dir(merged)
-    return planned(merged, checked, run_dir, "resume", "", overrides, state)
-
-
-def resume_config(stored: dict, composed: dict, overrides: list[str]) -> dict:
-    """The stored config of the run, with the command-line changes that resuming allows.
-
-    ``composed``: the config Hydra composed for this invocation; ``overrides``: the task
-    overrides given on the command line. A key outside ``RESUMABLE_KEYS`` may be repeated
-    with the run's own value (re-running the same command with ``resume=...``) but not
-    changed: that would be another experiment.
-    """
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    # a key that changes no result and that an older run file lacks: conf/config.yaml's value
-    merged = {**{k: composed[k] for k in COSMETIC_KEYS if k not in stored and k in composed}, **copy.deepcopy(stored)}
-    for override in OverridesParser.create().parse_overrides(list(overrides)):
-        key, line = override.key_or_group, override.input_line
-        if key.startswith("hydra.") or key == "hydra":
-            continue
-        new = dotted_get(composed, key)
-        if key.split(".")[0] in RESUMABLE_KEYS:
-            if new is not ABSENT:
-                dotted_set(merged, key, new)
-            continue
-        old = dotted_get(stored, key)
-        if new is ABSENT or old is ABSENT or new != old:
-            shown = "<absent>" if old is ABSENT else show(old)
-            why = f"cannot change when resuming (the run has {key}={shown}); resumable keys: {', '.join(RESUMABLE_KEYS)}"
-            raise ConfigError(key, line.split("=", 1)[-1], why)
-    merged["resume"] = None
-    return merged
-
-
-def _parse_stored(yaml_text: str, resume_value) -> dict:
-    """A stored config, parsed with the run-file reader's bounds (size, aliases expanded)."""
-    from higbench.runfile.reader import UnreadableRunFile, parse_config
-
-    try:
-        return parse_config(yaml_text)
-    except UnreadableRunFile as exc:
-        raise ConfigError("resume", resume_value, f"its stored config is refused: {exc}") from None
-
-
-# The config groups whose files may name a class to build: where a stored config's ``_target_``s
-# may come from (problem_optimizer and experiment files set keys of these nodes).
-TARGET_GROUPS = ("problem", "optimizer", "sink", "problem_optimizer", "experiment")
-
-
-def registered_targets() -> dict[str, set[str]]:
-    """Where a config may name a class, and which: ``{key: {target, ...}}`` for every ``_target_``
-    that a config file in Hydra's search path (conf/, and ``hydra.searchpath`` given on the
-    command line) sets, at the key it sets it (``optimizer._target_``, the nested
-    ``optimizer.parts.PART._target_`` of muon.yaml, ``sink.tensorboard._target_``), and
-    every registered Problem class at ``problem._target_``."""
-    from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.object_type import ObjectType
-
-    from higbench.config import config_dir
-    from higbench.problems.base import registry
-
-    if not GlobalHydra.instance().is_initialized():
-        from hydra import initialize_config_dir
-
-        with initialize_config_dir(config_dir=config_dir(), version_base="1.3"):
-            return registered_targets()
-    targets: dict[str, set[str]] = {"problem._target_": {f"{c.__module__}.{c.__qualname__}" for c in registry().values()}}
-    for source in GlobalHydra.instance().config_loader().get_sources():
-        for group in TARGET_GROUPS:
-            if not source.is_group(group):
-                continue
-            for name in source.list(group, ObjectType.CONFIG):
-                with contextlib.suppress(Exception):  # a YAML that does not load names nothing
-                    loaded = source.load_config(f"{group}/{name}")
-                    package = loaded.header.get("package") or group  # Hydra's default package: the group
-                    prefix = "" if package == "_global_" else f"{package.removeprefix('_global_.')}."
-                    for key, target in _targets(OmegaConf.to_container(loaded.config), prefix):
-                        targets.setdefault(key, set()).add(str(target))
-    return targets
-
-
-def check_stored_targets(stored: dict, composed: Mapping, resume_value) -> None:
-    """Refuse a stored config (a run file's, or .hydra/config.yaml) naming a ``_target_`` that
-    no config file sets at that key (``registered_targets``) and this command line does not
-    name there either: it would be built (called) before anything else is checked."""
-    registered, composed = registered_targets(), dict(composed)
-    for key, target in _targets(stored):
-        if str(target) not in registered.get(key, set()) and str(target) != str(dotted_get(composed, key, "")):
-            why = f"its stored config names {key}={target}, which no config file sets there; refusing to build it"
-            raise ConfigError("resume", resume_value, why)
-
-
-def check_stored_paths(stored: dict, overrides: list[str], resume_value) -> None:
-    """A stored config (someone else's file) never makes higbench open a file: a path it
-    names must be given again on this command line, where the user names what is opened."""
-    for key in PATH_KEYS:
-        path = stored.get(key)
-        if path and given_value(overrides, key) != str(path):
-            why = (
-                f"its stored config names {key}={path}; a stored config never makes higbench open a file: "
-                f"give {key}={path} on the command line to start it again from that file"
-            )
-            raise ConfigError("resume", resume_value, why)
-
-
-def _targets(node, prefix: str = ""):
-    if isinstance(node, dict):
-        for k, v in node.items():
-            if k == "_target_":
-                yield f"{prefix}{k}", v
-            yield from _targets(v, f"{prefix}{k}.")
-    elif isinstance(node, list):
-        for i, v in enumerate(node):
-            yield from _targets(v, f"{prefix}{i}.")
+        run_dir = RunDir(run_file_of(resume, output_dir), "resume")
+        found = run_dir.resumption(resume, multirun)
+        if found.fresh:
+            config = {**task, "resume": None}
+        else:  # a stored config: someone else's file (a sweep job's is its own composed one)
+            stored = task if found.stored_yaml is None else found.stored_yaml
+            config = stored_task(stored, task, overrides, resume, restart=found.policy == "restart")
+        # a continued run's weights are its checkpoint's: a stored init_from is a record, never opened
+        checked = validate({**config, "init_from": None} if found.head else config)
+        state = checkpoint.load(found.head, resume) if found.head else None
+        sinks = side_sink_specs(config)
+        run_dir.check_tensorboard_dir("tensorboard" in sinks)
+    return planned(config, checked, run_dir, found.policy, found.why, overrides, state, sinks)

@@ -9,7 +9,11 @@ key the user gave for the directory, ``hydra.run.dir`` or ``resume``):
 * what its run file holds (``look``, one read of its head): nothing worth keeping
   (``recorded_nothing``: killed while being created, or stopped before its first update),
   a sweep job stopped before its first checkpoint (``stopped_without_checkpoint``), or a run
-  to continue (``inspect``), and its stored config (``stored_config``).
+  to continue (``inspect``), and its stored config (``stored_config``);
+* what that means for the plan, one call per kind of run: ``fresh_start`` (new, restart,
+  keep, or the refusal to overwrite) and ``resumption`` (resume, restart, or a sweep job that
+  starts now), each a ``Found``;
+* another run's directory: the final weights ``init_from`` starts from (``final_weights``).
 
 Once the job holds the directory, ``make_room`` moves a dead run file and a checkpoint
 without its run (the stray checkpoint) aside: renamed beside them, never deleted.
@@ -21,7 +25,6 @@ import contextlib
 import dataclasses
 import os
 import time
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +87,32 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
     return run_file_path(Path(str(resume)).expanduser())
 
 
+def final_weights(path: str, problem_name: str) -> dict:
+    """``init_from``: the final weights of another run, existing, readable, finished, of the same
+    problem (ConfigError otherwise). Their shapes are checked against the network in
+    ``runner.train`` once it is built, still before anything is written."""
+    import numpy as np
+
+    p = run_file_path(path)
+    if not p.is_file():
+        raise ConfigError("init_from", path, "no such run file")
+    try:
+        head = read_head(p, with_weights=True)
+    except UnreadableRunFile as exc:
+        raise ConfigError("init_from", path, str(exc).split(": ", 1)[-1]) from None
+    if not head.has_weights:
+        raise ConfigError("init_from", path, "run file holds no final weights (run still going, or killed)")
+    if head.problem and head.problem != problem_name:
+        raise ConfigError("init_from", path, f"run is of problem {head.problem}, not {problem_name}")
+    if head.status == "diverged":  # its weights, finite or not, are where it failed
+        raise ConfigError("init_from", path, "run diverged; a diverged run cannot start another")
+    bad = sorted(k for k, v in head.weights.items() if not np.isfinite(v).all())
+    if bad:
+        why = f"final weights hold NaN or inf ({', '.join(bad)}); a diverged run cannot start another"
+        raise ConfigError("init_from", path, why)
+    return head.weights
+
+
 def move_aside(path: Path, label: str) -> Path:
     """Rename ``path`` to ``<name>.<label>-<time>`` beside it (never deleted: nothing is lost)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -92,6 +121,20 @@ def move_aside(path: Path, label: str) -> Path:
         target, n = path.with_name(f"{path.name}.{label}-{stamp}-{n}"), n + 1
     os.replace(path, target)
     return target
+
+
+@dataclasses.dataclass(frozen=True)
+class Found:
+    """What a run directory holds, as the plan needs it: what to do with it (``policy``: new,
+    restart, resume or keep) and why; the stored config a resumed or restarted run starts from
+    (``stored_yaml``; None: the command line's); the head of the run to continue (``resume``);
+    ``fresh``: a sweep job that starts now from its own config, whatever its run file said."""
+
+    policy: str
+    why: str = ""
+    stored_yaml: str | None = None
+    head: RunHead | None = None
+    fresh: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,19 +170,56 @@ class RunDir:
             if (self.path / name).is_symlink():
                 raise self.refuse(f"{self.path / name} {LINK.format(os.readlink(self.path / name))}")
 
-    def check_tensorboard_dir(self, task: Mapping) -> None:
-        """TensorBoard asked for: its directory here is absent or a real directory (a link would
-        take the event files elsewhere; a file or a dangling link would fail mid-run)."""
-        from higbench.runner.sinks import side_sink_specs
+    def check_tensorboard_dir(self, tensorboard: bool) -> None:
+        """TensorBoard asked for (``tensorboard``: the run's side sinks name it): its directory here
+        is absent or a real directory (a link would take the event files elsewhere; a file or a
+        dangling link would fail mid-run)."""
         from higbench.runner.tensorboard import TENSORBOARD_DIR
 
         path = self.path / TENSORBOARD_DIR
-        if "tensorboard" not in side_sink_specs(task) or not os.path.lexists(path):
+        if not tensorboard or not os.path.lexists(path):
             return
         if path.is_symlink():
             raise self.refuse(f"{path} {LINK.format(os.readlink(path))}")
         if not path.is_dir():
             raise self.refuse(f"{path} exists and is not a directory; tensorboard=true writes its event files there")
+
+    # -- what it means for the plan: one call per kind of run ----------------------------------
+
+    def fresh_start(self, multirun: bool, tensorboard: bool) -> Found:
+        """A run that does not resume: ``new`` where no run file is there, ``restart`` where the
+        one there recorded nothing, ``keep`` for a sweep job whose directory holds a run; else
+        the refusal to overwrite it (after the checks that a run can be written here)."""
+        self.check()
+        self.check_tensorboard_dir(tensorboard)
+        if not os.path.lexists(self.run_file):
+            return Found("new")
+        empty = self.recorded_nothing(self.look())
+        if empty:
+            return Found("restart", empty)
+        if multirun:  # a sweep run again into its directory: its runs stay as they are
+            return Found("keep", "already holds a run (resume=true completes interrupted and failed jobs)")
+        raise self.refuse(
+            f"already holds a run file ({RUN_FILE}); refusing to overwrite it "
+            f"(resume={self.path} continues it, or pick a new hydra.run.dir)"
+        )
+
+    def resumption(self, resume_value: Any, multirun: bool) -> Found:
+        """``resume=``: the run continues from its checkpoint (``resume``, its head inspected), or
+        starts again from its stored config where it recorded nothing (``restart``); a sweep job
+        that never started (``new``), or stopped before its first checkpoint (``restart``),
+        starts now from its own config (``fresh``). One look at its run file."""
+        self.check()
+        seen = self.look()
+        stopped = self.stopped_without_checkpoint(seen) if multirun else None
+        if multirun and (stopped or not self.run_file.exists()):
+            return Found("restart" if stopped else "new", stopped or "", fresh=True)
+        why = self.recorded_nothing(seen)
+        if not why:
+            head = self.inspect(resume_value)
+            return Found("resume", head=head, stored_yaml=head.config_yaml)
+        # a sweep job's stored config is its own composed one (None: the plan takes that)
+        return Found("restart", why, stored_yaml=None if multirun else self.stored_config(seen, resume_value))
 
     # -- what its run file holds ---------------------------------------------------------------
 

@@ -192,10 +192,10 @@ def side_sink_class(name: str, spec: object) -> type[Sink]:
     return cls
 
 
-def check_side_sinks(cfg) -> None:
-    """ConfigError unless every side sink the config names imports as a ``Sink`` (nothing is built:
-    a check for before any work, e.g. of every job of a sweep)."""
-    for name, spec in side_sink_specs(cfg).items():
+def check_side_sinks(specs: dict[str, dict]) -> None:
+    """ConfigError unless every side sink of ``specs`` (``side_sink_specs``) imports as a ``Sink``
+    (nothing is built: a check for before any work, e.g. of every job of a sweep)."""
+    for name, spec in specs.items():
         side_sink_class(name, spec)
 
 

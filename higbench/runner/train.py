@@ -59,7 +59,15 @@ from higbench.runner import checkpoint, placement
 from higbench.runner.environment import CpuUse, MemoryMonitor, environment, resolve_device
 from higbench.runner.plan import Plan
 from higbench.runner.progress import Progress, announce, start_text
-from higbench.runner.sinks import ProgressSink, RunFileSink, Sinks, spectrum_columns, spectrum_quantiles
+from higbench.runner.sinks import (
+    ProgressSink,
+    RunFileSink,
+    Sinks,
+    build_side_sinks,
+    check_side_sinks,
+    spectrum_columns,
+    spectrum_quantiles,
+)
 from higbench.runner.threads import fit_to_work, resolve_threads
 from higbench.runner.updates import Update, build_update
 from higbench.runner.warmup import warm_up
@@ -317,12 +325,10 @@ def check_checkpoint(plan: Plan, problem: Problem, model: torch.nn.Module, updat
     checkpoint.check_fits(plan.checkpoint, model, update.optimizer, per_epoch, plan.run_path)
 
 
-def check_sinks(cfg) -> None:
-    """The side sinks the config names import as sinks, and TensorBoard's extra is installed."""
-    from higbench.runner.sinks import check_side_sinks, side_sink_specs
-
-    check_side_sinks(cfg)
-    if "tensorboard" in side_sink_specs(cfg):
+def check_sinks(plan: Plan) -> None:
+    """The side sinks the plan names import as sinks, and TensorBoard's extra is installed."""
+    check_side_sinks(plan.sinks)
+    if "tensorboard" in plan.sinks:
         from higbench.runner.tensorboard import summary_writer_class  # the optional extra, only when asked for
 
         summary_writer_class()
@@ -337,7 +343,7 @@ def check_build(plan: Plan) -> None:
     model, update = build(plan, problem)
     if plan.initial_weights is not None:
         check_initial_weights(model, plan.initial_weights, plan.run.init_from)
-    check_sinks(plan.config)
+    check_sinks(plan)
     if resolve_device(plan.run.device).type == "cpu":
         check_memory(plan, problem, model, update)
         check_data_memory(plan, problem)
@@ -364,13 +370,6 @@ def _open_run_file(plan: Plan, env: dict) -> RunFileWriter:
         },
         config_yaml=config_yaml,
     )
-
-
-def _extra_sinks(cfg, run_path: Path) -> list:
-    """The side sinks the config names (the ``sink`` group; ``tensorboard=true``), beside the run file."""
-    from higbench.runner.sinks import build_side_sinks, side_sink_specs
-
-    return build_side_sinks(side_sink_specs(cfg), run_path.parent)
 
 
 class TrainingRun:
@@ -627,12 +626,12 @@ def train(plan: Plan) -> RunSummary:
     check_data_memory(plan, problem)
     if cfg.threads == "auto" and estimate is not None:  # a small eigen-solve loses from a second thread
         torch.set_num_threads(fit_to_work(torch.get_num_threads(), estimate.work_rows))
-    check_sinks(plan.config)
+    check_sinks(plan)
     announce(cfg.progress, start_text(plan.start_config()))  # the checks passed: replaces "checking"
 
     clock = TrainingClock(offset=state["wall_time"] if state else 0.0)
     clock.pause()  # creating/reopening the file is not training
-    extra = _extra_sinks(plan.config, run_path)
+    extra = build_side_sinks(plan.sinks, run_path.parent)  # the sink group's and tensorboard=true's, beside the run file
     env = {**environment(device, plan.parallel_jobs), "warmup_s": warmup_s, **(placed.record() if placed else {})}
     file = RunFileSink(_open_run_file(plan, env))
     step = state["step"] if state else 0

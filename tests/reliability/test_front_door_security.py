@@ -51,7 +51,7 @@ def test_a_stored_config_cannot_name_an_arbitrary_callable(tmp_path, monkeypatch
 def test_a_stored_problem_target_outside_the_registry_is_refused(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     from higbench.errors import ConfigError
-    from higbench.runner.plan import check_stored_targets
+    from higbench.runner.stored import check_stored_targets
 
     composed = {"problem": {"_target_": "higbench.problems.toy.ToyProblem"}, "optimizer": {"_target_": "x.Y"}}
     with pytest.raises(ConfigError, match="problem._target_=os.system"):

@@ -32,7 +32,7 @@ from higbench.config import ConfigError, to_plain
 from higbench.runfile.reader import load_run, load_updates, load_weights
 from higbench.runfile.writer import RunFileWriter
 from higbench.runner.checkpoint import checkpoint_path
-from higbench.runner.plan import resume_config
+from higbench.runner.stored import resume_config
 
 pytestmark = pytest.mark.process  # SIGINT and SIGKILL to CLI processes, a resume through the CLI
 

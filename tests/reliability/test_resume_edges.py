@@ -12,7 +12,7 @@ from rel_helpers import compose_here, stopped_run, train_here
 from higbench.config import to_plain
 from higbench.runfile.reader import load_run, load_updates
 from higbench.runner.checkpoint import checkpoint_path
-from higbench.runner.plan import resume_config
+from higbench.runner.stored import resume_config
 
 
 def resume_here(run_file, extra):

@@ -66,7 +66,7 @@ def test_every_shipped_sink_resumes_from_the_command_line(sink, tmp_path, monkey
 def test_a_stored_nested_target_is_allowed_only_where_a_config_file_sets_it():
     """Nested ``_target_``s: the one a config file sets at that key, or the command line's own."""
     from higbench.errors import ConfigError
-    from higbench.runner.plan import check_stored_targets
+    from higbench.runner.stored import check_stored_targets
 
     muon = {"optimizer": OmegaConf.to_container(OmegaConf.load(Path(config_dir()) / "optimizer" / "muon.yaml"))}
     part = next(iter(muon["optimizer"]["parts"]))  # the shipped file's own part names
