@@ -33,6 +33,9 @@ held-out variants ``problem.held_out``; ``--seconds`` replaces the budget for a 
 2. confirmation: that setting on ``--seeds`` fresh seeds, on the problem and on each held-out
    variant (never tuned on); the ``--paper`` optimizers also at their shipped settings, as separate
    rows: "(paper)" where conf/problem_optimizer/ holds the paper's, "(default)" where it holds none;
+2b. long budget (``--long SECONDS``): the ``--long-optimizers``' chosen settings, and the shipped
+   ones of those in ``--paper``, trained far longer on the first ``--long-seeds`` seeds: the
+   paper's own question against today's optimizers, a table of its own (``results.long_budget``);
 3. tables and scores: every league run's identity, role and per-evaluation curve go to
    ``ROOT/tables/`` (``higbench.league.tables``: what another machine's root is merged with); the
    scores (test loss, read once here) are computed from those tables and written to ``--out``
@@ -76,6 +79,7 @@ from higbench.league.protocol import (  # noqa: F401  (re-exported: the league's
     LeagueError,
     all_spaces,
     base_overrides,
+    check_long,
     check_protocol,
     check_set,
     config_names,
@@ -84,6 +88,8 @@ from higbench.league.protocol import (  # noqa: F401  (re-exported: the league's
     fail,
     has_paper_settings,
     has_validation,
+    long_budget_jobs,
+    long_budgets,
     parse_set,
     per_problem,
     problem_config,
@@ -111,6 +117,7 @@ from higbench.league.report import (  # noqa: F401  (re-exported)
     write_report,
 )
 from higbench.results import league
+from higbench.results.long_budget import LONG_ROLES
 
 DEFAULT_OPTIMIZERS = league_optimizers()  # every optimizer whose card (conf/optimizer/) says league: true
 LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm", "slurm")  # slurm: conf/hydra/launcher/slurm.yaml
@@ -304,6 +311,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--searchpath", action="append", default=[], type=Path, metavar="DIR",
                    help="a folder of your own configs (DIR/problem/, DIR/optimizer/, DIR/search/ for search spaces), as "
                    "hydra.searchpath=[file://DIR]; the problem's module goes on PYTHONPATH; repeatable")  # fmt: skip
+    p.add_argument("--long", metavar="SECONDS", help="also train the --long-optimizers' tuned settings (and the shipped "
+                   "ones of those in --paper) for this long, on the first --long-seeds seeds, after a problem's "
+                   "confirmation: a table of its own; 'oscillator=600,dipole=600': per problem (default: none)")  # fmt: skip
+    p.add_argument("--long-optimizers", default="soap,muon,lm,adam,hig",
+                   help="the optimizers of the long budget (default: soap,muon,lm,adam,hig)")  # fmt: skip
+    p.add_argument("--long-seeds", type=int, default=3, help="seeds of the long budget (default: 3)")
     p.add_argument("--variants", type=int, default=None, help="at most this many held-out variants per problem (default: all)")
     p.add_argument("--root", type=Path, action="append", default=None,
                    help="where the runs and their tables go (and are reused from); default outputs/league in the "
@@ -380,8 +393,10 @@ def plan_text(planned: list[tuple[str, list[Job]]], n_jobs: int) -> str:
         threads = sorted({str(j.overrides.get("threads", launched["threads"])) for j in jobs})
         tune = sum(j.sweep.startswith("tune/") for j in jobs)
         setting = sum(j.sweep.startswith(("target-tune/", f"{RERUN_ROLE}/")) for j in jobs)
+        long = [j for j in jobs if j.sweep.split("/")[0] in LONG_ROLES]
+        long_text = f", {len(long)} at the long budget ({span(sum(map(job_seconds, long)))})" if long else ""
         lines.append(f"[league] plan: {problem}: {len(jobs)} runs ({setting} target setting, {tune} tuning, "
-                     f"{len(jobs) - tune - setting} confirmation), {span(seconds)} of training, hardware "
+                     f"{len(jobs) - tune - setting - len(long)} confirmation{long_text}), {span(seconds)} of training, hardware "
                      f"{'/'.join(devices)} threads={'/'.join(threads)}")  # fmt: skip
         total_runs += len(jobs)
         total_s += seconds
@@ -425,14 +440,21 @@ def _main(argv=None) -> int:
     paper = [o for o in args.paper.split(",") if o in optimizers]
     trials = per_problem(args.trials, "--trials", int)
     budgets = per_problem(args.seconds, "--seconds")
+    longs = long_budgets(args)
     EXTRA[:] = [parse_set(item) for item in set_items]
     overrides = launcher_overrides(args.launcher_set)
     launcher = args.launcher or ("basic" if args.jobs == 1 else "joblib")
     check_launcher(launcher, overrides)
-    for flag, value in (("--studies", args.studies), ("--seeds", args.seeds), ("--jobs", args.jobs)):
+    for flag, value in (
+        ("--studies", args.studies),
+        ("--seeds", args.seeds),
+        ("--jobs", args.jobs),
+        ("--long-seeds", args.long_seeds),
+    ):
         if value < 1:
             fail(f"{flag} {value}: must be at least 1")
     check_protocol(trials, budgets, problems, optimizers)
+    check_long(args, longs, optimizers, problems)
     seeds = list(range(args.seeds))
     tuning_seeds = [league.tuning_seed(s) for s in range(args.studies)]
     if set(seeds) & set(tuning_seeds):
@@ -476,6 +498,7 @@ def _main(argv=None) -> int:
             jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
             jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
             jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+            jobs += long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
             planned.append((problem, jobs))
         print(plan_text(planned, args.jobs))
         return 0
@@ -555,8 +578,12 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         for o, why in refused[problem].items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         plans[problem] = (seconds, n, variants, usable)
-    references = references_of(args)
+    references, longs = references_of(args), long_budgets(args)
     total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    for problem in [] if args.targets_only else problems:  # the long budget's runs, each tuned setting assumed found
+        usable = plans[problem][3]
+        extra = long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
+        total, runner_seconds = total + len(extra), runner_seconds + sum(job_seconds(j) for j in extra)
     if args.targets_only:
         total, runner_seconds = 0, 0.0
     for problem in problems if reading_runs else []:
@@ -602,13 +629,19 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
                        for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
             confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
             phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
+            long = long_budget_jobs(args, longs, problem, usable, paper, chosen, seeds)
+            if long:
+                phase([(j.sweep.split("/")[0], j) for j in long], f"{problem} long budget")
             manifest["problems"][problem] = {"seconds": seconds, "budget_from": "--seconds" if given or derived is None
                                              else "target setting", "trials": n, "studies": args.studies,
                                              "targets": nodes[problem].get("targets"), "held_out": variants,
                                              "set": {o: extra_overrides(problem, o) for o in usable},
                                              "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
                                              "target_setting": targets.to_dict("records"),
-                                             "left_out": refused[problem]}  # fmt: skip
+                                             "left_out": refused[problem],
+                                             "long": {"seconds": longs.get(problem, longs.get(None)),
+                                                      "optimizers": sorted({j.overrides["optimizer"] for j in long}),
+                                                      "seeds": args.long_seeds} if long else None}  # fmt: skip
     except (KeyboardInterrupt, SystemExit) as exc:  # SIGINT, SIGTERM (``stop_on_sigterm``), a phase not done
         stopped = exc
         manifest["stopped"] = str(exc) or type(exc).__name__

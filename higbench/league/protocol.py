@@ -24,6 +24,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from higbench.errors import override_value as fmt
 from higbench.jobs import Job
 from higbench.results import league
+from higbench.results.long_budget import LONG_PAPER_ROLE, LONG_ROLE
 
 EVALUATIONS = 100  # per run: time-to-target ratios up to TAU_MAX = 4 are resolved (a target at 1/25 of the budget)
 SEARCHPATH_ENV = "HIGBENCH_SEARCHPATH"  # read by hydra_plugins/higbench_searchpath
@@ -293,6 +294,43 @@ def confirmation_jobs(problem: str, optimizer: str, setting: dict | None, seeds,
             overrides = {**base_overrides(problem, optimizer, seed, seconds), **variant_overrides(variant), **(setting or {})}
             jobs.append(Job("league", f"{role}/{problem}/{variant or 'base'}/{optimizer}", overrides, seed))
     return jobs
+
+
+def long_jobs(problem: str, optimizer: str, setting: dict | None, seeds, seconds: float) -> list[Job]:
+    """The long budget's runs of a tuned ``setting`` (role long), or of the shipped one
+    (``None``: role long-paper), on the problem alone (no held-out variant)."""
+    role = LONG_ROLE if setting is not None else LONG_PAPER_ROLE
+    return confirmation_jobs(problem, optimizer, setting, seeds, seconds, [], role=role)
+
+
+def long_budgets(args) -> dict[str | None, float]:
+    """--long as {problem or None (every problem): seconds}."""
+    return per_problem(args.long, "--long") if args.long else {}
+
+
+def check_long(args, longs: dict, optimizers: list[str], problems: list[str]) -> None:
+    """--long: a positive, finite budget per named problem, for optimizers the league tunes."""
+    for problem, seconds in longs.items():
+        if problem is not None and problem not in problems:
+            fail(f"--long {args.long}: {problem} is not in --problems")
+        if not (math.isfinite(seconds) and seconds > 0):
+            fail(f"--long {args.long}: a budget is a positive, finite number of seconds")
+    if longs:
+        for o in [o for o in args.long_optimizers.split(",") if o]:
+            if o not in optimizers:
+                fail(f"--long-optimizers {args.long_optimizers}: {o} is not in --optimizers (its tuned setting is the league's)")
+
+
+def long_budget_jobs(args, longs: dict, problem: str, usable: list[str], paper: list[str], chosen: dict, seeds) -> list[Job]:
+    """The long budget of a problem (``--long``): each long optimizer's chosen setting, and the
+    shipped one of those in ``--paper``, on the first ``--long-seeds`` seeds; none without --long."""
+    seconds = longs.get(problem, longs.get(None))
+    if not seconds:
+        return []
+    names = [o for o in args.long_optimizers.split(",") if o in usable]
+    first = list(seeds)[: args.long_seeds]
+    jobs = [j for o in names if chosen.get(o) is not None for j in long_jobs(problem, o, chosen[o], first, seconds)]
+    return jobs + [j for o in names if o in paper for j in long_jobs(problem, o, None, first, seconds)]
 
 
 def target_seconds_of(problem: str, node: dict) -> float | None:

@@ -21,6 +21,7 @@ from higbench.league import tables
 from higbench.league.files import read_json_files, safe_dir, write_text
 from higbench.league.protocol import RERUN_ROLE, all_spaces, fail
 from higbench.results import league
+from higbench.results.long_budget import format_long_budget
 
 # -- the machine ------------------------------------------------------------------------------
 
@@ -192,7 +193,8 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     try:
         targets, budgets, held_out = scoring_targets(runs, curves)
         text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
-        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text])
+        long = format_long_budget(runs)
+        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text, *([long] if long else [])])
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))

@@ -592,3 +592,35 @@ def test_a_stopped_driver_gives_its_running_job_time_to_close_its_run(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", job])
     close_on_interrupt(proc)
     assert proc.returncode == 130 and closed.read_text() == "rows written"
+
+
+def test_the_long_budget_trains_the_chosen_and_shipped_settings_longer_on_its_own_seeds(tmp_path, no_runs, monkeypatch):
+    """--long: after a problem's confirmation, each long optimizer's chosen setting (role long) and
+    the shipped one of those in --paper (role long-paper) on the first --long-seeds seeds, at the
+    long budget, on the problem alone."""
+    monkeypatch.setattr(driver, "choose", lambda jobs, target=None: ({"optimizer.lr": 0.01}, "test"))
+    argv = ["--problems", "toy", "--optimizers", "adam,sgd,hig", "--references", "", "--paper", "hig", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--seconds", "2", "--long", "600", "--long-optimizers", "adam,hig",
+            "--long-seeds", "3", "--root", str(tmp_path)]  # fmt: skip
+    assert driver.main(argv) == 0
+    long = [j for jobs, _ in no_runs for j in jobs if j.sweep.startswith("long")]
+    assert sorted({j.sweep for j in long}) == ["long-paper/toy/base/hig", "long/toy/base/adam", "long/toy/base/hig"]
+    assert {j.overrides["budget.seconds"] for j in long} == {600.0} and sorted({j.seed for j in long}) == [0, 1, 2]
+    assert all(j.overrides.get("optimizer.lr") == 0.01 for j in long if j.sweep.startswith("long/"))
+    (manifest,) = (tmp_path / "manifests").glob("*.json")
+    assert json.loads(manifest.read_text())["problems"]["toy"]["long"] == {"seconds": 600.0, "optimizers": ["adam", "hig"], "seeds": 3}
+
+
+@pytest.mark.parametrize(
+    ("flags", "says"),
+    [
+        (["--long", "0"], "--long 0: a budget is a positive, finite number of seconds"),
+        (["--long", "dipole=600"], "--long dipole=600: dipole is not in --problems"),
+        (["--long", "600", "--long-optimizers", "soap"], "--long-optimizers soap: soap is not in --optimizers"),
+        (["--long", "600", "--long-seeds", "0"], "--long-seeds 0: must be at least 1"),
+    ],
+)
+def test_a_bad_long_budget_is_one_line_before_any_run(tmp_path, no_runs, capsys, flags, says):
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "", "--trials", "1", "--root", str(tmp_path / "r")]
+    assert driver.main([*argv, *flags]) == 2
+    assert says in capsys.readouterr().err and not no_runs and not (tmp_path / "r").exists()

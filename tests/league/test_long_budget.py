@@ -1,0 +1,38 @@
+"""The long budget's table (higbench.results.long_budget) on hand-made runs: known medians."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from higbench.results.league import ROLES
+from higbench.results.long_budget import LONG_ROLES, format_long_budget, long_budget_table
+
+
+def _run(role, name, seed, val, test, status="completed", steps=100, seconds=600.0, task="oscillator"):
+    return {"league_role": role, "optimizer.name": name, "seed": seed, "final_val_loss": val, "final_test_loss": test,
+            "status": status, "steps": steps, "train_time_s": seconds, "task": task}  # fmt: skip
+
+
+def test_the_table_shows_every_seed_and_the_medians_best_first():
+    runs = pd.DataFrame([
+        _run("long", "hig", 0, 3e-5, 4e-5, steps=9000), _run("long", "hig", 1, 1e-5, 2e-5, steps=9100),
+        _run("long", "hig", 2, 2e-5, 3e-5, steps=8900),
+        _run("long-paper", "hig", 0, 1e-3, 1e-3), _run("long-paper", "hig", 1, math.nan, math.nan, status="diverged"),
+        _run("long-paper", "hig", 2, 2e-3, 2e-3),
+        _run("long", "adam", 0, 5e-4, 6e-4), _run("long", "adam", 1, 4e-4, 5e-4), _run("long", "adam", 2, 6e-4, 7e-4),
+        _run("confirm", "adam", 0, 1e-9, 1e-9),  # the league's own runs never enter the long table
+        _run("long", "adam", 3, 1e-9, 1e-9, status="interrupted"),  # nor an unfinished one
+    ])  # fmt: skip
+    table = long_budget_table(runs)
+    assert list(table["setting"]) == ["hig", "adam", "hig (paper)"]
+    assert list(table["median val"]) == [2e-5, 5e-4, 2e-3]  # the diverged seed counts as the worst: inf
+    assert table.loc[0, "test per seed"] == "4e-05, 2e-05, 3e-05" and table.loc[0, "updates per seed"] == "9000, 9100, 8900"
+    assert table.loc[2, "test per seed"] == "0.001, inf, 0.002" and list(table["seeds"]) == [3, 3, 3]
+    assert "long budget (--long)" in format_long_budget(runs)
+
+
+def test_no_long_runs_no_table_and_the_roles_reach_the_tables():
+    assert format_long_budget(pd.DataFrame([_run("confirm", "adam", 0, 1e-3, 1e-3)])) is None
+    assert set(LONG_ROLES) <= set(ROLES)  # exported to the tables with their role
