@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import re
-from collections.abc import Mapping
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
@@ -79,7 +78,7 @@ class Checked:
     """What ``validate`` found: the top-level keys typed, the problem node, the optimizer resolved."""
 
     run: RunConfig
-    problem: Mapping[str, Any]
+    problem: DictConfig  # read-only, its defaults filled in
     optimizer: OptimizerChoice
 
 
@@ -197,7 +196,7 @@ def validate(cfg: DictConfig | dict) -> Checked:
         if not torch.cuda.is_available():
             raise ConfigError("device", device, "CUDA is not available on this machine (use cpu or auto)")
     # init_from's file is read (and checked) once, by the plan: higbench.runner.rundir.final_weights
-    return Checked(top, {**problem, **data["problem"]}, optimizer)  # the problem's node, its defaults filled in
+    return Checked(top, _read_only({**problem, **data["problem"]}), optimizer)  # the problem's node, its defaults filled in
 
 
 def typed(cfg: DictConfig | dict) -> Checked:
@@ -206,7 +205,11 @@ def typed(cfg: DictConfig | dict) -> Checked:
     data = to_plain(cfg)
     run = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(RunConfig), data))
     problem = {**OmegaConf.to_container(OmegaConf.structured(problem_class(data["problem"]).Config)), **data["problem"]}
-    return Checked(run, problem, optimizer_choice(data["optimizer"]))
+    return Checked(run, _read_only(problem), optimizer_choice(data["optimizer"]))
+
+
+def _read_only(node: dict) -> DictConfig:
+    return OmegaConf.create(node, flags={"readonly": True})
 
 
 def max_threads() -> int:

@@ -44,7 +44,7 @@ from higbench.config import (
 from higbench.errors import ConfigError, dotted_get, fail, given_value
 from higbench.optim.choice import constructor_args, optimizer_class
 from higbench.runfile.reader import RUN_FILE
-from higbench.runner.plan import Plan, make_plan, planned
+from higbench.runner.plan import Plan, make_plan
 from higbench.runner.rundir import RunDir, check_output_dir, run_file_of
 
 MAX_PRECHECK_JOBS = 256  # larger sweeps: the first 256 jobs are checked up front, all in-job
@@ -327,7 +327,7 @@ def check_sweep(config: DictConfig) -> int | None:
         key = OmegaConf.to_yaml(sizing)
         if key not in seen:
             seen.add(key)
-            check_build(planned(task, job_checked, RunDir(sweep_dir / RUN_FILE, "hydra.sweep.dir")))
+            check_build(Plan.for_run(task, sweep_dir / RUN_FILE, checked=job_checked))
     return together
 
 

@@ -92,36 +92,26 @@ class Plan:
         return dataclasses.replace(self, parallel_jobs=int(parallel_jobs), stop_with_parent=stop_with_parent)
 
     @classmethod
-    def for_run(cls, cfg, run_path: str | Path, *, resume: bool = False, overrides=()) -> Plan:
-        """The plan of a config already validated (or vouched for: it is not checked again), for
-        code that calls ``train`` itself (tests, notebooks): its ``init_from`` weights or, with
-        ``resume``, its checkpoint loaded."""
+    def for_run(cls, cfg, run_path: str | Path, *, resume: bool = False, overrides=(), checked: Checked | None = None) -> Plan:
+        """The plan of a config already validated (``checked``: its validation) or vouched for (it
+        is not checked again: ``config.typed``), for code that calls ``train`` itself (tests,
+        notebooks) and the sweep's up-front check: its ``init_from`` weights or, with ``resume``,
+        its checkpoint loaded."""
         from higbench.config import to_plain
         from higbench.runfile.reader import UnreadableRunFile, read_head
 
-        task, run_dir = to_plain(cfg), RunDir(Path(run_path))
-        if not resume:
-            return planned(task, typed(task), run_dir, overrides=overrides)
-        try:
-            head = read_head(run_dir.run_file)
-        except UnreadableRunFile as exc:
-            raise ConfigError("resume", str(run_path), f"{run_path} is not a readable run file ({exc})") from None
-        state = checkpoint.load(head, str(run_path))
-        return planned(task, typed(task), run_dir, "resume", "", overrides, state)
-
-
-def planned(
-    task: dict, checked: Checked, run_dir: RunDir, policy: Policy = "new", why: str = "", overrides=(), state=None, sinks=None
-) -> Plan:
-    """A plan to train: its typed parts (``sinks``: its side sinks, resolved here unless given),
-    and its ``init_from`` run's final weights unless it continues from a checkpoint."""
-    init_from = task.get("init_from") if state is None else None
-    weights = final_weights(init_from, task["problem"]["name"]) if init_from else None
-    sinks = side_sink_specs(task) if sinks is None else sinks
-    problem = OmegaConf.create(dict(checked.problem), flags={"readonly": True})
-    parts = dict(run=checked.run, problem=problem, optimizer=checked.optimizer, sinks=MappingProxyType(sinks))
-    inputs = dict(initial_weights=weights, checkpoint=state)
-    return Plan(MappingProxyType(task), run_dir, policy, why, **parts, **inputs, overrides=tuple(overrides))
+        task, run_dir, state = to_plain(cfg), RunDir(Path(run_path)), None
+        checked = checked or typed(task)
+        if resume:
+            try:
+                head = read_head(run_dir.run_file)
+            except UnreadableRunFile as exc:
+                raise ConfigError("resume", str(run_path), f"{run_path} is not a readable run file ({exc})") from None
+            state = checkpoint.load(head, str(run_path))
+        weights = None if resume else final_weights(task.get("init_from"), task["problem"]["name"])
+        parts = dict(run=checked.run, problem=checked.problem, optimizer=checked.optimizer, sinks=side_sink_specs(task))
+        inputs = dict(initial_weights=weights, checkpoint=state)
+        return cls(MappingProxyType(task), run_dir, "resume" if resume else "new", **parts, **inputs, overrides=tuple(overrides))
 
 
 def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: bool, checked: Checked | None = None) -> Plan:
@@ -150,4 +140,8 @@ def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: b
         state = checkpoint.load(found.head, resume) if found.head else None
         sinks = side_sink_specs(config)
         run_dir.check_tensorboard_dir("tensorboard" in sinks)
-    return planned(config, checked, run_dir, found.policy, found.why, overrides, state, sinks)
+    # the inputs read once: a continued run's weights are its checkpoint's, else init_from's run's
+    weights = None if state is not None else final_weights(config.get("init_from"), config["problem"]["name"])
+    parts = dict(run=checked.run, problem=checked.problem, optimizer=checked.optimizer, sinks=sinks)
+    inputs = dict(initial_weights=weights, checkpoint=state)
+    return Plan(MappingProxyType(config), run_dir, found.policy, found.why, **parts, **inputs, overrides=overrides)

@@ -87,12 +87,14 @@ def run_file_of(resume: Any, run_dir: str | Path | None) -> Path:
     return run_file_path(Path(str(resume)).expanduser())
 
 
-def final_weights(path: str, problem_name: str) -> dict:
+def final_weights(path: str | None, problem_name: str) -> dict | None:
     """``init_from``: the final weights of another run, existing, readable, finished, of the same
-    problem (ConfigError otherwise). Their shapes are checked against the network in
-    ``runner.train`` once it is built, still before anything is written."""
+    problem (ConfigError otherwise; None where ``path`` is none). Their shapes are checked against
+    the network in ``runner.train`` once it is built, still before anything is written."""
     import numpy as np
 
+    if not path:
+        return None
     p = run_file_path(path)
     if not p.is_file():
         raise ConfigError("init_from", path, "no such run file")
