@@ -186,6 +186,19 @@ def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dic
     return {t: float(v) for t, v in found["target"].items()}, budgets, held_out
 
 
+def tuning_counts(runs: pd.DataFrame) -> str:
+    """The league's tuning trials in the tables, per problem and optimizer (studies x trials when
+    a tuning is whole; fewer while a piece is still under way)."""
+    tune = runs[runs["league_role"] == "tune"] if "league_role" in runs else runs.iloc[:0]
+    if tune.empty:
+        return "tuning: no league tuning trials in the tables yet"
+    lines = ["tuning trials in the tables (per optimizer: trials done; studies x trials when whole):"]
+    for problem, group in tune.groupby("problem.name", sort=True):
+        counts = group.groupby("optimizer.name").size()
+        lines.append(f"  {problem}: {len(group)} trials: " + ", ".join(f"{o} {n}" for o, n in counts.items()))
+    return "\n".join(lines)
+
+
 def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     """The scores of the roots' tables (``tables.read``: merged when several), written to ``out``."""
     runs, curves = tables.read(roots)
@@ -194,7 +207,8 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
         targets, budgets, held_out = scoring_targets(runs, curves)
         text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
         long = format_long_budget(runs)
-        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), text, *([long] if long else [])])
+        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs), text,
+                             *([long] if long else [])])  # fmt: skip
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))

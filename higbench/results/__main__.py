@@ -108,7 +108,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--columns", help="extra columns to show, comma-separated (e.g. optimizer.lr,batch_size,mean_update_s)")
     p.add_argument("--pattern", default=RUN_FILE_GLOB, help=f"run file name pattern (default: {RUN_FILE_GLOB})")
     p.add_argument(
-        "--figure-runs", action="store_true", help="also list the runs `make figures` made (under figures-runs/; off by default)"
+        "--figure-runs",
+        action="store_true",
+        help="also list the runs `make figures` and `higbench-league` launched (under figures-runs/; off by default)",
     )
     p.add_argument("--jobs", type=int, default=1, help="processes reading run files (for thousands of files)")
     p.add_argument("--csv", metavar="FILE", help="also write the full filtered table (all columns) to FILE")
@@ -411,7 +413,11 @@ def _summary_line(df: pd.DataFrame, total: int, roots: list[Path], args: argpars
     print(
         f"{len(df)} of {total} runs under {', '.join(map(str, roots))}"
         + (f" ({', '.join(f'{n} {s}' for s, n in counts.items())})" if counts else "")
-        + (f"; {left_out} run(s) of `make figures` left out (--figure-runs)" if left_out else "")
+        + (
+            f"; {left_out} run(s) launched by `make figures` or `higbench-league` left out (under figures-runs/; --figure-runs)"
+            if left_out
+            else ""
+        )
     )
 
 

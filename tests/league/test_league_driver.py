@@ -608,7 +608,11 @@ def test_the_long_budget_trains_the_chosen_and_shipped_settings_longer_on_its_ow
     assert {j.overrides["budget.seconds"] for j in long} == {600.0} and sorted({j.seed for j in long}) == [0, 1, 2]
     assert all(j.overrides.get("optimizer.lr") == 0.01 for j in long if j.sweep.startswith("long/"))
     (manifest,) = (tmp_path / "manifests").glob("*.json")
-    assert json.loads(manifest.read_text())["problems"]["toy"]["long"] == {"seconds": 600.0, "optimizers": ["adam", "hig"], "seeds": 3}
+    assert json.loads(manifest.read_text())["problems"]["toy"]["long"] == {
+        "seconds": 600.0,
+        "optimizers": ["adam", "hig"],
+        "seeds": 3,
+    }
 
 
 @pytest.mark.parametrize(

@@ -36,3 +36,13 @@ def test_the_table_shows_every_seed_and_the_medians_best_first():
 def test_no_long_runs_no_table_and_the_roles_reach_the_tables():
     assert format_long_budget(pd.DataFrame([_run("confirm", "adam", 0, 1e-3, 1e-3)])) is None
     assert set(LONG_ROLES) <= set(ROLES)  # exported to the tables with their role
+
+
+def test_the_report_counts_the_tuning_trials_a_piece_has_made_per_optimizer():
+    from higbench.league.report import tuning_counts
+
+    runs = pd.DataFrame({"league_role": ["tune"] * 5 + ["target-tune", "confirm"],
+                         "problem.name": ["toy", "toy", "toy", "dipole", "toy", "toy", "toy"],
+                         "optimizer.name": ["adam", "adam", "hig", "lm", "hig", "adam", "adam"]})  # fmt: skip
+    assert tuning_counts(runs).splitlines()[1:] == ["  dipole: 1 trials: lm 1", "  toy: 4 trials: adam 2, hig 2"]
+    assert tuning_counts(runs.iloc[5:]) == "tuning: no league tuning trials in the tables yet"
