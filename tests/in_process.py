@@ -194,5 +194,5 @@ def launch_in_process(monkeypatch) -> list[list[str]]:
                     code = exc.code or 0
         return subprocess.CompletedProcess(cmd, code)
 
-    monkeypatch.setattr(jobs.subprocess, "run", run)
+    monkeypatch.setattr(jobs, "run_to_end", run)
     return launched

@@ -405,13 +405,20 @@ def _run_multirun(jobs_file: Path, sweep_dir: Path, extra: list[str]) -> str:
         cmd = multirun_command(jobs_file, sweep_dir, extra)
         out.write(" ".join(cmd) + "\n\n")
         out.flush()
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=_checkout_env())
-        try:
-            proc.wait()
-        except KeyboardInterrupt:
-            close_on_interrupt(proc)
-            raise
+        proc = run_to_end(cmd, stdout=out, stderr=subprocess.STDOUT, env=_checkout_env())
     return "ok" if proc.returncode == 0 else f"exit code {proc.returncode}, see {sweep_dir / 'launch.log'}"
+
+
+def run_to_end(cmd: list[str], **kwargs) -> subprocess.Popen:
+    """``subprocess.run`` for a multirun, except when the driver is stopped: its job then gets
+    time to close its run (``close_on_interrupt``) rather than a kill after 0.25 s."""
+    proc = subprocess.Popen(cmd, **kwargs)
+    try:
+        proc.wait()
+    except KeyboardInterrupt:
+        close_on_interrupt(proc)
+        raise
+    return proc
 
 
 CLOSE_S = 60.0  # how long a stopped driver waits for its run to write its last rows and checkpoint

@@ -578,18 +578,7 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
         for o, why in refused[problem].items():
             print(f"[league] {problem}: {o} left out: {why}", file=sys.stderr)
         plans[problem] = (seconds, n, variants, usable)
-    references, longs = references_of(args), long_budgets(args)
-    total, runner_seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
-    for problem in [] if args.targets_only else problems:  # the long budget's runs, each tuned setting assumed found
-        usable = plans[problem][3]
-        extra = long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
-        total, runner_seconds = total + len(extra), runner_seconds + sum(job_seconds(j) for j in extra)
-    if args.targets_only:
-        total, runner_seconds = 0, 0.0
-    for problem in problems if reading_runs else []:
-        setting = [j for r in references for j in planned_target_jobs(problem, r, plans[problem][1], args.studies, seeds,
-                                                                       plans[problem][2], nodes[problem])]  # fmt: skip
-        total, runner_seconds = total + len(setting), runner_seconds + sum(job_seconds(j) for j in setting)
+    total, runner_seconds = protocol_size(args, plans, problems if reading_runs else [], paper, seeds, nodes)
     progress = CountProgress(not quiet and not args.report_only, "league", total)
     runner = Runner(root, args.jobs, launcher, overrides, progress)
     runner.left_seconds = runner_seconds
@@ -608,40 +597,8 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     stopped: BaseException | None = None
     try:
         for problem in problems if reading_runs else []:
-            seconds, n, variants, usable = plans[problem]
-            given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
-            targets = target_setting(problem, references, n, args.studies, seeds, variants, nodes[problem], phase)
-            if args.targets_only:
-                manifest["problems"][problem] = {"target_setting": targets.to_dict("records"), "references": references}
-                continue
-            derived = league_budget(targets, problem)
-            seconds = seconds if given or derived is None else derived
-            if references and derived is None:
-                print(f"[league] {problem}: the target setting gave no validation target; budget {seconds:g} s "
-                      "(--seconds or problem.league_seconds), tuning by the final validation loss", file=sys.stderr)  # fmt: skip
-            target = targets.set_index("task")["target"].get(problem) if len(targets) else None
-            tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
-            flat = [j for jobs in tune.values() for j in jobs]
-            phase([("tune", j) for j in flat], f"{problem} tuning")
-            picks = {o: choose(jobs, target) for o, jobs in tune.items()}
-            chosen = {o: pick[0] for o, pick in picks.items()}
-            confirm = [j for o in usable if chosen[o] is not None
-                       for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
-            confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
-            phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
-            long = long_budget_jobs(args, longs, problem, usable, paper, chosen, seeds)
-            if long:
-                phase([(j.sweep.split("/")[0], j) for j in long], f"{problem} long budget")
-            manifest["problems"][problem] = {"seconds": seconds, "budget_from": "--seconds" if given or derived is None
-                                             else "target setting", "trials": n, "studies": args.studies,
-                                             "targets": nodes[problem].get("targets"), "held_out": variants,
-                                             "set": {o: extra_overrides(problem, o) for o in usable},
-                                             "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
-                                             "target_setting": targets.to_dict("records"),
-                                             "left_out": refused[problem],
-                                             "long": {"seconds": longs.get(problem, longs.get(None)),
-                                                      "optimizers": sorted({j.overrides["optimizer"] for j in long}),
-                                                      "seeds": args.long_seeds} if long else None}  # fmt: skip
+            manifest["problems"][problem] = league_problem(args, problem, plans[problem], budgets, nodes[problem], paper,
+                                                           refused[problem], seeds, phase)  # fmt: skip
     except (KeyboardInterrupt, SystemExit) as exc:  # SIGINT, SIGTERM (``stop_on_sigterm``), a phase not done
         stopped = exc
         manifest["stopped"] = str(exc) or type(exc).__name__
@@ -649,6 +606,75 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
             resolve([j for _, j in all_jobs], {**Earlier.index(), **run_index(root)})
     finally:
         progress.close()
+    publish(args, roots, out, manifest, all_jobs, tuning_seeds)
+    if stopped is not None:
+        done = sum(j.done for _, j in all_jobs)
+        print(f"[league] stopped ({manifest['stopped']}): the {done} run(s) done so far are in the tables of {root} "
+              f"and {out}; the same command continues, reusing them", file=sys.stderr)  # fmt: skip
+        raise stopped
+    return 0
+
+
+def protocol_size(args, plans: dict, setting_problems: list[str], paper, seeds, nodes) -> tuple[int, float]:
+    """(runs, training seconds) the progress line counts: the league's phases, the long budget
+    (each tuned setting assumed found) and the target setting of the problems it reads."""
+    references, longs = references_of(args), long_budgets(args)
+    total, seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
+    for problem in [] if args.targets_only else plans:
+        usable = plans[problem][3]
+        extra = long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
+        total, seconds = total + len(extra), seconds + sum(job_seconds(j) for j in extra)
+    if args.targets_only:
+        total, seconds = 0, 0.0
+    for problem in setting_problems:
+        _, n, variants, _ = plans[problem]
+        setting = [j for r in references for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants,
+                                                                       nodes[problem])]  # fmt: skip
+        total, seconds = total + len(setting), seconds + sum(job_seconds(j) for j in setting)
+    return total, seconds
+
+
+def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase) -> dict:
+    """One problem's phases (``phase`` runs each): target setting, tuning, confirmation, the long
+    budget. Returns its manifest entry."""
+    seconds, n, variants, usable = plan
+    references, longs = references_of(args), long_budgets(args)
+    given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
+    targets = target_setting(problem, references, n, args.studies, seeds, variants, node, phase)
+    if args.targets_only:
+        return {"target_setting": targets.to_dict("records"), "references": references}
+    derived = league_budget(targets, problem)
+    seconds = seconds if given or derived is None else derived
+    if references and derived is None:
+        print(f"[league] {problem}: the target setting gave no validation target; budget {seconds:g} s "
+              "(--seconds or problem.league_seconds), tuning by the final validation loss", file=sys.stderr)  # fmt: skip
+    target = targets.set_index("task")["target"].get(problem) if len(targets) else None
+    tune = {o: tuning_jobs(problem, o, n, seconds, args.studies) for o in usable}
+    flat = [j for jobs in tune.values() for j in jobs]
+    phase([("tune", j) for j in flat], f"{problem} tuning")
+    picks = {o: choose(jobs, target) for o, jobs in tune.items()}
+    chosen = {o: pick[0] for o, pick in picks.items()}
+    confirm = [j for o in usable if chosen[o] is not None
+               for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
+    confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+    phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
+    long = long_budget_jobs(args, longs, problem, usable, paper, chosen, seeds)
+    if long:
+        phase([(j.sweep.split("/")[0], j) for j in long], f"{problem} long budget")
+    return {"seconds": seconds, "budget_from": "--seconds" if given or derived is None else "target setting",
+            "trials": n, "studies": args.studies, "targets": node.get("targets"), "held_out": variants,
+            "set": {o: extra_overrides(problem, o) for o in usable},
+            "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
+            "target_setting": targets.to_dict("records"), "left_out": refused,
+            "long": {"seconds": longs.get(problem, longs.get(None)),
+                     "optimizers": sorted({j.overrides["optimizer"] for j in long}),
+                     "seeds": args.long_seeds} if long else None}  # fmt: skip
+
+
+def publish(args, roots: list[Path], out: Path, manifest: dict, all_jobs: list[tuple[str, Job]], tuning_seeds) -> None:
+    """The manifest (beside the runs and with the tables), the root's tables, the report folder's
+    merged tables and the report; a line naming the runs not done."""
+    root = roots[0]
     if not args.report_only:
         manifest["calibration"].append(calibration())
     manifest["runs"] = [{"role": role, "job": j.sweep, "study": study_and_trial(j)[0], "trial": study_and_trial(j)[1],
@@ -669,9 +695,3 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     missing = [j for _, j in all_jobs if not j.done]
     if missing:
         print(f"[league] {len(missing)} run(s) not done: {', '.join(sorted({j.sweep for j in missing}))}", file=sys.stderr)
-    if stopped is not None:
-        done = sum(j.done for _, j in all_jobs)
-        print(f"[league] stopped ({manifest['stopped']}): the {done} run(s) done so far are in the tables of {root} "
-              f"and {out}; the same command continues, reusing them", file=sys.stderr)  # fmt: skip
-        raise stopped
-    return 0

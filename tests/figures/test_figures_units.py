@@ -151,7 +151,7 @@ def test_launch_sends_every_job_in_one_multirun_longest_first(tmp_path, monkeypa
 
         return Done()
 
-    monkeypatch.setattr(runs.subprocess, "run", fake_run)
+    monkeypatch.setattr(runs, "run_to_end", fake_run)
     short = [{"optimizer": o, "seed": s, "budget.seconds": 15.0} for o in ("adam", "sgd") for s in (0, 1)]
     long = [{"optimizer": "hig", "seed": 0, "batch_size": 128, "budget.seconds": 240.0}]
     written = runs.launch(_jobs(short + long), tmp_path, n_jobs=3, launcher="joblib", log=lambda *a: None)
@@ -179,7 +179,7 @@ def test_missing_runs_go_out_as_one_multirun_longest_first(tmp_path, monkeypatch
     from higbench import jobs as runs
 
     calls = []
-    monkeypatch.setattr(runs.subprocess, "run", lambda cmd, **kw: calls.append(cmd) or SimpleNamespace(returncode=0))
+    monkeypatch.setattr(runs, "run_to_end", lambda cmd, **kw: calls.append(cmd) or SimpleNamespace(returncode=0))
     jobs = [Job("f", "s", {"budget.seconds": t, "seed": i}, seed=i) for i, t in enumerate([20, 90, 45])]
     runs.launch(jobs, tmp_path, n_jobs=2, log=lambda _: None)
     assert len(calls) == 1, calls

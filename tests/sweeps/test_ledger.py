@@ -170,7 +170,7 @@ def test_a_job_another_driver_runs_is_waited_for_not_run_twice(tmp_path, monkeyp
             cli.main([*job.override_list(), f"hydra.run.dir={tmp_path / 'a'}"])
             claim.unlink()
 
-    monkeypatch.setattr(runs.subprocess, "run", run)
+    monkeypatch.setattr(runs, "run_to_end", run)
     monkeypatch.setattr(runs, "pause", worker_a_finishes)
     left = run_missing([job], tmp_path, log=lambda text: None)
     assert left == [] and multiruns == []
