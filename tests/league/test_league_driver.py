@@ -542,13 +542,20 @@ def test_a_targets_only_piece_and_a_full_piece_share_a_report_folder(tmp_path, n
     assert driver.main(argv) == 0
 
 
-@pytest.mark.process  # one real run: the tables read what it wrote
 def test_a_stopped_league_keeps_the_runs_it_finished_and_the_same_command_continues(tmp_path, monkeypatch, capsys):
     """Ctrl-C (or SIGTERM, or a failed run) in the middle of a phase: the runs finished so far are
     written to the tables of the root and of the report folder, with their roles, and the manifest
-    says it stopped; the same command then launches only what is left. One real toy run of 1 s."""
+    says it stopped; the same command then launches only what is left. One real toy run of 1 s, in this process."""
+    from in_process import launch_in_process, restored_process_state
+
     from higbench import jobs as jobs_module
 
+    launch_in_process(monkeypatch)  # the one run trains in this process
+    with restored_process_state():
+        _stop_a_league_after_one_run(tmp_path, monkeypatch, capsys, jobs_module)
+
+
+def _stop_a_league_after_one_run(tmp_path, monkeypatch, capsys, jobs_module):
     real = driver.run_missing
 
     def stopped_after_one(jobs, root, **kw):
