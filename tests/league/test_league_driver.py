@@ -594,7 +594,9 @@ def test_a_stopped_driver_gives_its_running_job_time_to_close_its_run(tmp_path):
     from higbench.jobs import close_on_interrupt
 
     closed = tmp_path / "closed"
-    job = ("import pathlib, time\ntry:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
+    # a run installs its own SIGINT handler (a shell's background job may inherit SIGINT ignored)
+    job = ("import pathlib, signal, time\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+           "try:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
            f"    pathlib.Path({str(closed)!r}).write_text('rows written')\n    raise SystemExit(130)\n")  # fmt: skip
     proc = subprocess.Popen([sys.executable, "-c", job])
     close_on_interrupt(proc)
