@@ -590,15 +590,20 @@ def test_a_stopped_driver_gives_its_running_job_time_to_close_its_run(tmp_path):
     the run does on SIGINT), not subprocess.run's kill after a quarter of a second."""
     import subprocess
     import sys
+    import time
 
     from higbench.jobs import close_on_interrupt
 
-    closed = tmp_path / "closed"
+    closed, ready = tmp_path / "closed", tmp_path / "ready"
     # a run installs its own SIGINT handler (a shell's background job may inherit SIGINT ignored)
     job = ("import pathlib, signal, time\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+           f"pathlib.Path({str(ready)!r}).touch()\n"
            "try:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
            f"    pathlib.Path({str(closed)!r}).write_text('rows written')\n    raise SystemExit(130)\n")  # fmt: skip
     proc = subprocess.Popen([sys.executable, "-c", job])
+    while not ready.exists():  # its handler is in place: a loaded machine may take seconds to start Python
+        assert proc.poll() is None
+        time.sleep(0.05)
     close_on_interrupt(proc)
     assert proc.returncode == 130 and closed.read_text() == "rows written"
 
