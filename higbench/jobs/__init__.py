@@ -411,8 +411,8 @@ def _run_multirun(jobs_file: Path, sweep_dir: Path, extra: list[str]) -> str:
 
 def run_to_end(cmd: list[str], **kwargs) -> subprocess.Popen:
     """``subprocess.run`` for a multirun, except when the driver is stopped: its job then gets
-    time to close its run (``close_on_interrupt``) rather than a kill after 0.25 s."""
-    proc = subprocess.Popen(cmd, **kwargs)
+    time to close its runs (``close_on_interrupt``) rather than a kill after 0.25 s."""
+    proc = start_job(cmd, **kwargs)
     try:
         proc.wait()
     except KeyboardInterrupt:
@@ -421,23 +421,32 @@ def run_to_end(cmd: list[str], **kwargs) -> subprocess.Popen:
     return proc
 
 
-CLOSE_S = 60.0  # how long a stopped driver waits for its run to write its last rows and checkpoint
+def start_job(cmd: list[str], **kwargs) -> subprocess.Popen:
+    """The job in a process group of its own, so that the driver alone decides when it stops, and
+    the stop reaches the launcher's workers too (joblib's), not only the sweep's parent."""
+    return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+
+
+CLOSE_S = 60.0  # how long a stopped driver waits for its runs to write their last rows and checkpoint
 
 
 def close_on_interrupt(proc: subprocess.Popen) -> None:
-    """The driver was stopped (Ctrl-C reaches the whole process group; SIGTERM only the driver):
-    the running job gets one SIGINT, if Ctrl-C did not already reach it, and time to stop after its
-    update and close its run file (resumable), rather than subprocess.run's kill after 0.25 s."""
-    try:
-        proc.wait(timeout=2.0)
-        return
-    except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGINT)
+    """The driver was stopped (Ctrl-C or SIGTERM): the job's whole group gets one SIGINT, as Ctrl-C
+    gives a terminal's foreground group, so every running run stops after its update and closes its
+    run file (resumable) and no launcher starts another; what still runs after ``CLOSE_S`` is killed."""
+    _signal_group(proc, signal.SIGINT)
     try:
         proc.wait(timeout=CLOSE_S)
     except subprocess.TimeoutExpired:
-        proc.kill()
+        _signal_group(proc, signal.SIGKILL)
         proc.wait()
+
+
+def _signal_group(proc: subprocess.Popen, signum: int) -> None:
+    try:
+        os.killpg(proc.pid, signum)
+    except ProcessLookupError:  # the job and its workers are gone already
+        pass
 
 
 def _run_array(jobs_file: Path, sweep_dir: Path, n: int, launcher: Launcher, extra: list[str]) -> str:

@@ -585,23 +585,27 @@ def _stop_a_league_after_one_run(tmp_path, monkeypatch, capsys, jobs_module):
 
 
 @pytest.mark.process  # the job is a process: the point
-def test_a_stopped_driver_gives_its_running_job_time_to_close_its_run(tmp_path):
-    """SIGTERM reaches the driver alone: its job gets SIGINT and time to close its run file (what
-    the run does on SIGINT), not subprocess.run's kill after a quarter of a second."""
+def test_a_stopped_driver_gives_its_running_job_and_its_workers_time_to_close_their_runs(tmp_path):
+    """SIGTERM reaches the driver alone: its job's whole group gets SIGINT and time to close its run
+    files (what a run does on SIGINT), not subprocess.run's kill after a quarter of a second. The
+    stand-in job is a launcher's parent that ignores SIGINT (as a sweep started in the background
+    does) and waits for its worker: only a signal to the group reaches the run."""
     import subprocess
     import sys
     import time
 
-    from higbench.jobs import close_on_interrupt
+    from higbench.jobs import close_on_interrupt, start_job
 
     closed, ready = tmp_path / "closed", tmp_path / "ready"
     # a run installs its own SIGINT handler (a shell's background job may inherit SIGINT ignored)
-    job = ("import pathlib, signal, time\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
-           f"pathlib.Path({str(ready)!r}).touch()\n"
-           "try:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
-           f"    pathlib.Path({str(closed)!r}).write_text('rows written')\n    raise SystemExit(130)\n")  # fmt: skip
-    proc = subprocess.Popen([sys.executable, "-c", job])
-    while not ready.exists():  # its handler is in place: a loaded machine may take seconds to start Python
+    worker = ("import pathlib, signal, time\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+              f"pathlib.Path({str(ready)!r}).touch()\n"
+              "try:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    time.sleep(0.5)\n"
+              f"    pathlib.Path({str(closed)!r}).write_text('rows written')\n    raise SystemExit(130)\n")  # fmt: skip
+    parent = (f"import signal, subprocess, sys\nsignal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+              f"sys.exit(subprocess.call([sys.executable, '-c', {worker!r}]))\n")  # fmt: skip
+    proc = start_job([sys.executable, "-c", parent])
+    while not ready.exists():  # the worker's handler is in place: a loaded machine may take seconds to start Python
         assert proc.poll() is None
         time.sleep(0.05)
     close_on_interrupt(proc)
