@@ -309,7 +309,10 @@ def long_budgets(args) -> dict[str | None, float]:
 
 
 def check_long(args, longs: dict, optimizers: list[str], problems: list[str]) -> None:
-    """--long: a positive, finite budget per named problem, for optimizers the league tunes."""
+    """--long: a positive, finite budget per named problem, for optimizers the league tunes, in
+    a league that tunes (--targets-only stops before any setting is chosen)."""
+    if longs and args.targets_only:
+        fail(f"--long {args.long}: --targets-only trains no league setting to train longer")
     for problem, seconds in longs.items():
         if problem is not None and problem not in problems:
             fail(f"--long {args.long}: {problem} is not in --problems")

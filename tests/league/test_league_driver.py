@@ -640,6 +640,7 @@ def test_the_long_budget_trains_the_chosen_and_shipped_settings_longer_on_its_ow
         (["--long", "dipole=600"], "--long dipole=600: dipole is not in --problems"),
         (["--long", "600", "--long-optimizers", "soap"], "--long-optimizers soap: soap is not in --optimizers"),
         (["--long", "600", "--long-seeds", "0"], "--long-seeds 0: must be at least 1"),
+        (["--long", "600", "--targets-only"], "--long 600: --targets-only trains no league setting"),
     ],
 )
 def test_a_bad_long_budget_is_one_line_before_any_run(tmp_path, no_runs, capsys, flags, says):
