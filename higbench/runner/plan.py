@@ -133,8 +133,9 @@ def make_plan(task: dict, output_dir: Path, overrides: list[str], *, multirun: b
         if found.fresh:
             config = {**task, "resume": None}
         else:  # a stored config: someone else's file (a sweep job's is its own composed one)
-            stored = task if found.stored_yaml is None else found.stored_yaml
-            config = stored_task(stored, task, overrides, resume, restart=found.policy == "restart")
+            theirs = found.stored_yaml is not None  # a sweep job's own config names the user's files
+            stored = found.stored_yaml if theirs else task
+            config = stored_task(stored, task, overrides, resume, restart=found.policy == "restart" and theirs)
         # a continued run's weights are its checkpoint's: a stored init_from is a record, never opened
         checked = validate({**config, "init_from": None} if found.head else config)
         state = checkpoint.load(found.head, resume) if found.head else None

@@ -291,6 +291,23 @@ def test_dir_of_a_run_killed_at_creation_can_be_started_again(tmp_path):
     assert meta["status"] == "completed" and meta["config"]["optimizer"]["name"] == "sgd"
 
 
+def test_a_sweep_job_killed_at_creation_starts_again_from_its_own_config_and_its_init_from(tmp_path):
+    """resume=true on a sweep whose job died creating its file: the job's config is the one
+    composed now (its init_from the user's, from a config file or the command line), not a
+    stored one, so its init_from is opened as given, never refused as a stored config's path."""
+    from omegaconf import OmegaConf
+
+    from higbench.runner.plan import make_plan
+
+    donor = tmp_path / "donor" / "run.h5"
+    train_here(compose_here(["problem=toy", "optimizer=sgd", "budget.max_updates=3", *FAST]), donor)
+    task = compose_here(["problem=toy", "optimizer=sgd", "budget.max_updates=3", "resume=true", *FAST])
+    task = OmegaConf.to_container(task, resolve=True) | {"init_from": str(donor)}  # as a config file sets it
+    stub = _killed_at_creation(tmp_path / "sweep" / "0")
+    plan = make_plan(task, stub.parent, ["resume=true"], multirun=True)
+    assert plan.policy == "restart" and plan.initial_weights is not None
+
+
 @pytest.mark.process
 @pytest.mark.slow
 def test_killed_before_first_checkpoint(tmp_path):
