@@ -8,7 +8,7 @@ examples:
   higbench-league --problems poisson --set poisson/hig:device=cuda      # HIG on a GPU
   higbench-league --launcher submitit_slurm --launcher-set partition=gpu --launcher-set timeout_min=60
   higbench-league --report-only --root runs-a --root runs-b             # merge two machines' tables, train nothing
-  higbench-league --problems toy --root outputs/league --root docs/results/league/cpu \
+  higbench-league --problems toy --root outputs/league --root docs/results/league/cpu \\
       --out docs/results/league/cpu                                     # add a piece to a published league
 
 Per-problem protocol: ``--trials 4,toy=16`` (4 trials, 16 on the toy) and likewise ``--seconds``;
