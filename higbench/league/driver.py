@@ -169,7 +169,7 @@ def done_runs(jobs: list[Job]) -> tuple[pd.DataFrame, pd.DataFrame]:
     curves = pd.concat([p[1] for p in parts], ignore_index=True)
     by_path = {str(Path(j.path)): j for j in done}
     runs = runs.assign(trial=runs["path"].map(lambda p: by_path[str(Path(p))].sweep))
-    return runs.assign(task=runs.apply(league.task_label, axis=1)), curves
+    return runs.assign(task=runs.assign(league_job=runs["trial"]).apply(league.task_label, axis=1)), curves
 
 
 def choose(jobs: list[Job], target: float | None = None) -> tuple[dict | None, str]:

@@ -104,11 +104,22 @@ def has_paper_settings(problem: str, optimizer: str) -> bool:
 
 
 def problem_config(problem: str) -> dict:
-    """The composed problem node (targets, budget, variants) of ``problem``."""
+    """The composed problem node (targets, budgets, variants) of ``problem``, with the --set
+    overrides of ``problem.*`` that every job of it trains with, so that the driver reads what
+    the runs do (``--set problem.target_seconds=2``: the target setting's budget). A --set value
+    that does not compose is left to ``check_set``, which names it."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
     from higbench.jobs import compose, hydra_conf
 
+    sets = [f"{key}={fmt(value)}" for scope, key, value in EXTRA
+            if scope in (None, problem) and key.lstrip("+~").startswith("problem.")]  # fmt: skip
     with hydra_conf():
-        return compose((f"problem={problem}",))["problem"]
+        try:
+            return compose((f"problem={problem}", *sets))["problem"]
+        except (HydraException, OmegaConfBaseException):
+            return compose((f"problem={problem}",))["problem"]
 
 
 def has_validation(problem: str, node: dict) -> bool:
@@ -260,7 +271,7 @@ def variant_overrides(variant: str) -> dict:
     return dict(item.split("=", 1) for item in variant.split())
 
 
-TUNE_ROLES = ("tune", "target-tune")  # a league tuning trial; a reference's trial in the target setting
+TUNE_ROLES = league.TUNE_ROLES
 RERUN_ROLE = league.TARGET_ROLE  # a reference's tuned setting rerun on the confirmation seeds at the target-setting budget
 
 

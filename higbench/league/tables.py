@@ -108,12 +108,12 @@ def runs_table(root: Path, runs: pd.DataFrame, roles: Mapping[str, dict]) -> pd.
     table = runs.assign(
         run=runs["path"].map(lambda p: Path(p).resolve().relative_to(base).as_posix()),
         identity=runs["config_id"],
-        task=runs.apply(league.task_label, axis=1),
         hardware=hardware(runs),
         **{"env.load_1min": runs.get("env.load_at_finish", pd.Series(None, index=runs.index)).map(load_1min)},
     )
     for key in ("league_role", "league_job", "study", "trial"):
         table[key] = table["identity"].map(lambda i, key=key: roles[i][key])
+    table["task"] = table.apply(league.task_label, axis=1)  # the job names its variant
     for key in ("study", "trial"):  # whole numbers, empty for confirmation runs (not 0.0)
         table[key] = pd.to_numeric(table[key], errors="coerce").astype("Int64")
     for column in RUN_COLUMNS:

@@ -57,6 +57,7 @@ HIG = "hig"
 ROLES = ("tune", "confirm", "paper", "default", "target-tune", "target", *LONG_ROLES)  # league_role, where the driver records it
 TARGET_ROLE = "target"  # a target-setting rerun: a reference optimizer's tuned setting at the target-setting budget
 SCORED_ROLES = ("confirm", "paper", "default")
+TUNE_ROLES = ("tune", "target-tune")  # a league tuning trial; a reference's trial in the target setting
 TUNING_SEED_BASE = 1000  # tuning seeds are 1000 + study; confirmation seeds stay below
 MAX_STUDIES = 1000
 TUNING_SEEDS = (TUNING_SEED_BASE,)  # study 0's: the driver before studies; scoring leaves out every seed >= 1000
@@ -205,11 +206,19 @@ def _override_items(overrides: str) -> list[tuple[str, str]]:
 
 
 def task_label(row: pd.Series) -> str:
-    """The problem and its variant: 'toy', or 'toy gamma=0.001' for a held-out variant (the
-    run's ``problem.*`` overrides)."""
-    variant = sorted(
-        f"{k.removeprefix('problem.')}={v}" for k, v in _override_items(row.get("overrides")) if k.startswith("problem.")
-    )
+    """The problem and its variant: 'toy', or 'toy gamma=0.001' for a held-out variant. A league
+    job names its variant (``<role>/<problem>/<variant or base>/...``; tuning is on the problem),
+    so a ``--set problem.*`` that every job of the problem carries is not a variant; without the
+    job's name (an older league's runs.csv), the run's ``problem.*`` overrides are."""
+    job = row.get("league_job")
+    if isinstance(job, str) and job:
+        parts = job.split("/")
+        named = parts[2] if parts[0] not in TUNE_ROLES and len(parts) > 3 and parts[2] != "base" else ""
+        variant = sorted(item.removeprefix("problem.") for item in named.split())
+    else:
+        variant = sorted(
+            f"{k.removeprefix('problem.')}={v}" for k, v in _override_items(row.get("overrides")) if k.startswith("problem.")
+        )
     return " ".join([str(row["problem.name"]), *variant])
 
 

@@ -334,6 +334,17 @@ def test_a_list_in_set_reaches_the_jobs_as_a_list_not_a_quoted_string(tmp_path, 
     assert "optimizer.betas=[0.8,0.99]" in job.launch_overrides()
 
 
+def test_a_problem_key_in_set_is_what_the_driver_reads_too(tmp_path, no_runs):
+    """`--set problem.target_seconds=2` reached the jobs' config (which no run reads) while the
+    driver kept the shipped 10 s for the target-setting runs: silently not what was asked."""
+    argv = ["--problems", "toy", "--optimizers", "adam", "--references", "adam", "--paper", "", "--trials", "1",
+            "--studies", "1", "--seeds", "5", "--variants", "0", "--targets-only", "--root", str(tmp_path),
+            "--set", "problem.target_seconds=2"]  # fmt: skip
+    assert driver.main(argv) == 0
+    budgets = {j.overrides["budget.seconds"] for jobs, _ in no_runs for j in jobs}
+    assert budgets == {2.0}
+
+
 def test_held_out_through_set_is_the_league_s_own(tmp_path, no_runs, capsys):
     argv = ["--problems", "toy", "--optimizers", "adam", "--root", str(tmp_path / "r"), "--set", "toy:problem.held_out=[{a:1}]"]
     assert driver.main(argv) == 2

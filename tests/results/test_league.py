@@ -295,6 +295,19 @@ def test_more_trials_keep_the_first_ones():
     assert league.sobol_trials(space, 8)[:4] == league.sobol_trials(space, 4)
 
 
+def test_a_task_is_its_job_s_variant_not_every_problem_override():
+    """`--set toy:++problem.val_size=256` (the driver's own advice for a problem without a
+    validation set) reaches every job of the toy: it is no variant, or no task is 'toy' and the
+    target setting finds no target. Without a job name, the overrides are the variant."""
+    sets = "problem=toy optimizer=adam ++problem.val_size=256"
+    rows = [("confirm/toy/base/adam", sets, "toy"), ("tune/toy/adam/0/3", sets, "toy"),
+            ("target/toy/problem.gamma=0.01/adam", f"{sets} problem.gamma=0.01", "toy gamma=0.01"),
+            (None, "problem=toy problem.gamma=0.001", "toy gamma=0.001")]  # fmt: skip
+    for job, overrides, task in rows:
+        row = pd.Series({"league_job": job, "overrides": overrides, "problem.name": "toy"})
+        assert league.task_label(row) == task, job
+
+
 def test_two_settings_under_one_league_label_are_refused(tmp_path, capsys):
     """Two confirmed configurations of one optimizer on one task would be scored as one setting."""
     from higbench.results.__main__ import main
