@@ -210,12 +210,38 @@ def _summarise(
     attrs = dict(run.attrs)
     if "format_version" not in attrs or "config" not in attrs:
         raise ValueError("not a higbench run file (no format_version/config attributes)")
-    row: dict = {}
     attrs.pop("config")
     config = run.config  # parsed by the reader, with bounds (an alias bomb is refused there)
     if thresholds is None:  # the run's own problem's targets (stored, else shipped)
         thresholds = for_problem(config if isinstance(config, dict) else attrs.get("problem", ""))
-    row["config_id"] = config_id(config) if isinstance(config, dict) else None
+    row = _record_columns(config, attrs)
+    curves, ragged = _cut(run.tables.get("curves", {}))
+    if ragged:  # a writer stopped between columns: the last full row is the final one
+        kept = ragged.pop("kept")
+        longer = ", ".join(f"{k} ({v})" for k, v in sorted(ragged.items()))
+        row["curves_note"] = f"curve columns differ in length: {longer}; final values taken at row {kept} of each"
+    row.update(_curve_columns(curves, thresholds, row))
+    final = run.tables.get("final", {})
+    row.update(final_test_spread(final.get("test_losses"), final.get("fresh_test_losses")))
+    row.update(_update_columns(run.tables.get("updates", {})))
+    row.update(run.memory)
+    if isinstance(config, dict):
+        row["setting_config"] = setting_config(config, run.env.get("device"))
+    for key, value in run.env.items():
+        row[f"env.{key}"] = value
+    # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their
+    # wall-clock budgets bought less compute each. NaN for files that predate the record.
+    row["parallel_jobs"] = float(run.env.get("parallel_jobs", math.nan))
+    return row, (curves if want_curves else None)
+
+
+_RECORD_ATTRS = ("status", "status_reason", "status_step", "problem", "optimizer", "started", "finished", "steps",
+                 "wall_time", "format_version")  # fmt: skip
+
+
+def _record_columns(config, attrs: dict) -> dict:
+    """The run's identity and record: its config (flattened), overrides, resumes and status."""
+    row: dict = {"config_id": config_id(config) if isinstance(config, dict) else None}
     if isinstance(config, dict) and config.get("init_from"):
         row["_config"] = config  # config_id is set again once its parent is known (load_runs)
     for key, value in _flatten(config).items():
@@ -229,82 +255,58 @@ def _summarise(
         row["resumes"] = len(json.loads(attrs.pop("resumes", "[]")))  # times the run was resumed
     except ValueError:
         row["resumes"] = 0
-    for key in (
-        "status",
-        "status_reason",
-        "status_step",
-        "problem",
-        "optimizer",
-        "started",
-        "finished",
-        "steps",
-        "wall_time",
-        "format_version",
-    ):
-        if key in attrs:
-            row[key] = attrs[key]
+    row.update({key: attrs[key] for key in _RECORD_ATTRS if key in attrs})
+    return row
 
-    curves, ragged = _cut(run.tables.get("curves", {}))
-    if ragged:  # a writer stopped between columns: the last full row is the final one
-        kept = ragged.pop("kept")
-        longer = ", ".join(f"{k} ({v})" for k, v in sorted(ragged.items()))
-        row["curves_note"] = f"curve columns differ in length: {longer}; final values taken at row {kept} of each"
+
+def _curve_columns(curves: dict[str, np.ndarray], thresholds: Sequence[float], record: dict) -> dict:
+    """Final and best losses, and the wall clock to each threshold, from the evaluation curves
+    (``record``: the columns so far; the curves stand in for a wall time or steps it lacks)."""
     test = curves.get("test_loss")
-    n_evals = 0 if test is None else len(test)
-    row["n_evals"] = n_evals
-    if n_evals:
-        wall = curves.get("wall_time")
-        steps = curves.get("step")
-        row["final_test_loss"] = float(test[-1])
-        finite = np.isfinite(test)
-        if finite.any():
-            i = int(np.argmin(np.where(finite, test, np.inf)))
-            row["best_test_loss"] = float(test[i])
-            row["best_step"] = int(steps[i]) if steps is not None else i
-        if steps is not None:
-            row["final_step"] = int(steps[-1])
-        if "train_loss" in curves:
-            row["final_train_loss"] = float(curves["train_loss"][-1])
-        if "val_loss" in curves:  # the validation split (what tuning reads): final and best
-            val = curves["val_loss"]
-            row["final_val_loss"] = float(val[-1])
-            row["best_val_loss"] = float(np.nanmin(val)) if np.isfinite(val).any() else math.nan
-        for name, values in curves.items():  # extra metrics: final_test_<metric>
-            if name.startswith("test_") and name != "test_loss":
-                row[f"final_{name}"] = float(values[-1])
-        if "wall_time" not in row and wall is not None:
-            row["wall_time"] = float(wall[-1])
-        if "steps" not in row and steps is not None:
-            row["steps"] = int(steps[-1])
-        for t in thresholds:
-            i = reach_index(test, t)
-            row[threshold_column(t)] = float(wall[i]) if (i is not None and wall is not None) else math.nan
-    else:
-        for t in thresholds:
-            row[threshold_column(t)] = math.nan
+    row: dict = {"n_evals": 0 if test is None else len(test)}
+    if not row["n_evals"]:
+        return row | {threshold_column(t): math.nan for t in thresholds}
+    wall, steps = curves.get("wall_time"), curves.get("step")
+    row["final_test_loss"] = float(test[-1])
+    finite = np.isfinite(test)
+    if finite.any():
+        i = int(np.argmin(np.where(finite, test, np.inf)))
+        row["best_test_loss"] = float(test[i])
+        row["best_step"] = int(steps[i]) if steps is not None else i
+    if steps is not None:
+        row["final_step"] = int(steps[-1])
+    if "train_loss" in curves:
+        row["final_train_loss"] = float(curves["train_loss"][-1])
+    if "val_loss" in curves:  # the validation split (what tuning reads): final and best
+        val = curves["val_loss"]
+        row["final_val_loss"] = float(val[-1])
+        row["best_val_loss"] = float(np.nanmin(val)) if np.isfinite(val).any() else math.nan
+    for name, values in curves.items():  # extra metrics: final_test_<metric>
+        if name.startswith("test_") and name != "test_loss":
+            row[f"final_{name}"] = float(values[-1])
+    if "wall_time" not in record and wall is not None:
+        row["wall_time"] = float(wall[-1])
+    if "steps" not in record and steps is not None:
+        row["steps"] = int(steps[-1])
+    for t in thresholds:
+        i = reach_index(test, t)
+        row[threshold_column(t)] = float(wall[i]) if (i is not None and wall is not None) else math.nan
+    return row
 
-    final = run.tables.get("final", {})
-    row.update(final_test_spread(final.get("test_losses"), final.get("fresh_test_losses")))
 
-    raw = run.tables.get("updates", {})
+def _update_columns(raw: dict[str, np.ndarray]) -> dict:
+    """Mean and median update times, and the conditioning, from the per-update table."""
     # Spectrum columns cut apart: they may be shorter than the timings (a file from before they
     # were recorded, resumed by a version that records them), which must not shorten those.
     updates, _ = _cut({k: v for k, v in raw.items() if k not in UPDATE_SPECTRUM_COLUMNS})
     update_s = updates.get("update_s")
-    row["mean_update_s"] = _mean(update_s)
-    row["median_update_s"] = float(np.median(update_s)) if update_s is not None and len(update_s) else math.nan
-    row["mean_jacobian_s"] = _mean(updates.get("jacobian_s"))
-    row["mean_inversion_s"] = _mean(updates.get("inversion_s"))
-    row.update(conditioning(_cut({k: raw[k] for k in UPDATE_SPECTRUM_COLUMNS if k in raw})[0]))  # else NaN
-    row.update(run.memory)
-    if isinstance(config, dict):
-        row["setting_config"] = setting_config(config, run.env.get("device"))
-    for key, value in run.env.items():
-        row[f"env.{key}"] = value
-    # Runs of a sweep that shared the machine (a joblib launcher's parallel jobs): their
-    # wall-clock budgets bought less compute each. NaN for files that predate the record.
-    row["parallel_jobs"] = float(run.env.get("parallel_jobs", math.nan))
-    return row, (curves if want_curves else None)
+    row = {
+        "mean_update_s": _mean(update_s),
+        "median_update_s": float(np.median(update_s)) if update_s is not None and len(update_s) else math.nan,
+        "mean_jacobian_s": _mean(updates.get("jacobian_s")),
+        "mean_inversion_s": _mean(updates.get("inversion_s")),
+    }
+    return row | conditioning(_cut({k: raw[k] for k in UPDATE_SPECTRUM_COLUMNS if k in raw})[0])  # else NaN
 
 
 def read_run_summary(
