@@ -285,88 +285,71 @@ def dict_table(rows: list[dict], columns: list[tuple[str, str]]) -> str:
     )
 
 
+def _find(rows: list[dict], problem: str, optimizer: str, b: int, jacobian: str = "-", solver: str | None = None):
+    """The measured row of one configuration, or None."""
+    for r in rows:
+        if (r["problem"], r["optimizer"], r["batch_size"], r["jacobian"]) == (problem, optimizer, b, jacobian) and (
+            solver is None or r["solver"] == solver
+        ):
+            return r
+    return None
+
+
+def _figure(target: str, value: float, limit: float, how: str, value_min=None, reached: bool | None = None) -> dict:
+    """One figure to reach (``reached``: at most ``limit`` unless given)."""
+    reached = value <= limit if reached is None else reached
+    row = {"target": target, "value": value, "value_min": value_min, "limit": limit, "reached": reached, "how": how}
+    return row if value_min is not None else {k: v for k, v in row.items() if k != "value_min"}
+
+
 def targets(rows: list[dict]) -> list[dict]:
     """The issue's figures to reach, from the measured rows."""
-
-    def find(problem, optimizer, b, jacobian="-", solver=None):
-        for r in rows:
-            if (r["problem"], r["optimizer"], r["batch_size"], r["jacobian"]) == (problem, optimizer, b, jacobian) and (
-                solver is None or r["solver"] == solver
-            ):
-                return r
-        return None
-
     out = []
-
-    def ratio(name, a, b, limit, text):
-        if a and b:
-            value = a["update_s"] / b["update_s"]
-            best = a["update_min_s"] / b["update_min_s"]
-            out.append(
-                {"target": name, "value": value, "value_min": best, "limit": limit, "reached": value <= limit, "how": text}
-            )
-
-    adam512 = find("oscillator", "adam", 512)
+    adam512 = _find(rows, "oscillator", "adam", 512)
     if adam512:
-        out.append(
-            {
-                "target": "oscillator Adam b=512 update (s)",
-                "value": adam512["update_s"],
-                "value_min": adam512["update_min_s"],
-                "limit": 0.017,
-                "reached": adam512["update_s"] <= 0.017,
-                "how": "update_s",
-            }
-        )
-
-    ratio(
-        "oscillator HIG b=128 / Adam b=512",
-        find("oscillator", "hig", 128, "structured"),
-        find("oscillator", "adam", 512),
-        1.5,
-        "update_s ratio",
-    )
-    ratio(
-        "dipole HIG b=16 / Adam b=256",
-        find("dipole", "hig", 16, "structured"),
-        find("dipole", "adam", 256),
-        1.5,
-        "update_s ratio",
-    )
-    p64 = find("poisson", "hig", 64, "structured")
+        out.append(_figure("oscillator Adam b=512 update (s)", adam512["update_s"], 0.017, "update_s", adam512["update_min_s"]))
+    for name, hig, adam in (
+        ("oscillator HIG b=128 / Adam b=512", ("oscillator", "hig", 128, "structured"), ("oscillator", "adam", 512)),
+        ("dipole HIG b=16 / Adam b=256", ("dipole", "hig", 16, "structured"), ("dipole", "adam", 256)),
+    ):
+        a, b = _find(rows, *hig), _find(rows, *adam)
+        if a and b:
+            value, best = a["update_s"] / b["update_s"], a["update_min_s"] / b["update_min_s"]
+            out.append(_figure(name, value, 1.5, "update_s ratio", best))
+    p64 = _find(rows, "poisson", "hig", 64, "structured")
     if p64:
-        out.append(
-            {
-                "target": "Poisson HIG b=64 update (s)",
-                "value": p64["update_s"],
-                "value_min": p64["update_min_s"],
-                "limit": 3.0,
-                "reached": p64["update_s"] <= 3.0,
-                "how": "update_s",
-            }
-        )
+        out.append(_figure("Poisson HIG b=64 update (s)", p64["update_s"], 3.0, "update_s", p64["update_min_s"]))
         if p64["peak_mem_mb"] is not None:
-            out.append(
-                {
-                    "target": "Poisson HIG b=64 peak memory (MB)",
-                    "value": p64["peak_mem_mb"],
-                    "limit": 1024.0,
-                    "reached": p64["peak_mem_mb"] < 1024,
-                    "how": "peak_mem_mb",
-                }
-            )
-    gram, naive = find("poisson", "hig", 16, "structured"), find("poisson", "hig", 16, "naive", "svd")
+            memory = p64["peak_mem_mb"]
+            out.append(_figure("Poisson HIG b=64 peak memory (MB)", memory, 1024.0, "peak_mem_mb", reached=memory < 1024))
+    gram, naive = _find(rows, "poisson", "hig", 16, "structured"), _find(rows, "poisson", "hig", 16, "naive", "svd")
     if gram and naive:
         value = naive["update_s"] / gram["update_s"]
-        out.append(
-            {
-                "target": "Poisson b=16 naive SVD / Gram (speed-up)",
-                "value": value,
-                "limit": 5.0,
-                "reached": value >= 5.0,
-                "how": "update_s ratio, >= limit",
-            }
-        )
+        name = "Poisson b=16 naive SVD / Gram (speed-up)"
+        out.append(_figure(name, value, 5.0, "update_s ratio, >= limit", reached=value >= 5.0))
+    return out
+
+
+COST_COLUMNS = [("optimizer", "optimizer"), ("batch_size", "b"), ("jacobian", "Jacobian"), ("solver", "solver"),
+                ("peak_mem_mb", "memory (MB)"), ("update_s", "update (s)"), ("update_min_s", "best (s)"), ("cpu_s", "CPU (s)"),
+                ("jacobian_s", "Jacobian (s)"), ("inversion_s", "inversion (s)"), ("paper_mem_mb", "paper memory (MB)"),
+                ("paper_update_s", "paper update (s)"), ("paper_jacobian_s", "paper Jacobian (s)")]  # fmt: skip
+SPEEDUP_COLUMNS = [("problem", "problem"), ("batch_size", "b"), ("naive_s", "naive update (s)"),
+                   ("structured_s", "structured update (s)"), ("speedup", "speed-up"), ("naive_mb", "naive memory (MB)"),
+                   ("structured_mb", "structured memory (MB)")]  # fmt: skip
+TARGET_COLUMNS = [("target", "figure"), ("value", "measured (median)"), ("value_min", "best repeat"), ("limit", "target"),
+                  ("reached", "reached")]  # fmt: skip
+
+
+def speedups(rows: list[dict]) -> list[dict]:
+    """Each naive-path row against the structured path of the same configuration."""
+    out = []
+    for r in rows:
+        fast = _find(rows, r["problem"], r["optimizer"], r["batch_size"], "structured") if r["jacobian"] == "naive" else None
+        if fast:
+            out.append({"problem": r["problem"], "batch_size": r["batch_size"], "naive_s": r["update_s"],
+                        "structured_s": fast["update_s"], "speedup": r["update_s"] / fast["update_s"],
+                        "naive_mb": r["peak_mem_mb"], "structured_mb": fast["peak_mem_mb"]})  # fmt: skip
     return out
 
 
@@ -378,23 +361,7 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
         paper = PAPER_COSTS.get((r["problem"], r["optimizer"], r["batch_size"])) if r["jacobian"] in ("-", "structured") else None
         r["table"] = PROBLEM_TABLES[r["problem"]]
         r["paper_mem_mb"], r["paper_update_s"], r["paper_jacobian_s"] = paper if paper else (None, None, None)
-    df = pd.DataFrame(rows)
-    df.to_csv(out_dir / "paper_tables.csv", index=False)
-    columns = [
-        ("optimizer", "optimizer"),
-        ("batch_size", "b"),
-        ("jacobian", "Jacobian"),
-        ("solver", "solver"),
-        ("peak_mem_mb", "memory (MB)"),
-        ("update_s", "update (s)"),
-        ("update_min_s", "best (s)"),
-        ("cpu_s", "CPU (s)"),
-        ("jacobian_s", "Jacobian (s)"),
-        ("inversion_s", "inversion (s)"),
-        ("paper_mem_mb", "paper memory (MB)"),
-        ("paper_update_s", "paper update (s)"),
-        ("paper_jacobian_s", "paper Jacobian (s)"),
-    ]
+    pd.DataFrame(rows).to_csv(out_dir / "paper_tables.csv", index=False)
     parts = [
         f"# Update cost, paper tables 3-5 (measured {meta['date']})",
         "",
@@ -407,67 +374,17 @@ def write_tables(rows: list[dict], out_dir: Path, meta: dict) -> None:
     for problem, table in PROBLEM_TABLES.items():
         sub = [r for r in rows if r["problem"] == problem]
         if sub:
-            parts += [f"## Table {table}: {problem}", "", dict_table(sub, columns), ""]
-    speedups = []
-    for r in rows:
-        if r["jacobian"] == "naive":
-            fast = [
-                q
-                for q in rows
-                if (q["problem"], q["optimizer"], q["batch_size"], q["jacobian"])
-                == (r["problem"], r["optimizer"], r["batch_size"], "structured")
-            ]
-            if fast:
-                speedups.append(
-                    {
-                        "problem": r["problem"],
-                        "batch_size": r["batch_size"],
-                        "naive_s": r["update_s"],
-                        "structured_s": fast[0]["update_s"],
-                        "speedup": r["update_s"] / fast[0]["update_s"],
-                        "naive_mb": r["peak_mem_mb"],
-                        "structured_mb": fast[0]["peak_mem_mb"],
-                    }
-                )
-    if speedups:
-        parts += [
-            "## Naive path (torch.func J + SVD) against the structured path",
-            "",
-            dict_table(
-                speedups,
-                [
-                    ("problem", "problem"),
-                    ("batch_size", "b"),
-                    ("naive_s", "naive update (s)"),
-                    ("structured_s", "structured update (s)"),
-                    ("speedup", "speed-up"),
-                    ("naive_mb", "naive memory (MB)"),
-                    ("structured_mb", "structured memory (MB)"),
-                ],
-            ),
-            "",
-        ]
+            parts += [f"## Table {table}: {problem}", "", dict_table(sub, COST_COLUMNS), ""]
+    naive = speedups(rows)
+    if naive:
+        parts += ["## Naive path (torch.func J + SVD) against the structured path", "", dict_table(naive, SPEEDUP_COLUMNS), ""]
     goal = targets(rows) if meta.get("device", "cpu") == "cpu" else []  # the targets are CPU figures
     if goal:
-        parts += [
-            "## Targets",
-            "",
-            dict_table(
-                goal,
-                [
-                    ("target", "figure"),
-                    ("value", "measured (median)"),
-                    ("value_min", "best repeat"),
-                    ("limit", "target"),
-                    ("reached", "reached"),
-                ],
-            ),
-            "",
-        ]
+        parts += ["## Targets", "", dict_table(goal, TARGET_COLUMNS), ""]
     (out_dir / "paper_tables.md").write_text("\n".join(parts))
 
 
-def main(argv=None) -> None:
+def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="python -m higbench.bench.step", description="Time GN/HIG and first-order updates by phase (see module docstring)."
     )
@@ -501,60 +418,68 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="--paper-tables: where to write (outputs/bench)")
     parser.add_argument("--memory-probe", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.device == "cuda" and not torch.cuda.is_available():
+        parser.error("--device cuda: CUDA is not available on this machine")
+    return args
 
+
+def config_groups(args: argparse.Namespace) -> list[list[Config]]:
+    """The configurations to time, in groups timed interleaved: the paper's tables, or the
+    command line's problems x optimizers (or --pairs) x batch sizes x Jacobian paths."""
+    if args.paper_tables:
+        return paper_configs(args.naive_all)
+    configs = []
+    pairs = [(p.split(":")[0], int(p.split(":")[1])) for p in args.pairs] if args.pairs else None
+    for problem, optimizer in itertools.product(args.problem, [o for o, _ in pairs] if pairs else args.optimizer):
+        sizes = [b for o, b in pairs if o == optimizer][:1] if pairs else None
+        sizes = sizes or args.batch_size or [default_batch(problem, optimizer)]
+        paths = list(itertools.product(args.jacobian, args.solver)) if is_jacobian_power(optimizer) else [("-", "-")]
+        for b, (jac, solver) in itertools.product(sizes, paths):
+            configs.append(Config(problem, optimizer, b, jac, solver, tuple(args.set)))
+    return [configs]
+
+
+def machine_meta(args: argparse.Namespace, device: torch.device) -> dict:
+    """What the paper tables say of the machine and the measurement."""
+    import platform
+
+    return {
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
+        + (f"; {device_name(device)}" if device.type == "cuda" else ""),
+        "memory": MEMORY_MEANING[device.type],
+        "device": device.type,
+        "torch": torch.__version__,
+        "threads": args.threads,
+        "dtype": args.dtype,
+        "repeats": args.repeats,
+        "warmup": args.warmup,
+    }
+
+
+def main(argv=None) -> None:
+    args = parse_args(argv)
     from higbench.runner.threads import resolve_threads
 
     args.threads = resolve_threads(args.threads if args.threads == "auto" else int(args.threads))
     torch.set_num_threads(args.threads)
-    dtype = DTYPES[args.dtype]
-    if args.device == "cuda" and not torch.cuda.is_available():
-        parser.error("--device cuda: CUDA is not available on this machine")
-    device = torch.device(args.device)
+    dtype, device = DTYPES[args.dtype], torch.device(args.device)
     if args.memory_probe:
         spec = json.loads(args.memory_probe)
         spec["overrides"] = tuple(spec["overrides"])
         print(memory_probe(Config(**spec), args.warmup, dtype, device))
         return
-
-    if args.paper_tables:
-        groups = paper_configs(args.naive_all)
-    else:
-        configs = []
-        pairs = [(p.split(":")[0], int(p.split(":")[1])) for p in args.pairs] if args.pairs else None
-        for problem, optimizer in itertools.product(args.problem, [o for o, _ in pairs] if pairs else args.optimizer):
-            sizes = [b for o, b in pairs if o == optimizer][:1] if pairs else None
-            sizes = sizes or args.batch_size or [default_batch(problem, optimizer)]
-            paths = list(itertools.product(args.jacobian, args.solver)) if is_jacobian_power(optimizer) else [("-", "-")]
-            for b, (jac, solver) in itertools.product(sizes, paths):
-                configs.append(Config(problem, optimizer, b, jac, solver, tuple(args.set)))
-        groups = [configs]
-
     rows = []
-    for group in groups:
-        repeats, warmup = args.repeats, args.warmup
+    for group in config_groups(args):
         print(f"timing {len(group)} configuration(s) interleaved: {', '.join(c.label() for c in group)}", file=sys.stderr)
-        timings = time_configs(group, repeats, warmup, dtype, device)
+        timings = time_configs(group, args.repeats, args.warmup, dtype, device)
         for cfg in group:
-            mem = None if args.no_memory else measure_memory(cfg, warmup, args.dtype, args.threads, args.device)
+            mem = None if args.no_memory else measure_memory(cfg, args.warmup, args.dtype, args.threads, args.device)
             r = row(cfg, timings[cfg], mem, args.threads, args.dtype, device_name(device))
             rows.append(r)
             print(json.dumps(r), flush=True)
     if args.paper_tables:
-        import platform
-
-        meta = {
-            "date": time.strftime("%Y-%m-%d %H:%M"),
-            "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}"
-            + (f"; {device_name(device)}" if device.type == "cuda" else ""),
-            "memory": MEMORY_MEANING[device.type],
-            "device": device.type,
-            "torch": torch.__version__,
-            "threads": args.threads,
-            "dtype": args.dtype,
-            "repeats": args.repeats,
-            "warmup": args.warmup,
-        }
-        write_tables(rows, args.out, meta)
+        write_tables(rows, args.out, machine_meta(args, device))
         for t in targets(rows) if device.type == "cpu" else []:
             print(json.dumps(t), flush=True)
         print(f"wrote {args.out / 'paper_tables.csv'} and {args.out / 'paper_tables.md'}", file=sys.stderr)

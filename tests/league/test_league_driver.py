@@ -601,7 +601,6 @@ def test_a_stopped_driver_gives_its_running_job_and_its_workers_time_to_close_th
     files (what a run does on SIGINT), not subprocess.run's kill after a quarter of a second. The
     stand-in job is a launcher's parent that ignores SIGINT (as a sweep started in the background
     does) and waits for its worker: only a signal to the group reaches the run."""
-    import subprocess
     import sys
     import time
 
