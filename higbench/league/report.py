@@ -141,18 +141,23 @@ def check_out(out: Path, root: Path, protocol: dict, in_place: bool = False) -> 
 
 
 def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, reached: pd.DataFrame) -> None:
-    """league.txt, league.json, runs.csv and the profile figure into ``out`` (links refused)."""
+    """league.txt, league.json, runs.csv and the figures (every seed's final loss; the profile)
+    into ``out`` (links refused)."""
     safe_dir(out, create=True)
-    if len(reached):  # the profile needs targets (a problem of your own may declare none)
-        # drawn apart, then moved in: a link planted in out is replaced, not written through
-        plots = out / f".plots-{os.getpid()}"
+    # drawn apart, then moved in: a link planted in out is replaced, not written through
+    plots = out / f".plots-{os.getpid()}"
+    shutil.rmtree(plots, ignore_errors=True)
+    plots.mkdir()
+    try:
+        drawn = []
+        if len(scored) and league.TEST_METRIC in scored:  # every seed's final loss per task and setting
+            drawn.append(league.plot_final_losses(league.final_loss_table(scored), plots))
+        if len(reached):  # the profile needs targets (a problem of your own may declare none)
+            drawn += league.plot_league(reached, league.interval_table(scored, reached), plots)
+        for path in drawn:
+            os.replace(path, out / path.name)
+    finally:
         shutil.rmtree(plots, ignore_errors=True)
-        plots.mkdir()
-        try:
-            for path in league.plot_league(reached, league.interval_table(scored, reached), plots):
-                os.replace(path, out / path.name)
-        finally:
-            shutil.rmtree(plots, ignore_errors=True)
     if len(scored):
         columns = ["task", "league_setting", "seed", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
                    "config_id", "run", "hardware"]  # fmt: skip

@@ -617,7 +617,8 @@ def _colours(settings: Sequence[str], leaders: Sequence[str]) -> dict[str, str]:
 def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
     """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
     log scale; diverged: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
-    median, leaders and HIG in colour, the rest grey. ``table``: ``final_loss_table``."""
+    median, leaders (up to five, one colour each in every panel) and HIG in colour, the rest grey.
+    ``table``: ``final_loss_table``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -629,9 +630,14 @@ def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
     fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.0 * nrows), squeeze=False)
     for ax in axes.flat[len(tasks) :]:
         ax.set_visible(False)
+    # one colour per setting in every panel: the settings that lead the most tasks (then come
+    # second, third), and HIG
+    ranks = table.groupby("task", sort=False).cumcount()
+    placed = pd.crosstab(table["setting"], ranks).reindex(columns=[0, 1, 2], fill_value=0)
+    ranked = placed.sort_values([0, 1, 2], ascending=False)
+    colours = _colours(list(dict.fromkeys(table["setting"])), list(ranked.index[ranked.sum(axis=1) > 0]))
     for ax, task in zip(axes.flat, tasks):
         rows = table[table["task"] == task].reset_index(drop=True)
-        colours = _colours(list(rows["setting"]), list(rows["setting"][:3]))
         finite = np.concatenate([np.asarray(s, dtype=float) for s in rows["seeds"]])
         finite = finite[np.isfinite(finite) & (finite > 0)]
         top, bottom = (finite.max() * 3, finite.min() / 3) if len(finite) else (1.0, 0.1)
@@ -685,8 +691,9 @@ def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: 
     ax.set_xlabel("tau (seconds to target over the fastest)")
     ax.set_ylabel("rho(tau): fraction of (task, target) pairs")
     ax.set_title("equal wall clock (grey: the other settings)", fontsize=10)
+    ax.set_ylim(-0.03, 1.03)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     path = out / "profile.png"
     fig.savefig(path, dpi=120)
