@@ -322,7 +322,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="where the runs and their tables go (and are reused from); default outputs/league in the "
                    "current folder; repeat: the first gets the new runs, the others are earlier leagues' tables "
                    "(a published league), whose done runs are reused, never rerun; with --report-only, merged")  # fmt: skip
-    p.add_argument("--out", type=Path, default=None, help="league.txt, league.json, runs.csv, profile.png (default: ROOT/report)")
+    p.add_argument("--out", type=Path, default=None, help="league.txt, league.json, runs.csv, figures (default: ROOT/report)")
     p.add_argument("--jobs", type=int, default=1, help="runs at once on this machine (1: the budgets are not shared)")
     p.add_argument("--launcher", choices=LAUNCHERS, default=None,
                    help="Hydra launcher of the runs (default: basic with --jobs 1, else joblib); submitit_slurm submits each "
