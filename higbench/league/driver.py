@@ -490,16 +490,7 @@ def _main(argv=None) -> int:
             if problem not in budgets and None not in budgets and problem in derived:  # an earlier target setting's
                 seconds = float(math.ceil(derived[problem]))
             variants = list(node.get("held_out") or [])[: args.variants]
-            refs = references_of(args)
-            jobs = [j for r in refs for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants, node)]
-            if args.targets_only:
-                planned.append((problem, jobs))
-                continue
-            jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
-            jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
-            jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
-            jobs += long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
-            planned.append((problem, jobs))
+            planned.append((problem, planned_jobs(args, problem, (seconds, n, variants, usable), paper, seeds, node)))
         print(plan_text(planned, args.jobs))
         return 0
     check_out(out, root, protocol, in_place=out.resolve() in [r.resolve() for r in roots])
@@ -543,17 +534,6 @@ def target_setting(problem, references, n, studies, seeds, variants, node, phase
         print(f"[league] {row['task']}: validation target {row['target']:.3g} ({row['reference']}, median of "
               f"{row['reruns']} reruns at {seconds:g} s), budget {row['budget_s']:.3g} s", file=sys.stderr)  # fmt: skip
     return targets
-
-
-def planned_counts(plans, paper: list[str], studies: int, seeds: int) -> tuple[int, float]:
-    """(runs, training seconds) of the whole protocol: tuning, confirmation and the shipped settings
-    (every tuned optimizer assumed to find a setting)."""
-    runs, seconds_total = 0, 0.0
-    for seconds, n, variants, usable in plans:
-        count = len(usable) * (n * studies + (1 + len(variants)) * seeds)
-        count += len([o for o in paper if o in usable]) * (1 + len(variants)) * seeds
-        runs, seconds_total = runs + count, seconds_total + count * seconds
-    return runs, seconds_total
 
 
 def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, nodes, refused, seeds, tuning_seeds,
@@ -616,22 +596,25 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
 
 
 def protocol_size(args, plans: dict, setting_problems: list[str], paper, seeds, nodes) -> tuple[int, float]:
-    """(runs, training seconds) the progress line counts: the league's phases, the long budget
-    (each tuned setting assumed found) and the target setting of the problems it reads."""
-    references, longs = references_of(args), long_budgets(args)
-    total, seconds = planned_counts(plans.values(), paper, args.studies, len(seeds))
-    for problem in [] if args.targets_only else plans:
-        usable = plans[problem][3]
-        extra = long_budget_jobs(args, longs, problem, usable, paper, {o: {} for o in usable}, seeds)
-        total, seconds = total + len(extra), seconds + sum(job_seconds(j) for j in extra)
+    """(runs, training seconds) the progress line counts: ``planned_jobs`` of every problem, the
+    target setting only of the problems it reads."""
+    jobs = [j for p in plans for j in planned_jobs(args, p, plans[p], paper, seeds, nodes[p], setting=p in setting_problems)]
+    return len(jobs), sum(job_seconds(j) for j in jobs)
+
+
+def planned_jobs(args, problem: str, plan, paper, seeds, node: dict, setting: bool = True) -> list[Job]:
+    """Every job of a problem's protocol, as --plan and the progress line count them (each tuned
+    setting assumed found, written {}): the target setting (``setting``), tuning, confirmation,
+    the shipped settings and the long budget."""
+    seconds, n, variants, usable = plan
+    refs = references_of(args) if setting else []
+    jobs = [j for r in refs for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants, node)]
     if args.targets_only:
-        total, seconds = 0, 0.0
-    for problem in setting_problems:
-        _, n, variants, _ = plans[problem]
-        setting = [j for r in references for j in planned_target_jobs(problem, r, n, args.studies, seeds, variants,
-                                                                       nodes[problem])]  # fmt: skip
-        total, seconds = total + len(setting), seconds + sum(job_seconds(j) for j in setting)
-    return total, seconds
+        return jobs
+    jobs += [j for o in usable for j in tuning_jobs(problem, o, n, seconds, args.studies)]
+    jobs += [j for o in usable for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
+    jobs += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
+    return jobs + long_budget_jobs(args, long_budgets(args), problem, usable, paper, {o: {} for o in usable}, seeds)
 
 
 def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase) -> dict:
