@@ -213,13 +213,10 @@ def task_label(row: pd.Series) -> str:
     job = row.get("league_job")
     if isinstance(job, str) and job:
         parts = job.split("/")
-        named = parts[2] if parts[0] not in TUNE_ROLES and len(parts) > 3 and parts[2] != "base" else ""
-        variant = sorted(item.removeprefix("problem.") for item in named.split())
+        items = parts[2].split() if parts[0] not in TUNE_ROLES and len(parts) > 3 and parts[2] != "base" else []
     else:
-        variant = sorted(
-            f"{k.removeprefix('problem.')}={v}" for k, v in _override_items(row.get("overrides")) if k.startswith("problem.")
-        )
-    return " ".join([str(row["problem.name"]), *variant])
+        items = [f"{k}={v}" for k, v in _override_items(row.get("overrides")) if k.startswith("problem.")]
+    return " ".join([str(row["problem.name"]), *sorted(item.removeprefix("problem.") for item in items)])
 
 
 def setting_label(row: pd.Series, spaces: Mapping[str, Mapping]) -> str:
