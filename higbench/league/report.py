@@ -9,12 +9,14 @@ written with the target setting they imply.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from higbench.league import tables
@@ -204,6 +206,30 @@ def tuning_counts(runs: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def tuning_outcomes(runs: pd.DataFrame, curves: pd.DataFrame, targets: dict) -> str:
+    """Per problem with a validation target, per optimizer: how many of its completed tuning
+    trials reached the target, and the fastest (training clock at the first evaluation at or
+    below it): how hard the target was to hit, the luck a tuning had. Empty without targets."""
+    tune = runs[(runs["league_role"] == "tune") & (runs["status"] == "completed")] if "league_role" in runs else runs.iloc[:0]
+    by_run = dict(tuple(curves.groupby("run", observed=True))) if len(curves) else {}
+    lines = []
+    for problem, group in tune.groupby("problem.name", sort=True):
+        target = targets.get(problem)
+        if target is None:
+            continue
+        seconds = [league.reach(by_run[r], target, "val_loss")[0] if r in by_run else math.inf for r in group["run"]]
+        found = pd.DataFrame({"optimizer": group["optimizer.name"].to_numpy(), "s": seconds})
+        found["hit"] = np.isfinite(found["s"])
+        per = found.groupby("optimizer").agg(n=("s", "size"), hit=("hit", "sum"), best=("s", "min"))
+        per = per.sort_values(["hit", "best"], ascending=[False, True])
+        parts = [f"{o} {int(r.hit)} of {int(r.n)}" + (f", {r.best:.3g} s" if r.hit else "") for o, r in per.iterrows()]
+        lines.append(f"  {problem} (validation target {target:.3g}): " + "; ".join(parts))
+    if not lines:
+        return ""
+    head = "tuning trials that reached the validation target (of the completed ones), and the fastest, in training-clock seconds:"
+    return "\n".join([head, *lines])
+
+
 def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     """The scores of the roots' tables (``tables.read``: merged when several), written to ``out``."""
     runs, curves = tables.read(roots)
@@ -212,8 +238,9 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
         targets, budgets, held_out = scoring_targets(runs, curves)
         text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
         long = format_long_budget(runs)
-        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs), text,
-                             *([long] if long else [])])  # fmt: skip
+        outcomes = tuning_outcomes(runs, curves, targets)
+        text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs),
+                             *([outcomes] if outcomes else []), text, *([long] if long else [])])  # fmt: skip
         scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
     except ValueError as exc:
         fail(str(exc))

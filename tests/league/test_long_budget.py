@@ -46,3 +46,19 @@ def test_the_report_counts_the_tuning_trials_a_piece_has_made_per_optimizer():
                          "optimizer.name": ["adam", "adam", "hig", "lm", "hig", "adam", "adam"]})  # fmt: skip
     assert tuning_counts(runs).splitlines()[1:] == ["  dipole: 1 trials: lm 1", "  toy: 4 trials: adam 2, hig 2"]
     assert tuning_counts(runs.iloc[5:]) == "tuning: no league tuning trials in the tables yet"
+
+
+def test_the_report_says_how_many_tuning_trials_reached_the_validation_target_and_the_fastest():
+    """Known answer: hig's trials reach 0.01 at 3 s and never; adam's at 5 s (more trials that
+    reached first, then the faster); a failed trial and a problem without a target not counted."""
+    from higbench.league.report import tuning_outcomes
+
+    runs = pd.DataFrame({"league_role": ["tune"] * 5, "status": ["completed"] * 4 + ["failed"],
+                         "problem.name": ["toy", "toy", "toy", "dipole", "toy"],
+                         "optimizer.name": ["hig", "hig", "adam", "lm", "adam"], "run": ["a", "b", "c", "d", "e"]})  # fmt: skip
+    curve = {"a": [1.0, 0.005, 0.001], "b": [1.0, 0.5, 0.2], "c": [0.5, 0.1, 0.009], "d": [1.0] * 3, "e": [0.0] * 3}
+    curves = pd.DataFrame([{"run": r, "wall_time": 1.0 + 2 * i, "step": i, "val_loss": v}
+                           for r, losses in curve.items() for i, v in enumerate(losses)])  # fmt: skip
+    text = tuning_outcomes(runs, curves, {"toy": 0.01})
+    assert text.splitlines()[1] == "  toy (validation target 0.01): hig 1 of 2, 3 s; adam 1 of 1, 5 s"
+    assert tuning_outcomes(runs, curves, {}) == ""
