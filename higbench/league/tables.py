@@ -162,7 +162,8 @@ def curves_table(root: Path, curves: pd.DataFrame, runs: pd.DataFrame) -> pd.Dat
 def export(root: Path, jobs: Mapping[str, Mapping] | None = None) -> tuple[Path, Path]:
     """Write ``ROOT/tables/runs.csv.gz`` and ``curves.csv.gz`` from the league runs under ``root``
     (runs the manifests or ``jobs``, identity -> manifest entry, name). Rows already exported for
-    runs whose files are no longer there are kept; a run read now replaces its old row."""
+    runs whose files are no longer there are kept; a run read now replaces its old row, and the
+    row of another run of its identity (one moved out and trained again)."""
     from higbench.results.index import load_runs
 
     root = Path(root)
@@ -172,7 +173,10 @@ def export(root: Path, jobs: Mapping[str, Mapping] | None = None) -> tuple[Path,
     curves_now = curves_table(root, curves, runs_now)
     old_runs, old_curves = read_root(root, missing_ok=True)
     if len(old_runs):
-        old_runs = old_runs[~old_runs["run"].isin(set(runs_now["run"]))].drop(columns=["root", "path"], errors="ignore")
+        # a run read now replaces its old row, and a run moved out of the root and trained again
+        # (the same identity, another directory) replaces the row of the one moved out
+        stale = old_runs["run"].isin(set(runs_now["run"])) | old_runs["identity"].isin(set(runs_now["identity"]))
+        old_runs = old_runs[~stale].drop(columns=["root", "path"], errors="ignore")
         old_curves = old_curves[old_curves["run"].isin(set(old_runs["run"]))].drop(columns=["root", "path"], errors="ignore")
         old_runs["problem.targets"] = old_runs["problem.targets"].map(_targets_text)
         runs_now = pd.concat([old_runs, runs_now], ignore_index=True) if len(runs_now) else old_runs

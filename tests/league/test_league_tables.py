@@ -96,3 +96,19 @@ def test_two_roots_merge_into_the_score_of_one_root_holding_both(tmp_path):
     tables.export(b, league_root(b, [4], cores=16))  # a machine of another class: the scorer splits its task
     assert "toy [CPU, 16 cores]" in score(*tables.read([a, b]))
     assert score(merged_runs, merged_curves) == single == score_files(both)
+
+
+def test_a_run_moved_out_and_trained_again_replaces_its_old_row(tmp_path):
+    """A run set aside (moved out of the root, e.g. for a low CPU share) and trained again under
+    another directory: the old row, its file gone, must not shadow the new one (the merge keeps
+    the first row of an identity)."""
+    root = tmp_path / "root"
+    jobs = league_root(root, [0])
+    tables.export(root, jobs)
+    shutil.move(str(root / "figures-runs" / "x" / "h0"), str(tmp_path / "set-aside"))
+    write_run(root, "h0-again", "hig", 0, [1.0, 0.04, 0.0005], lr=0.5)  # the same identity, trained again
+    tables.export(root, jobs)
+    runs, _ = tables.read(root)
+    hig = runs[runs["optimizer.name"] == "hig"]
+    assert len(runs) == 2 and list(hig["run"]) == ["figures-runs/x/h0-again/run.h5"]
+    assert float(hig["final_test_loss"].iloc[0]) == 0.0005
