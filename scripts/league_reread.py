@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from higbench.results import league  # noqa: E402
+from higbench.results import league, league_figures  # noqa: E402
 
 
 def toy_constant_loss() -> float:
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     note = f"constant-prediction test loss (flag level), toy tasks: {constant:.3g}; other tasks: not computed"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "reread.txt").write_text(text + "\n" + note + "\n")
-    figure = league.plot_final_losses(league.final_loss_table(scored, constant_loss=constant_loss), args.out)
+    figure = league_figures.plot_final_losses(league.final_loss_table(scored, constant_loss=constant_loss), args.out)
     print(f"{args.out / 'reread.txt'}\n{figure}")
     return 0
 

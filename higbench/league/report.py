@@ -22,7 +22,7 @@ import pandas as pd
 from higbench.league import tables
 from higbench.league.files import read_json_files, safe_dir, write_text
 from higbench.league.protocol import RERUN_ROLE, all_spaces, fail
-from higbench.results import league
+from higbench.results import league, league_figures
 from higbench.results.long_budget import format_long_budget
 
 # -- the machine ------------------------------------------------------------------------------
@@ -151,11 +151,13 @@ def write_report(out: Path, text: str, manifest: dict, scored: pd.DataFrame, rea
     shutil.rmtree(plots, ignore_errors=True)
     plots.mkdir()
     try:
-        drawn = []
+        drawn, colours = [], {}
         if len(scored) and league.TEST_METRIC in scored:  # every seed's final loss per task and setting
-            drawn.append(league.plot_final_losses(league.final_loss_table(scored), plots))
+            table = league.final_loss_table(scored)
+            colours = league_figures.setting_colours(table)
+            drawn.append(league_figures.plot_final_losses(table, plots, colours))
         if len(reached):  # the profile needs targets (a problem of your own may declare none)
-            drawn += league.plot_league(reached, league.interval_table(scored, reached), plots)
+            drawn.append(league_figures.plot_profile(reached, colours, plots))
         for path in drawn:
             os.replace(path, out / path.name)
     finally:

@@ -141,6 +141,18 @@ def time_to_target(curve: pd.DataFrame | None, status: str, target: float, budge
     return seconds if seconds <= budget else math.inf
 
 
+def problems_in_play(
+    scored: pd.DataFrame, targets: Mapping[str, float], held_out: Mapping[str, Sequence[str]] | None = None
+) -> tuple[list[str], list[str]]:
+    """(problems scored, problems with a target but no scored run yet). A league run in pieces has
+    targets for every problem before it has confirmation runs on each; a problem nobody has run
+    yet is left out of the score (and said so), not scored as failed by every setting."""
+    variants = {v for vs in (held_out or {}).values() for v in vs}
+    ran = set(scored["task"])
+    problems = sorted(p for p in targets if p not in variants)
+    return [p for p in problems if p in ran], [p for p in problems if p not in ran]
+
+
 def algoperf_table(
     scored: pd.DataFrame,
     curves: pd.DataFrame,
@@ -149,12 +161,15 @@ def algoperf_table(
     held_out: Mapping[str, Sequence[str]] | None = None,
     tau_max: float = TAU_MAX,
 ) -> pd.DataFrame:
-    """Per setting, AlgoPerf's score: per problem (the keys of ``targets``, each weighing the same)
-    the median over seeds of the seconds to the problem's validation target within its budget
-    (inf when fewer than half reach it), the ratio to the fastest setting, and the integrated
-    score over problems. Held-out variants (``held_out``: problem -> its variant tasks, each with
-    its own target and budget) are gates, not problems: a setting whose median on a variant is
-    inf fails that gate and is marked ('gates failed'), never scored into the area."""
+    """Per setting, AlgoPerf's score: per problem (the keys of ``targets`` with scored runs, each
+    weighing the same; ``problems_in_play``) the median over seeds of the seconds to the problem's
+    validation target within its budget (inf when fewer than half reach it), the ratio to the
+    fastest setting, and the integrated score over problems. Held-out variants (``held_out``:
+    problem -> its variant tasks, each with its own target and budget) are gates, not problems,
+    as in AlgoPerf: a setting whose median on a variant is inf fails that gate ('gates failed')
+    and its time on the variant's problem becomes inf in ``score``; ``score, gates ignored`` is
+    the area without that rule, to show what the gates cost. A variant the setting has no runs
+    on is 'gates not run', neither failed nor passed."""
     key = "run" if "run" in curves and "run" in scored else "path"
     by_run = dict(tuple(curves.groupby(key, observed=True))) if len(curves) else {}
 
@@ -166,16 +181,24 @@ def algoperf_table(
         return float(np.sort(t)[(len(t) - 1) // 2])  # the lower median: inf unless half the seeds reach it
 
     settings = sorted(set(scored["league_setting"]))
-    problems = sorted(p for p in targets if not any(p in v for v in (held_out or {}).values()))
-    times = pd.DataFrame({p: {s: median_time(p, s) for s in settings} for p in problems})
+    problems, _ = problems_in_play(scored, targets, held_out)
+    times = pd.DataFrame({p: {s: median_time(p, s) for s in settings} for p in problems}, index=settings)
     fastest = times.min(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratios = times / fastest.where(np.isfinite(fastest) & (fastest > 0))
+    gated = ratios.copy()
     rows = []
     for setting in settings:
-        failed = [v for p in problems for v in (held_out or {}).get(p, []) if v in targets
-                  and not math.isfinite(median_time(v, setting))]  # fmt: skip
-        rows.append({"setting": setting, "score": integrated_score(ratios.loc[setting].to_numpy(dtype=float), tau_max),
+        gates = {(p, v): median_time(v, setting) for p in problems for v in (held_out or {}).get(p, []) if v in targets}
+        for (problem, _), t in gates.items():
+            if math.isinf(t):
+                gated.loc[setting, problem] = math.inf
+        rows.append({"setting": setting, "score": integrated_score(gated.loc[setting].to_numpy(dtype=float), tau_max),
+                     "score, gates ignored": integrated_score(ratios.loc[setting].to_numpy(dtype=float), tau_max),
                      **{f"s to target: {p}": times.loc[setting, p] for p in problems},
-                     "gates failed": ", ".join(failed)})  # fmt: skip
-    return pd.DataFrame(rows).sort_values("score", ascending=False, kind="stable").reset_index(drop=True)
+                     "gates failed": ", ".join(v for (_, v), t in gates.items() if math.isinf(t)),
+                     "gates not run": ", ".join(v for (_, v), t in gates.items() if math.isnan(t))})  # fmt: skip
+    table = pd.DataFrame(rows)
+    if not table["gates not run"].astype(bool).any():
+        table = table.drop(columns="gates not run")
+    return table.sort_values(["score", "score, gates ignored"], ascending=False, kind="stable").reset_index(drop=True)

@@ -44,6 +44,7 @@ from higbench.results.algoperf import (  # noqa: F401  (re-exported: the league'
     format_targets,
     integrated_score,
     no_targets,
+    problems_in_play,
     reach,
     targets_from_reruns,
     time_to_target,
@@ -548,9 +549,15 @@ def format_league(
                 "not exact at few seeds); P(hig < X) averaged over the tasks both ran"]  # fmt: skip
         out.append(aggregate_table(scored).to_string(index=False))
         if validation_targets and budgets:
-            given = "; ".join(f"{t}: target {validation_targets[t]:g}, budget {budgets[t]:g} s" for t in validation_targets)
+            playing, waiting = problems_in_play(scored, validation_targets, held_out)
+            tasks = [t for t in validation_targets if t in playing or any(t in (held_out or {}).get(p, ()) for p in playing)]
+            given = "; ".join(f"{t}: target {validation_targets[t]:.4g}, budget {budgets[t]:.3g} s" for t in tasks)
             out += ["", "AlgoPerf: seconds to the validation target within the budget (median over seeds; inf: fewer "
-                    f"than half reach it), each problem weighing the same; held-out variants are gates: {given}"]  # fmt: skip
+                    f"than half reach it), each problem weighing the same; held-out variants are gates (a setting whose median on "
+                    "a variant is inf counts as not reaching its problem's target, as in AlgoPerf; 'score, gates "
+                    f"ignored': without that rule): {given}"]  # fmt: skip
+            if waiting:
+                out.append(f"not scored yet (targets set, no scored runs): {', '.join(waiting)}")
             table = algoperf_table(scored, curves, validation_targets, budgets, held_out)
             out.append(table.to_string(index=False))
         out += ["", "targets (problem.targets, test loss): " + "; ".join(f"{t}: {', '.join(f'{v:g}' for v in vs)}"
@@ -594,105 +601,3 @@ def format_runs_csv(path: Path, constant_loss: Mapping[str, float] | None = None
     with pd.option_context("display.width", 250, "display.max_columns", None, "display.float_format", "{:.3f}".format):
         out.append(aggregate_table(scored).to_string(index=False))
     return "\n".join(out)
-
-
-# -- figures ---------------------------------------------------------------------------------
-
-LEADER_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown")
-HIG_COLOURS = {HIG: "tab:red", f"{HIG} (paper)": "tab:pink"}
-
-
-def _colours(settings: Sequence[str], leaders: Sequence[str]) -> dict[str, str]:
-    """HIG (tuned, paper) in reds, up to five leaders in distinct colours, the rest grey."""
-    colours = {name: "0.7" for name in settings}
-    for name, colour in zip([n for n in leaders if n not in HIG_COLOURS], LEADER_COLOURS):
-        colours[name] = colour
-    colours.update({n: c for n, c in HIG_COLOURS.items() if n in colours})
-    return colours
-
-
-def plot_final_losses(table: pd.DataFrame, out: Path) -> Path:
-    """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
-    log scale; diverged: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
-    median, leaders (up to five, one colour each in every panel) and HIG in colour, the rest grey.
-    ``table``: ``final_loss_table``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    tasks = list(dict.fromkeys(table["task"]))
-    ncols = min(len(tasks), 3)
-    nrows = -(-len(tasks) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 4.0 * nrows), squeeze=False)
-    for ax in axes.flat[len(tasks) :]:
-        ax.set_visible(False)
-    # one colour per setting in every panel: the settings that lead the most tasks (then come
-    # second, third), and HIG
-    ranks = table.groupby("task", sort=False).cumcount()
-    placed = pd.crosstab(table["setting"], ranks).reindex(columns=[0, 1, 2], fill_value=0)
-    ranked = placed.sort_values([0, 1, 2], ascending=False)
-    colours = _colours(list(dict.fromkeys(table["setting"])), list(ranked.index[ranked.sum(axis=1) > 0]))
-    for ax, task in zip(axes.flat, tasks):
-        rows = table[table["task"] == task].reset_index(drop=True)
-        finite = np.concatenate([np.asarray(s, dtype=float) for s in rows["seeds"]])
-        finite = finite[np.isfinite(finite) & (finite > 0)]
-        top, bottom = (finite.max() * 3, finite.min() / 3) if len(finite) else (1.0, 0.1)
-        for i, r in rows.iterrows():
-            seeds = np.asarray(r["seeds"], dtype=float)
-            c = colours[r["setting"]]
-            ok = np.isfinite(seeds) & (seeds > 0)
-            ax.scatter(np.full(ok.sum(), i), seeds[ok], s=14, color=c, zorder=3)
-            for where, marker, level in ((~np.isfinite(seeds), "x", top), (np.isfinite(seeds) & (seeds <= 0), "v", bottom)):
-                if where.any():  # diverged at the top edge; a loss <= 0 (float rounding) at the bottom
-                    ax.scatter(np.full(where.sum(), i), np.full(where.sum(), level), marker=marker, s=20, color=c, zorder=3)
-            if math.isfinite(r["median"]) and r["median"] > 0:
-                ax.hlines(r["median"], i - 0.3, i + 0.3, color=c, lw=2, zorder=4)
-        ax.set_yscale("log")
-        ax.set_xticks(range(len(rows)), rows["setting"], rotation=70, fontsize=7)
-        for label, name in zip(ax.get_xticklabels(), rows["setting"]):
-            label.set_color(colours[name] if colours[name] != "0.7" else "0.35")
-        ax.set_title(f"{task} (leader by median: {rows['setting'][0]})", fontsize=9)
-        ax.grid(alpha=0.3, axis="y")
-    for row_axes in axes:
-        row_axes[0].set_ylabel("final test loss (dots: seeds; bar: median;\nx: diverged; v: <= 0, rounding)", fontsize=8)
-    fig.tight_layout()
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "final_losses.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def plot_league(reached: pd.DataFrame, table: pd.DataFrame, out: Path, tau_max: float = TAU_MAX) -> list[Path]:
-    """profile.png: rho(tau) in seconds to the problems' targets (equal wall clock; no updates
-    view), the leaders and HIG in colour, the rest grey. ``table`` (``interval_table``) names
-    the settings."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from higbench.results.profile import performance_profile
-
-    out.mkdir(parents=True, exist_ok=True)
-    taus = np.linspace(1.0, tau_max, 61)
-    rho = performance_profile(profile_times(reached), taus)
-    area = rho.mean(axis=0).sort_values(ascending=False)
-    colours = _colours(list(table["setting"].unique()), list(area.index[:5]))
-    fig, ax = plt.subplots(figsize=(6.5, 4.4))
-    for name in rho.columns:
-        grey = colours.get(name, "0.7") == "0.7"
-        ax.step(taus, rho[name], where="post", color=colours.get(name, "0.7"), lw=0.8 if grey else 1.8,
-                label=None if grey else name, zorder=1 if grey else 3)  # fmt: skip
-    ax.set_xlabel("tau (seconds to target over the fastest)")
-    ax.set_ylabel("rho(tau): fraction of (task, target) pairs")
-    ax.set_title("equal wall clock (grey: the other settings)", fontsize=10)
-    ax.set_ylim(-0.03, 1.03)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    path = out / "profile.png"
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return [path]

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from higbench.results import league
+from higbench.results import league, league_figures
 from higbench.results.profile import performance_profile
 from higbench.runfile.writer import RunFileWriter
 
@@ -320,7 +320,7 @@ def test_two_settings_under_one_league_label_are_refused(tmp_path, capsys):
 
 
 def test_the_figures_draw_the_leaders_and_hig_in_colour_and_the_rest_grey():
-    colours = league._colours(["a", "b", "c", "hig", "hig (paper)"], ["a", "b"])
+    colours = league_figures.assign_colours(["a", "b", "c", "hig", "hig (paper)"], ["a", "b"])
     assert colours["c"] == "0.7" and len({colours[n] for n in ("a", "b", "hig", "hig (paper)")}) == 4
 
 

@@ -181,9 +181,12 @@ def test_time_to_target_scores_each_problem_the_same_and_held_out_variants_gate(
     table = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1, "p v": 0.1},
                                   budgets={"p": 10, "q": 10, "p v": 10}, held_out={"p": ["p v"]})  # fmt: skip
     table = table.set_index("setting")
-    # a: fastest on p (1), 2x on q; b: 2x on p, fastest on q: the same score, each problem weighing 1/2
-    assert table.loc["a", "score"] == pytest.approx(table.loc["b", "score"]) == pytest.approx((3 + 2) / 2 / 3)
+    # a: fastest on p (1), 2x on q; b: 2x on p, fastest on q: the same area, each problem weighing 1/2
+    ignored = table["score, gates ignored"]
+    assert ignored["a"] == pytest.approx(ignored["b"]) == pytest.approx((3 + 2) / 2 / 3)
     assert table.loc["b", "gates failed"] == "p v" and table.loc["a", "gates failed"] == ""
+    # AlgoPerf's rule: b fails p's held-out variant, so its time on p counts as inf: only q scores
+    assert table.loc["a", "score"] == pytest.approx(5 / 6) and table.loc["b", "score"] == pytest.approx(3 / 2 / 3)
     over_budget = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1},
                                         budgets={"p": 1.5, "q": 10}).set_index("setting")  # fmt: skip
     assert math.isinf(over_budget.loc["b", "s to target: p"])  # 2 s is past p's 1.5 s budget
@@ -205,3 +208,20 @@ def test_the_report_prints_the_algoperf_table_when_targets_and_budgets_are_given
     rows = {line.split()[0]: line.split() for line in algoperf.splitlines()[2:] if line.strip()}
     assert float(rows["adam"][1]) == 1.0 and float(rows["sgd"][1]) == 0.0  # sgd never reaches 0.05
     assert "AlgoPerf" not in league.format_league(runs, curves, league.all_spaces())  # no target-setting runs: no table
+
+
+def test_a_problem_nobody_has_run_yet_is_left_out_of_the_score_not_failed_by_everyone():
+    # a league run in pieces: targets for p and q, confirmation runs on p only; b has not run p's variant
+    scored = pd.DataFrame({"task": ["p", "p", "p v"], "league_setting": ["a", "b", "a"], "seed": [0] * 3,
+                           "status": ["completed"] * 3, "path": ["r0", "r1", "r2"]})  # fmt: skip
+    rows = [{"path": r, "wall_time": w, "step": k, "val_loss": v}
+            for r in ("r0", "r1", "r2") for k, (w, v) in enumerate([(0.0, 1.0), (1.0, 0.01)])]  # fmt: skip
+    targets = {"p": 0.1, "q": 0.1, "p v": 0.1, "q v": 0.1}
+    held_out = {"p": ["p v"], "q": ["q v"]}
+    assert league.problems_in_play(scored, targets, held_out) == (["p"], ["q"])
+    table = league.algoperf_table(scored, pd.DataFrame(rows), targets, budgets=dict.fromkeys(targets, 10),
+                                  held_out=held_out).set_index("setting")  # fmt: skip
+    assert "s to target: q" not in table  # q is waiting, not inf for everyone
+    assert table.loc["a", "score"] == pytest.approx(1.0)  # fastest on the one problem run
+    assert table.loc["a", "gates failed"] == "" and table.loc["b", "gates failed"] == ""  # q v: never a gate yet
+    assert table.loc["b", "gates not run"] == "p v" and table.loc["a", "gates not run"] == ""
