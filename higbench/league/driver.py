@@ -577,8 +577,8 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     stopped: BaseException | None = None
     try:
         for problem in problems if reading_runs else []:
-            manifest["problems"][problem] = league_problem(args, problem, plans[problem], budgets, nodes[problem], paper,
-                                                           refused[problem], seeds, phase)  # fmt: skip
+            entry = manifest["problems"][problem] = {}  # filled as the phases go: a stopped sitting keeps what it found
+            league_problem(args, problem, plans[problem], budgets, nodes[problem], paper, refused[problem], seeds, phase, entry)
     except (KeyboardInterrupt, SystemExit) as exc:  # SIGINT, SIGTERM (``stop_on_sigterm``), a phase not done
         stopped = exc
         manifest["stopped"] = str(exc) or type(exc).__name__
@@ -617,15 +617,17 @@ def planned_jobs(args, problem: str, plan, paper, seeds, node: dict, setting: bo
     return jobs + long_budget_jobs(args, long_budgets(args), problem, usable, paper, {o: {} for o in usable}, seeds)
 
 
-def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase) -> dict:
+def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase, entry: dict) -> None:
     """One problem's phases (``phase`` runs each): target setting, tuning, confirmation, the long
-    budget. Returns its manifest entry."""
+    budget. Fills its manifest ``entry`` as each phase ends (the chosen settings before their
+    confirmation runs), so a sitting stopped in confirmation records what tuning chose."""
     seconds, n, variants, usable = plan
     references, longs = references_of(args), long_budgets(args)
     given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
     targets = target_setting(problem, references, n, args.studies, seeds, variants, node, phase)
+    entry.update({"target_setting": targets.to_dict("records"), "references": references})
     if args.targets_only:
-        return {"target_setting": targets.to_dict("records"), "references": references}
+        return
     derived = league_budget(targets, problem)
     seconds = seconds if given or derived is None else derived
     if references and derived is None:
@@ -637,21 +639,19 @@ def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, r
     phase([("tune", j) for j in flat], f"{problem} tuning")
     picks = {o: choose(jobs, target) for o, jobs in tune.items()}
     chosen = {o: pick[0] for o, pick in picks.items()}
+    entry.update({"seconds": seconds, "budget_from": "--seconds" if given or derived is None else "target setting",
+                  "trials": n, "studies": args.studies, "targets": node.get("targets"), "held_out": variants,
+                  "set": {o: extra_overrides(problem, o) for o in usable}, "chosen": chosen,
+                  "chosen_by": {o: pick[1] for o, pick in picks.items()}, "left_out": refused, "long": None})  # fmt: skip
     confirm = [j for o in usable if chosen[o] is not None
                for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
     confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
     phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
     long = long_budget_jobs(args, longs, problem, usable, paper, chosen, seeds)
     if long:
+        entry["long"] = {"seconds": longs.get(problem, longs.get(None)), "seeds": args.long_seeds,
+                         "optimizers": sorted({j.overrides["optimizer"] for j in long})}  # fmt: skip
         phase([(j.sweep.split("/")[0], j) for j in long], f"{problem} long budget")
-    return {"seconds": seconds, "budget_from": "--seconds" if given or derived is None else "target setting",
-            "trials": n, "studies": args.studies, "targets": node.get("targets"), "held_out": variants,
-            "set": {o: extra_overrides(problem, o) for o in usable},
-            "chosen": chosen, "chosen_by": {o: pick[1] for o, pick in picks.items()},
-            "target_setting": targets.to_dict("records"), "left_out": refused,
-            "long": {"seconds": longs.get(problem, longs.get(None)),
-                     "optimizers": sorted({j.overrides["optimizer"] for j in long}),
-                     "seeds": args.long_seeds} if long else None}  # fmt: skip
 
 
 def publish(args, roots: list[Path], out: Path, manifest: dict, all_jobs: list[tuple[str, Job]], tuning_seeds) -> None:

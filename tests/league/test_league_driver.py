@@ -450,6 +450,29 @@ def test_the_league_runs_at_the_budget_the_target_setting_derived(tmp_path, no_r
     assert manifest["problems"]["toy"]["budget_from"] == "target setting"
 
 
+def test_a_sitting_stopped_in_confirmation_records_what_tuning_chose(tmp_path, no_runs, monkeypatch):
+    """The manifest's problem entry is filled as the phases end: a sitting stopped while its
+    confirmation runs (hours, across sessions) still records the chosen settings and the budget."""
+    found = pd.DataFrame([{"task": "toy", "reference": "adam", "target": 0.01, "budget_s": 7.2, "reruns": 5,
+                           "medians": {}, "seconds_to_target": []}])  # fmt: skip
+    monkeypatch.setattr(driver, "target_setting", lambda *a, **k: found)
+    monkeypatch.setattr(driver, "choose", lambda jobs, target=None: ({"optimizer.lr": 0.02}, "time to the target"))
+
+    def stop_in_confirmation(jobs, root, **kw):
+        if any(j.sweep.startswith("confirm") for j in jobs):
+            raise KeyboardInterrupt
+        return []
+
+    monkeypatch.setattr(driver, "run_missing", stop_in_confirmation)
+    argv = ["--problems", "toy", "--optimizers", "adam", "--paper", "", "--trials", "1", "--studies", "1", "--seeds",
+            "1", "--variants", "0", "--root", str(tmp_path)]  # fmt: skip
+    assert driver.main(argv) == 128 + signal.SIGINT
+    (manifest,) = (tmp_path / "manifests").glob("*.json")
+    entry = json.loads(manifest.read_text())["problems"]["toy"]
+    assert entry["chosen"] == {"adam": {"optimizer.lr": 0.02}} and entry["chosen_by"] == {"adam": "time to the target"}
+    assert entry["seconds"] == 8.0 and entry["budget_from"] == "target setting"
+
+
 def test_an_earlier_league_s_tables_are_reused_never_rerun(tmp_path, monkeypatch, capsys):
     """Long leagues accumulate across machines and sessions: with a second --root holding an
     earlier league's tables (a published one), its done runs count as done (read from the tables,
