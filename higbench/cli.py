@@ -264,6 +264,8 @@ def _run_job(plan: Plan, multirun: bool) -> float:
     # instead of training on, orphaned; and the worker then exits instead of lingering. The
     # same for a sweep a driver launched (the league, the figures: DRIVER_ENV names it), which
     # would otherwise go on through its jobs list with no driver to read the results.
+    from higbench.results import end_of_run  # pandas: read once the run is over, not at start-up
+    from higbench.runner.progress import job_label
     from higbench.runner.train import DRIVER_ENV
 
     parent = None if invocation().main else os.getppid()
@@ -274,7 +276,7 @@ def _run_job(plan: Plan, multirun: bool) -> float:
     # 128+signal while the file says completed. Ignored while reporting (and, for a single
     # run, until exit); a sweep gets its handlers back for the next job.
     previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    for line in summary_lines(summary, start):  # through logging: the console and <run dir>/higbench.log
+    for line in end_of_run.summary_lines(summary, start, job_label()):  # through logging: the console and <run dir>/higbench.log
         log.info(line)
     if multirun:
         for s, handler in previous.items():
@@ -311,49 +313,6 @@ def sweep_resume_command(sweep_dir: str) -> str:
     sweep_dir = os.path.abspath(str(sweep_dir))
     args = [a for a in sys.argv[1:] if not a.startswith(("hydra.sweep.dir=", "resume="))]
     return shlex.join(["higbench", *args, f"hydra.sweep.dir={sweep_dir}", "resume=true"])
-
-
-def summary_lines(summary, cfg: DictConfig) -> list[str]:
-    """The end-of-run lines, read back from the closed run file (the numbers the index shows)."""
-    from higbench.display import busy_note
-    from higbench.results.index import read_run_summary, threshold_column
-    from higbench.results.targets import for_problem
-    from higbench.runner.progress import job_label
-
-    label = job_label()
-    head = f"{label}{summary.status}: {cfg.problem.name}/{cfg.optimizer.name} {summary.steps} updates in {summary.wall_time:.1f}s"
-    thresholds = for_problem(cfg)  # the problem's targets (problem.targets), as the index times them
-    row, _ = read_run_summary(summary.path, thresholds=thresholds, tables=summary.tables)  # never raises
-    if "final_test_loss" not in row:  # an unreadable file: say what the loop knew
-        row["final_test_loss"] = summary.final_test_loss
-    final = row.get("final_test_loss", math.nan)
-    at = f" (last evaluated at step {row['final_step']})" if "final_step" in row and row["final_step"] != summary.steps else ""
-    lines = [f"{head}, final test loss {final:.4e}{at}" + (f" ({summary.reason})" if summary.reason else "")]
-    if summary.status == "diverged":
-        lines.append(f"{label}{diverged_hint(cfg)}")
-    times = []
-    for t in thresholds:
-        value = row.get(threshold_column(t), math.nan)
-        times.append(f"{t:.0e}: " + (f"{value:.1f}s" if math.isfinite(value) else "not reached"))
-    if times:
-        lines.append(f"{label}time to test loss " + ", ".join(times))
-    else:  # a problem of one's own may set none
-        lines.append(f"{label}time to test loss: the problem sets no targets (give some with problem.targets=[1e-2,1e-3])")
-    busy = busy_note(row.get("env.cpu_share"), row.get("env.load_at_finish"))
-    if busy:  # a busy machine: the numbers above are not an idle machine's (the README's)
-        lines.append(f"{label}{busy}")
-    lines.append(f"{label}run file: {summary.path}")
-    return lines
-
-
-def diverged_hint(cfg: DictConfig) -> str:
-    """What a researcher does next with a diverged run (the figures' own rule for GN)."""
-    if cfg.optimizer.name == "gn":
-        return (
-            "Gauss-Newton diverges for many seeds at the paper's settings; the figures search seeds "
-            "and report the stable ones (on the oscillator seed 7 is stable: seed=7), see docs/results"
-        )
-    return "a diverged run is a result (its file says where and why); a smaller optimizer.lr or another seed may train"
 
 
 def _report_kept_run(run_path: Path, why: str) -> float:

@@ -553,9 +553,9 @@ def format_league(
             tasks = [t for t in validation_targets if t in playing or any(t in (held_out or {}).get(p, ()) for p in playing)]
             given = "; ".join(f"{t}: target {validation_targets[t]:.4g}, budget {budgets[t]:.3g} s" for t in tasks)
             out += ["", "AlgoPerf: seconds to the validation target within the budget (median over seeds; inf: fewer "
-                    f"than half reach it), each problem weighing the same; held-out variants are gates (a setting whose median on "
-                    "a variant is inf counts as not reaching its problem's target, as in AlgoPerf; 'score, gates "
-                    f"ignored': without that rule): {given}"]  # fmt: skip
+                    "than half reach it), each problem weighing the same; held-out variants are gates (a setting whose "
+                    "median on a variant is inf counts as not reaching its problem's target, as in AlgoPerf; 'score, "
+                    f"gates ignored': without that rule): {given}"]  # fmt: skip
             if waiting:
                 out.append(f"not scored yet (targets set, no scored runs): {', '.join(waiting)}")
             table = algoperf_table(scored, curves, validation_targets, budgets, held_out)

@@ -73,15 +73,15 @@ def test_stop_signal_just_after_the_file_is_closed_exits_as_the_file_says(higben
     import os
     import signal
 
-    from higbench import cli
+    from higbench.results import end_of_run
 
-    real = cli.summary_lines
+    real = end_of_run.summary_lines
 
     def late(*a):
         os.kill(os.getpid(), signal.SIGTERM)
         return real(*a)
 
-    monkeypatch.setattr(cli, "summary_lines", late)
+    monkeypatch.setattr(end_of_run, "summary_lines", late)
     reached = []  # in a process of its own, a SIGTERM nobody ignores would end it (here: pytest)
     signal.signal(signal.SIGTERM, lambda signum, frame: reached.append(signum))  # put back after the test
     code, _, err = higbench("problem=toy", "optimizer=sgd", "budget.max_updates=5", "hydra.run.dir=run")

@@ -38,7 +38,7 @@ def test_busy_summary_counts_the_busy_runs():
 
 
 def test_closing_lines_of_a_run_say_the_machine_was_busy(tmp_path):
-    from higbench.cli import summary_lines
+    from higbench.results.end_of_run import summary_lines
 
     cfg = OmegaConf.create({"problem": {"name": "toy", "targets": [1e-2]}, "optimizer": {"name": "hig"}})
     for share, said in ((0.33, True), (0.97, False)):
