@@ -62,3 +62,7 @@ def test_the_report_says_how_many_tuning_trials_reached_the_validation_target_an
     text = tuning_outcomes(runs, curves, {"toy": 0.01})
     assert text.splitlines()[1] == "  toy (validation target 0.01): hig 1 of 2, 3 s; adam 1 of 1, 5 s"
     assert tuning_outcomes(runs, curves, {}) == ""
+    # two studies (tuning seeds 1000 and 1001): each study's fastest, the luck of one study alone
+    studies = runs.assign(seed=[1000, 1001, 1000, 1000, 1001])
+    line = tuning_outcomes(studies, curves, {"toy": 0.01}).splitlines()[1]
+    assert line == "  toy (validation target 0.01): hig 1 of 2, 3 s (per study: 3, inf s); adam 1 of 1, 5 s"
