@@ -5,11 +5,12 @@
     league.league_frames(runs, curves, spaces)   # as from load_runs(root, curves=True)
 
 The contract with the scorer (``higbench.results.league``). ``runs.csv.gz``: one row per league
-run, the columns of ``higbench.results.index.load_runs`` named in ``RUN_COLUMNS`` with their
-meanings there, ``path`` replaced by ``run`` (the run file's path relative to the root), and
-the league's own: ``identity`` (the job identity, ``config_id``), ``league_role`` (tune,
-confirm, paper or default: the problem's shipped settings where it has none of the paper's;
-target-tune and target: the target setting's reference trials and reruns),
+run and role (a run that served two roles has two rows), the columns of
+``higbench.results.index.load_runs`` named in ``RUN_COLUMNS`` with their meanings there,
+``path`` replaced by ``run`` (the run file's path relative to the root), and the league's own:
+``identity`` (the job identity, ``config_id``), ``league_role`` (tune, confirm, paper or
+default: the problem's shipped settings where it has none of the paper's; target-tune and
+target: the target setting's reference trials and reruns),
 ``league_job`` (``tune/toy/adam/0/3``: role, problem, optimizer, study, trial; confirmation
 jobs name their variant), ``study`` and ``trial`` (tuning runs), ``task``, ``hardware``
 (``tables.hardware``) and ``env.load_1min``. ``curves.csv.gz``: one row per (run,
@@ -73,18 +74,20 @@ def _warn(text: str) -> None:
     print(f"[league] {text}", file=sys.stderr)
 
 
-def _roles(root: Path, jobs: Mapping[str, Mapping] | None) -> dict[str, dict]:
-    """identity -> {league_role, league_job, study, trial}: from the manifests every league
-    invocation left under ``ROOT/manifests/`` (oldest first), then ``jobs`` (this invocation's)."""
-    found: dict[str, dict] = {}
+def _roles(root: Path, jobs: Mapping[str, Mapping] | None) -> dict[str, dict[str, dict]]:
+    """identity -> role -> {league_role, league_job, study, trial}: from the manifests every league
+    invocation left under ``ROOT/manifests/`` (oldest first), then ``jobs`` (this invocation's).
+    One run can serve two roles (a reference's tuning trial is a league tuning trial too when
+    the league's budget is the target setting's): it gets a row for each."""
+    found: dict[str, dict[str, dict]] = {}
     manifests = sorted((root / "manifests").glob("*.json")) if safe_dir(root / "manifests") else []
     for _, manifest in read_json_files(manifests):
         entries = manifest.get("runs") if isinstance(manifest, dict) else None
         for entry in entries if isinstance(entries, list) else []:
             if isinstance(entry, dict) and isinstance(entry.get("identity"), str) and entry.get("role") in ROLES:
-                found[entry["identity"]] = _role_of(entry)
+                found.setdefault(entry["identity"], {})[entry["role"]] = _role_of(entry)
     for identity, entry in (jobs or {}).items():
-        found[identity] = _role_of(entry)
+        found.setdefault(identity, {})[entry.get("role")] = _role_of(entry)
     return found
 
 
@@ -111,8 +114,10 @@ def runs_table(root: Path, runs: pd.DataFrame, roles: Mapping[str, dict]) -> pd.
         hardware=hardware(runs),
         **{"env.load_1min": runs.get("env.load_at_finish", pd.Series(None, index=runs.index)).map(load_1min)},
     )
+    table = table.assign(role=table["identity"].map(lambda i: list(roles[i].values()))).explode("role")  # a row per role
     for key in ("league_role", "league_job", "study", "trial"):
-        table[key] = table["identity"].map(lambda i, key=key: roles[i][key])
+        table[key] = table["role"].map(lambda r, key=key: r[key])
+    table = table.reset_index(drop=True)
     table["task"] = table.apply(league.task_label, axis=1)  # the job names its variant
     for key in ("study", "trial"):  # whole numbers, empty for confirmation runs (not 0.0)
         table[key] = pd.to_numeric(table[key], errors="coerce").astype("Int64")
@@ -185,11 +190,11 @@ def export(root: Path, jobs: Mapping[str, Mapping] | None = None) -> tuple[Path,
 
 
 def write_merged(out: Path, roots: Iterable[Path]) -> tuple[Path, Path]:
-    """The tables of ``roots`` merged into ``OUT/tables/`` (one row per run; its ``run`` as in its
+    """The tables of ``roots`` merged into ``OUT/tables/`` (one row per run and role; its ``run`` as in its
     own root): ``out`` is then a root itself, which a later league reads as its earlier runs and
     ``--report-only --root OUT`` scores alone."""
     runs, curves = read(roots)
-    runs = runs.drop_duplicates("identity", keep="first").drop(columns=["root", "path"], errors="ignore")
+    runs = runs.drop_duplicates(["identity", "league_role"], keep="first").drop(columns=["root", "path"], errors="ignore")
     runs["problem.targets"] = runs["problem.targets"].map(_targets_text)
     curves = curves[curves["run"].isin(set(runs["run"]))].drop(columns=["path"], errors="ignore")
     return _write_tables(Path(out), runs[list(RUN_COLUMNS)], curves[list(CURVE_COLUMNS)])

@@ -112,3 +112,27 @@ def test_a_run_moved_out_and_trained_again_replaces_its_old_row(tmp_path):
     hig = runs[runs["optimizer.name"] == "hig"]
     assert len(runs) == 2 and list(hig["run"]) == ["figures-runs/x/h0-again/run.h5"]
     assert float(hig["final_test_loss"].iloc[0]) == 0.0005
+
+
+def test_a_run_that_served_two_roles_has_a_row_for_each(tmp_path):
+    """A reference's rerun is also a confirmation run when the league's budget is the target
+    setting's and tuning chose the same point (the job identities coincide): the target setting
+    and the score both need it, so the tables keep a row per role, through the merge too."""
+    import json
+
+    root, out = tmp_path / "root", tmp_path / "out"
+    jobs = league_root(root, [0])
+    adam = next(i for i, e in jobs.items() if e["job"].endswith("adam"))
+    entries = [{"identity": i, **e} for i, e in jobs.items()] + [
+        {"identity": adam, "role": "target", "job": "target/toy/base/adam"}
+    ]
+    (root / "manifests").mkdir()
+    (root / "manifests" / "sitting.json").write_text(json.dumps({"runs": entries}))
+    tables.export(root)
+    tables.write_merged(out, [root])
+    for folder in (root, out):
+        runs, _ = tables.read(folder)
+        assert sorted(runs.loc[runs["identity"] == adam, "league_role"]) == ["confirm", "target"]
+        assert len(runs) == 3 and runs["run"].nunique() == 2
+        scored, _, _ = league.league_frames(runs, tables.read(folder)[1], league.all_spaces())
+        assert sorted(scored["optimizer.name"]) == ["adam", "hig"]  # the confirm row scores once
