@@ -183,22 +183,29 @@ def algoperf_table(
     settings = sorted(set(scored["league_setting"]))
     problems, _ = problems_in_play(scored, targets, held_out)
     times = pd.DataFrame({p: {s: median_time(p, s) for s in settings} for p in problems}, index=settings)
-    fastest = times.min(axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratios = times / fastest.where(np.isfinite(fastest) & (fastest > 0))
-    gated = ratios.copy()
-    rows = []
-    for setting in settings:
-        gates = {(p, v): median_time(v, setting) for p in problems for v in (held_out or {}).get(p, []) if v in targets}
-        for (problem, _), t in gates.items():
+    gates = {s: {(p, v): median_time(v, s) for p in problems for v in (held_out or {}).get(p, []) if v in targets}
+             for s in settings}  # fmt: skip
+    gated = times.copy()  # AlgoPerf: a failed gate makes the problem's time inf, before the fastest is taken
+    for setting, results in gates.items():
+        for (problem, _), t in results.items():
             if math.isinf(t):
                 gated.loc[setting, problem] = math.inf
-        rows.append({"setting": setting, "score": integrated_score(gated.loc[setting].to_numpy(dtype=float), tau_max),
-                     "score, gates ignored": integrated_score(ratios.loc[setting].to_numpy(dtype=float), tau_max),
+    ratios, ungated = _ratios(gated), _ratios(times)
+    rows = []
+    for setting in settings:
+        rows.append({"setting": setting, "score": integrated_score(ratios.loc[setting].to_numpy(dtype=float), tau_max),
+                     "score, gates ignored": integrated_score(ungated.loc[setting].to_numpy(dtype=float), tau_max),
                      **{f"s to target: {p}": times.loc[setting, p] for p in problems},
-                     "gates failed": ", ".join(v for (_, v), t in gates.items() if math.isinf(t)),
-                     "gates not run": ", ".join(v for (_, v), t in gates.items() if math.isnan(t))})  # fmt: skip
+                     "gates failed": ", ".join(v for (_, v), t in gates[setting].items() if math.isinf(t)),
+                     "gates not run": ", ".join(v for (_, v), t in gates[setting].items() if math.isnan(t))})  # fmt: skip
     table = pd.DataFrame(rows)
     if not table["gates not run"].astype(bool).any():
         table = table.drop(columns="gates not run")
     return table.sort_values(["score", "score, gates ignored"], ascending=False, kind="stable").reset_index(drop=True)
+
+
+def _ratios(times: pd.DataFrame) -> pd.DataFrame:
+    """Each setting's time over the fastest on each problem (NaN where no setting reached it)."""
+    fastest = times.min(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return times / fastest.where(np.isfinite(fastest) & (fastest > 0))

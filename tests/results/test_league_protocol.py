@@ -190,6 +190,14 @@ def test_time_to_target_scores_each_problem_the_same_and_held_out_variants_gate(
     over_budget = league.algoperf_table(scored, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1},
                                         budgets={"p": 1.5, "q": 10}).set_index("setting")  # fmt: skip
     assert math.isinf(over_budget.loc["b", "s to target: p"])  # 2 s is past p's 1.5 s budget
+    # the fastest on p fails p's gate: AlgoPerf takes the fastest after the gate, so b's 2 s is the best on p
+    swapped = scored.assign(league_setting=["a", "b", "a", "b", "b", "a"])  # now a never reaches p's variant
+    a_fails = league.algoperf_table(swapped, pd.DataFrame(rows), targets={"p": 0.1, "q": 0.1, "p v": 0.1},
+                                    budgets={"p": 10, "q": 10, "p v": 10}, held_out={"p": ["p v"]})  # fmt: skip
+    a_fails = a_fails.set_index("setting")
+    assert a_fails.loc["a", "gates failed"] == "p v" and a_fails.loc["b", "gates failed"] == ""
+    assert a_fails.loc["b", "score"] == pytest.approx(1.0)  # fastest on q, and on p once a is out
+    assert a_fails.loc["a", "score"] == pytest.approx((0 + 2) / 2 / 3)  # p: out; q: 2x the fastest
 
 
 def test_the_report_prints_the_algoperf_table_when_targets_and_budgets_are_given():
