@@ -194,9 +194,12 @@ def write_merged(out: Path, roots: Iterable[Path]) -> tuple[Path, Path]:
     own root): ``out`` is then a root itself, which a later league reads as its earlier runs and
     ``--report-only --root OUT`` scores alone."""
     runs, curves = read(roots)
-    runs = runs.drop_duplicates(["identity", "league_role"], keep="first").drop(columns=["root", "path"], errors="ignore")
+    runs = runs.drop_duplicates(["identity", "league_role"], keep="first")
+    # each kept run's evaluations once: from the root its row came from (a run in two roots, a
+    # league's own root and the published one, was counted once per root, and again per merge)
+    curves = curves[curves["path"].isin(set(runs["path"]))].drop(columns=["path"], errors="ignore").drop_duplicates()
+    runs = runs.drop(columns=["root", "path"], errors="ignore")
     runs["problem.targets"] = runs["problem.targets"].map(_targets_text)
-    curves = curves[curves["run"].isin(set(runs["run"]))].drop(columns=["path"], errors="ignore")
     return _write_tables(Path(out), runs[list(RUN_COLUMNS)], curves[list(CURVE_COLUMNS)])
 
 

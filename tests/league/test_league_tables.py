@@ -136,3 +136,15 @@ def test_a_run_that_served_two_roles_has_a_row_for_each(tmp_path):
         assert len(runs) == 3 and runs["run"].nunique() == 2
         scored, _, _ = league.league_frames(runs, tables.read(folder)[1], league.all_spaces())
         assert sorted(scored["optimizer.name"]) == ["adam", "hig"]  # the confirm row scores once
+
+
+def test_a_run_in_two_roots_keeps_its_evaluations_once_through_repeated_merges(tmp_path):
+    """A league's own root and the published tables both hold a run: the merge keeps its row once
+    and its curve once, and merging the merged tables again (each sitting) adds nothing."""
+    root, out = tmp_path / "root", tmp_path / "out"
+    tables.export(root, league_root(root, [0]))
+    tables.write_merged(out, [root])
+    for _ in range(3):  # three sittings, each merging the league's root with the published tables
+        tables.write_merged(out, [root, out])
+    runs, curves = tables.read(out)
+    assert len(runs) == 2 and len(curves) == 3 + 4  # hig's 3 evaluations, adam's 4
