@@ -93,7 +93,8 @@ def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str]
 def plot_profile(reached: pd.DataFrame, colours: Mapping[str, str], out: Path, tau_max: float = TAU_MAX) -> Path:
     """profile.png: rho(tau) in seconds to the problems' targets (equal wall clock; no updates
     view), in the colours of ``final_losses.png`` (``setting_colours``): the leaders by final
-    loss and HIG in colour, the rest grey."""
+    loss and HIG in colour, the rest grey. Coloured lines are drawn widest first, so one lying on
+    another shows as a stripe inside it, and the legend gives each one's rho at ``tau_max``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -103,13 +104,17 @@ def plot_profile(reached: pd.DataFrame, colours: Mapping[str, str], out: Path, t
     taus = np.linspace(1.0, tau_max, 61)
     rho = performance_profile(profile_times(reached), taus)
     fig, ax = plt.subplots(figsize=(6.5, 4.4))
-    for name in rho.columns:
-        grey = colours.get(name, "0.7") == "0.7"
-        ax.step(taus, rho[name], where="post", color=colours.get(name, "0.7"), lw=0.8 if grey else 1.8,
-                label=None if grey else name, zorder=1 if grey else 3)  # fmt: skip
+    coloured = [n for n in rho.columns if colours.get(n, "0.7") != "0.7"]
+    greys = [n for n in rho.columns if n not in coloured]
+    for name in greys:
+        ax.step(taus, rho[name], where="post", color="0.7", lw=0.8, zorder=1)
+    for i, name in enumerate(coloured):
+        ax.step(taus, rho[name], where="post", color=colours[name], lw=max(4.5 - 0.8 * i, 1.2), zorder=3 + i,
+                label=f"{name}: {rho[name].iloc[-1]:.2f} at tau={tau_max:g}")  # fmt: skip
+    never = sum(rho[n].iloc[-1] == 0 for n in greys)
     ax.set_xlabel("tau (seconds to target over the fastest)")
     ax.set_ylabel("rho(tau): fraction of (task, target) pairs")
-    ax.set_title("equal wall clock (grey: the other settings)", fontsize=10)
+    ax.set_title(f"equal wall clock (grey: {len(greys)} other settings, {never} of them at 0 throughout)", fontsize=10)
     ax.set_ylim(-0.03, 1.03)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best")
