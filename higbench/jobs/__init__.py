@@ -61,6 +61,7 @@ from higbench.results.index import config_id as identity_of
 from higbench.runfile.reader import RUN_FILE
 from higbench.runner.checkpoint import checkpoint_path
 from higbench.runner.rundir import RESUMABLE_STATUSES
+from higbench.runner.threads import available_cores, idle_cores
 
 # Overrides of every figure run that do not change its result (tests check they are cosmetic keys).
 LAUNCH_OVERRIDES = ("progress=false", "threads=1")
@@ -546,6 +547,30 @@ def parse_overrides(overrides: Sequence[str]) -> dict[str, Any]:
     return {o.key_or_group: o.value() for o in OverridesParser.create().parse_overrides(list(overrides))}
 
 
+# Launchers whose runs train on this machine: their budgets in seconds are only equal when each
+# run has a core to itself.
+LOCAL_LAUNCHERS = ("basic", "joblib", "auto", "submitit_local")
+
+
+def busy_cores() -> float:
+    """Cores of this process in use right now (``runner.threads.idle_cores``: /proc/stat over
+    0.2 s; the 1-minute load average would still count a driver's own runs that just ended)."""
+    idle = idle_cores()
+    return 0.0 if idle is None else max(0.0, available_cores() - idle)
+
+
+def busy_machine(n_runs: int, busy: float | None = None, cores: int | None = None) -> str | None:
+    """One line when ``n_runs`` runs at once would share this process's cores with work already
+    running, else None: their budgets in seconds then buy less than on an idle machine."""
+    cores = cores or available_cores()
+    busy = busy_cores() if busy is None else busy
+    if busy + n_runs <= cores + 0.25:
+        return None
+    return (f"[jobs] busy machine: {busy:.1f} of {cores} cores in use before {n_runs} run(s) at once start: the runs "
+            "will share cores, so a budget in seconds buys less than on an idle machine (each run records its CPU "
+            "share, env/cpu_share)")  # fmt: skip
+
+
 def run_missing(
     jobs: Sequence[Job],
     runs_root: Path,
@@ -579,6 +604,9 @@ def run_missing(
     todo = [j for j in jobs if launchable(j)]
     elsewhere = " or in the earlier tables" if known else ""
     log(f"[jobs] {sum(j.done for j in jobs)} of {len(jobs)} run(s) already done under {runs_root}{elsewhere}")
+    at_once = 1 if launcher.name == "basic" else min(n_jobs, len(todo))
+    if todo and launcher.name in LOCAL_LAUNCHERS and (busy := busy_machine(at_once)):
+        log(busy)
     while todo:  # a job once per call; again only if it was another worker's, and that worker died
         held = {j.identity for j in todo if j.identity and ledger.live_holder(j.identity) is not None}
         launch(todo, runs_root, n_jobs=n_jobs, launcher=launcher, log=log, progress=progress)
