@@ -71,8 +71,8 @@ test-optuna: install-optuna
 	$(BIN)/python -m pytest -q -m optuna $(PYTEST_ARGS)
 
 lint: install-dev
-	$(BIN)/ruff check higbench tests scripts
-	$(BIN)/ruff format --check higbench tests scripts
+	$(BIN)/ruff check higbench tests scripts hydra_plugins
+	$(BIN)/ruff format --check higbench tests scripts hydra_plugins
 	$(BIN)/lint-imports
 
 bench: install

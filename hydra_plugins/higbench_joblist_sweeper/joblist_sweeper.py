@@ -23,7 +23,7 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from hydra.core.config_store import ConfigStore
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -38,7 +38,7 @@ from hydra_plugins.higbench_joblist_sweeper.every_batch_sweeper import EveryBatc
 class JobListSweeperConf:
     _target_: str = "hydra_plugins.higbench_joblist_sweeper.joblist_sweeper.JobListSweeper"
     jobs_file: str = "???"  # JSON: [["key=value", ...], ...], one list of overrides per job
-    only: Optional[int] = None  # run the job of this index alone (a job array's task)
+    only: int | None = None  # run the job of this index alone (a job array's task)
 
 
 ConfigStore.instance().store(group="hydra/sweeper", name="joblist", node=JobListSweeperConf, provider="higbench")
@@ -49,15 +49,17 @@ def read_jobs(path: str | Path) -> list[list[str]]:
     return [e["overrides"] for e in read_entries(path)[1]]
 
 
-def read_entries(path: str | Path) -> tuple[Optional[str], list[dict]]:
+def read_entries(path: str | Path) -> tuple[str | None, list[dict]]:
     """(the ledger's runs root or None, one dict per job: ``overrides``, and ``claim`` and
     ``run`` where the jobs are claimed), checked."""
     data = json.loads(_read_regular(Path(path)))
     root, entries = None, data
     if isinstance(data, dict):
         root, entries = data.get("ledger"), data.get("jobs")
-        ok = isinstance(root, str) and isinstance(entries, list) and all(
-            isinstance(e, dict) and isinstance(e.get("claim"), str) and isinstance(e.get("run"), str) for e in entries
+        ok = (
+            isinstance(root, str)
+            and isinstance(entries, list)
+            and all(isinstance(e, dict) and isinstance(e.get("claim"), str) and isinstance(e.get("run"), str) for e in entries)
         )
     else:
         ok = isinstance(entries, list)
@@ -93,7 +95,7 @@ def merge(common: list[str], job: list[str]) -> list[str]:
 
 
 class JobListSweeper(Sweeper):
-    def __init__(self, jobs_file: str, only: Optional[int] = None):
+    def __init__(self, jobs_file: str, only: int | None = None):
         self.jobs_file, self.only = jobs_file, only
         self.config = self.launcher = self.hydra_context = None
         self.root, self.entries = None, []
