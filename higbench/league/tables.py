@@ -194,13 +194,24 @@ def write_merged(out: Path, roots: Iterable[Path]) -> tuple[Path, Path]:
     own root): ``out`` is then a root itself, which a later league reads as its earlier runs and
     ``--report-only --root OUT`` scores alone."""
     runs, curves = read(roots)
-    runs = runs.drop_duplicates(["identity", "league_role"], keep="first")
+    runs = one_row_per_identity_and_role(runs)
     # each kept run's evaluations once: from the root its row came from (a run in two roots, a
     # league's own root and the published one, was counted once per root, and again per merge)
     curves = curves[curves["path"].isin(set(runs["path"]))].drop(columns=["path"], errors="ignore").drop_duplicates()
     runs = runs.drop(columns=["root", "path"], errors="ignore")
     runs["problem.targets"] = runs["problem.targets"].map(_targets_text)
     return _write_tables(Path(out), runs[list(RUN_COLUMNS)], curves[list(CURVE_COLUMNS)])
+
+
+def one_row_per_identity_and_role(runs: pd.DataFrame) -> pd.DataFrame:
+    """The first row of each (identity, role), a finished one (completed or diverged) before any
+    other: a run killed without closing its file (status ``running``) or interrupted, and trained
+    again under another directory, leaves two files of one identity, and the old one comes first."""
+    from higbench.results.index import DONE_STATUSES
+
+    unfinished = ~runs["status"].isin(DONE_STATUSES)
+    order = unfinished.sort_values(kind="stable").index  # finished first, each group in its old order
+    return runs.loc[order].drop_duplicates(["identity", "league_role"], keep="first").sort_index()
 
 
 def _write_tables(root: Path, runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[Path, Path]:

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import pandas as pd
+import pytest
 import yaml
 
 from higbench.league import tables
@@ -15,8 +16,10 @@ from higbench.results.index import load_runs
 from higbench.runfile.writer import RunFileWriter
 
 
-def write_run(root: Path, name: str, optimizer: str, seed: int, losses, *, lr: float, load="3.50 2.00 1.00", cores=2):
-    """A completed toy run under ``root/figures-runs`` (where the league's launches put them)."""
+def write_run(root: Path, name: str, optimizer: str, seed: int, losses, *, lr: float, load="3.50 2.00 1.00", cores=2,
+              status: str | None = "completed"):  # fmt: skip
+    """A toy run under ``root/figures-runs`` (where the league's launches put them); completed, or
+    ``status=None``: left ``running``, as a run killed by SIGKILL leaves its file."""
     config = {"problem": {"name": "toy", "targets": [1e-1, 1e-2]}, "optimizer": {"name": optimizer, "lr": lr}, "seed": seed,
               "budget": {"seconds": 5.0, "max_updates": None}}  # fmt: skip
     env = {"hostname": "test", "device": "cpu", "cpu_count": cores, "cpu_share": 0.8, "load_at_finish": load}
@@ -31,7 +34,7 @@ def write_run(root: Path, name: str, optimizer: str, seed: int, losses, *, lr: f
     w.flush()
     w.f.attrs["steps"] = (len(losses) - 1) * 10
     w.f.attrs["wall_time"] = (len(losses) - 1) * 0.37
-    w.close("completed", "", (len(losses) - 1) * 10)
+    w.close(status, "", (len(losses) - 1) * 10)
 
 
 def league_root(root: Path, seeds, cores=2) -> dict:
@@ -112,6 +115,27 @@ def test_a_run_moved_out_and_trained_again_replaces_its_old_row(tmp_path):
     hig = runs[runs["optimizer.name"] == "hig"]
     assert len(runs) == 2 and list(hig["run"]) == ["figures-runs/x/h0-again/run.h5"]
     assert float(hig["final_test_loss"].iloc[0]) == 0.0005
+
+
+@pytest.mark.parametrize("killed", [None, "interrupted"], ids=["sigkill-left-running", "interrupted"])
+def test_a_run_killed_and_trained_again_elsewhere_merges_as_the_finished_one(tmp_path, killed):
+    """A run killed mid-way (SIGKILL leaves its file ``running``; SIGTERM ``interrupted``) whose
+    job the next sitting trained again in a new directory: both files stay in the root, and the
+    merge keeps the finished one, though the killed one's directory sorts first. Keeping the
+    first left an oscillator tuning trial of Muon and one of AdaGrad out of the tuning counts."""
+    root, out = tmp_path / "root", tmp_path / "out"
+    jobs = league_root(root, [0])
+    shutil.move(str(root / "figures-runs" / "x" / "h0"), str(tmp_path / "finished"))
+    write_run(root, "h0", "hig", 0, [1.0, 0.3], lr=0.5, status=killed)  # the killed attempt, first by path
+    write_run(root, "h0-again", "hig", 0, [1.0, 0.04, 0.0005], lr=0.5)  # the same identity, trained again
+    tables.export(root, jobs)
+    assert len(tables.read(root)[0]) == 3  # the root's own table keeps every file's row
+    tables.write_merged(out, [root])
+    runs, curves = tables.read(out)
+    hig = runs[runs["optimizer.name"] == "hig"]
+    assert len(runs) == 2 and list(hig["run"]) == ["figures-runs/x/h0-again/run.h5"]
+    assert list(hig["status"]) == ["completed"] and float(hig["final_test_loss"].iloc[0]) == 0.0005
+    assert len(curves[curves["run"] == "figures-runs/x/h0-again/run.h5"]) == 3 and set(curves["run"]) == set(runs["run"])
 
 
 def test_a_run_that_served_two_roles_has_a_row_for_each(tmp_path):
