@@ -424,8 +424,27 @@ def run_to_end(cmd: list[str], **kwargs) -> subprocess.Popen:
 
 def start_job(cmd: list[str], **kwargs) -> subprocess.Popen:
     """The job in a process group of its own, so that the driver alone decides when it stops, and
-    the stop reaches the launcher's workers too (joblib's), not only the sweep's parent."""
-    return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+    the stop reaches the launcher's workers too (joblib's), not only the sweep's parent. The job
+    gets SIGINT's default even where the driver has it ignored (``_sigint_not_ignored``)."""
+    with _sigint_not_ignored():
+        return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+
+
+@contextmanager
+def _sigint_not_ignored():
+    """A shell that starts the driver in the background ignores SIGINT for it, and an ignored signal
+    stays ignored across exec (a caught one is reset to its default). A job started so missed the
+    SIGINT of ``close_on_interrupt`` until its run set its own handler: a stop sent while the sweep
+    was starting was lost, and its first run killed after ``CLOSE_S`` without closing its file.
+    Catching SIGINT around the start gives the job the default; only the main thread may."""
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 CLOSE_S = 60.0  # how long a stopped driver waits for its runs to write their last rows and checkpoint

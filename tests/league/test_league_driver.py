@@ -645,6 +645,32 @@ def test_a_stopped_driver_gives_its_running_job_and_its_workers_time_to_close_th
     assert proc.returncode == 130 and closed.read_text() == "rows written"
 
 
+@pytest.mark.process  # the job is a process: the point
+def test_a_driver_started_in_the_background_stops_a_job_that_is_still_starting(monkeypatch):
+    """A shell starts a background driver with SIGINT ignored, and exec keeps it ignored: the job
+    must not inherit that, or the SIGINT of a stop sent before its run sets a handler (the sweep's
+    start-up: tens of seconds on a loaded machine) is lost and the run killed after CLOSE_S
+    (a league sitting stopped between two phases left a run file saying `running` so)."""
+    import subprocess
+    import sys
+    import time
+
+    import higbench.jobs as jobs
+
+    monkeypatch.setattr(jobs, "CLOSE_S", 10.0)  # without the fix: SIGKILL after 10 s, not 60
+    child = "import signal, sys, time\nprint(signal.getsignal(signal.SIGINT) is signal.SIG_IGN, flush=True)\ntime.sleep(60)\n"
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # as `higbench-league ... &` from a script
+    try:
+        proc = jobs.start_job([sys.executable, "-c", child], stdout=subprocess.PIPE, text=True)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # the driver's own disposition is kept
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert proc.stdout.readline().strip() == "False", "the job inherited SIGINT ignored"
+    start = time.monotonic()
+    jobs.close_on_interrupt(proc)  # no handler of its own yet: SIGINT's default ends it at once
+    assert proc.returncode == -signal.SIGINT and time.monotonic() - start < 5
+
+
 def test_the_long_budget_trains_the_chosen_and_shipped_settings_longer_on_its_own_seeds(tmp_path, no_runs, monkeypatch):
     """--long: after a problem's confirmation, each long optimizer's chosen setting (role long) and
     the shipped one of those in --paper (role long-paper) on the first --long-seeds seeds, at the
