@@ -28,7 +28,9 @@ from pathlib import Path
 
 import pytest
 
-BUDGET = 15  # tests of the default suite (not slow) that may start processes (issue 34)
+# tests of the default suite (not slow) that may start processes (issue 34); 16 since a background
+# driver stopping a job still starting, which needs a process of its own
+BUDGET = 16
 
 ENFORCE = True  # fail a test of the default suite (not slow) that starts processes unmarked
 
