@@ -653,11 +653,10 @@ def test_a_driver_started_in_the_background_stops_a_job_that_is_still_starting(m
     (a league sitting stopped between two phases left a run file saying `running` so)."""
     import subprocess
     import sys
-    import time
 
     import higbench.jobs as jobs
 
-    monkeypatch.setattr(jobs, "CLOSE_S", 10.0)  # without the fix: SIGKILL after 10 s, not 60
+    monkeypatch.setattr(jobs, "CLOSE_S", 30.0)  # without the fix: SIGKILL after 30 s, not 60
     child = "import signal, sys, time\nprint(signal.getsignal(signal.SIGINT) is signal.SIG_IGN, flush=True)\ntime.sleep(60)\n"
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # as `higbench-league ... &` from a script
     try:
@@ -666,9 +665,8 @@ def test_a_driver_started_in_the_background_stops_a_job_that_is_still_starting(m
     finally:
         signal.signal(signal.SIGINT, previous)
     assert proc.stdout.readline().strip() == "False", "the job inherited SIGINT ignored"
-    start = time.monotonic()
     jobs.close_on_interrupt(proc)  # no handler of its own yet: SIGINT's default ends it at once
-    assert proc.returncode == -signal.SIGINT and time.monotonic() - start < 5
+    assert proc.returncode == -signal.SIGINT, "the job outlived the stop (killed after CLOSE_S: -9)"
 
 
 def test_the_long_budget_trains_the_chosen_and_shipped_settings_longer_on_its_own_seeds(tmp_path, no_runs, monkeypatch):
