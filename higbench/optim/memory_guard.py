@@ -180,26 +180,23 @@ def largest_batch(
     solver: str = "auto",
     precision="float64",
     upper: int = 1 << 30,
-    jacobian: str = "naive",
-    tau: float = 1e-6,
-    truncation: str = "relative",
-    krylov_steps: int = 200,
-    factor_values: int | None = None,
+    **route,
 ) -> int:
-    """Largest batch size whose estimate fits in ``limit`` bytes (0 if not even 1 fits)."""
-    route = {
-        "jacobian": jacobian,
-        "tau": tau,
-        "truncation": truncation,
-        "krylov_steps": krylov_steps,
-        "factor_values": factor_values,
-    }
-    if estimate_bytes(1, output_size, n_params, dtype, solver, precision, **route).total > limit:
+    """Largest batch size whose estimate fits in ``limit`` bytes (0 if not even 1 fits).
+
+    ``route``: the keyword arguments of :func:`estimate_bytes` that pick the step's route
+    (``jacobian``, ``tau``, ``truncation``, ``krylov_steps``, ``factor_values``), with its defaults.
+    """
+
+    def fits(batch_size: int) -> bool:
+        return estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, **route).total <= limit
+
+    if not fits(1):
         return 0
     lo, hi = 1, upper
     while lo < hi:
         mid = (lo + hi + 1) // 2
-        if estimate_bytes(mid, output_size, n_params, dtype, solver, precision, **route).total <= limit:
+        if fits(mid):
             lo = mid
         else:
             hi = mid - 1
@@ -215,20 +212,12 @@ def check(
     precision="float64",
     device: str = "cpu",
     limit_mb: float | None = None,
-    jacobian: str = "naive",
-    tau: float = 1e-6,
-    truncation: str = "relative",
-    krylov_steps: int = 200,
-    factor_values: int | None = None,
+    **route,
 ) -> Estimate:
-    """Raise ConfigError if the step for ``batch_size`` does not fit; return the estimate."""
-    route = {
-        "jacobian": jacobian,
-        "tau": tau,
-        "truncation": truncation,
-        "krylov_steps": krylov_steps,
-        "factor_values": factor_values,
-    }
+    """Raise ConfigError if the step for ``batch_size`` does not fit; return the estimate.
+
+    ``route``: :func:`estimate_bytes`'s route keywords, as in :func:`largest_batch`.
+    """
     est = estimate_bytes(batch_size, output_size, n_params, dtype, solver, precision, **route)
     avail, source = usable_bytes(device, limit_mb)
     if est.total > avail:
