@@ -381,11 +381,15 @@ def format_final_loss_table(table: pd.DataFrame, metric: str = TEST_METRIC) -> s
         lead = group[group["leader"]].iloc[0]
         ns = sorted(set(group["n"]))
         coverage = ", ".join(f"{c:.1%} at n={n}" for n, c in sorted(set(zip(group["n"], group["coverage"]))))
+        comparisons = len(group) - 1
         smallest = stats.smallest_attainable_p(min(ns), min(ns))
+        after_holm = min(1.0, smallest * comparisons)  # Holm multiplies the smallest p by the comparisons
+        cannot = ": no ordering can be separated at this seed count" if after_holm >= stats.ALPHA else ""
         out += [
             f"-- {task}: leader (lowest median {metric}) {lead['setting']}; interval: order statistics for the "
             f"median, coverage {coverage}; test: exact one-sided Mann-Whitney (leader below X), Holm over "
-            f"{len(group) - 1} comparisons; smallest attainable p at n={min(ns)}: {smallest:.3g}",
+            f"{comparisons} comparisons; smallest attainable p at n={min(ns)}: {smallest:.3g}, after Holm "
+            f"{after_holm:.3g}{cannot}",
         ]
         lines = [("setting", "median", "seeds", "interval", "P(lead<X)", "p", "p Holm", "verdict")]
         for _, r in group.iterrows():

@@ -52,6 +52,7 @@ def test_the_final_loss_table_leads_by_median_and_flags_a_row_that_diverged_ever
     assert not table["separated"].any()  # 3 seeds against 2 rivals: Holm's smallest p is 0.1
     text = league.format_final_loss_table(league.final_loss_table(scored))
     assert "coverage 75.0% at n=3" in text and "FLAGGED: diverged on every seed" in text
+    assert "smallest attainable p at n=3: 0.05, after Holm 0.1: no ordering can be separated" in text
 
 
 def test_every_shipped_optimizer_has_a_search_space():
