@@ -14,7 +14,10 @@ non-finite trial point; the probe says where it was.
     python scripts/probe_lbfgs_divergence.py --report-only  # re-read the csv
 
 Writes ``lbfgs_divergence.csv`` (one row per replayed trial) to ``--out`` (default
-docs/results/probes). The runs themselves go under ``--root`` (default outputs/probes/lbfgs).
+docs/results/probes). The runs themselves go under ``--root`` (default outputs/probes/lbfgs),
+in a new folder per invocation (a run directory is never reused). Each replay runs in a process
+of its own, this script with ``--one``, because the watch patches torch in that process; the
+probes' launcher (``probe_runs``) starts plain ``higbench`` jobs, which it could not patch.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import json
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -69,7 +73,7 @@ def replay(overrides: list[str], run_dir: Path) -> dict:
 
         return plain_search(watched, x, t, d, f, g, gtd, *args, **kwargs)
 
-    lbfgs.LBFGS.step, lbfgs._strong_wolfe = step, strong_wolfe
+    lbfgs.LBFGS.step, lbfgs._strong_wolfe = step, strong_wolfe  # not restored: a process per replay
     from higbench.cli import main
 
     try:
@@ -122,9 +126,10 @@ def main() -> None:
     csv = Path(args.out) / "lbfgs_divergence.csv"
     if not args.report_only:
         rows = []
+        sitting = Path(args.root) / time.strftime("%Y-%m-%d_%H-%M-%S")
         for i, trial in diverged_trials().iterrows():
             overrides = trial.overrides.split()
-            run_dir = Path(args.root) / f"study{int(trial.study)}-trial{int(trial.trial)}"
+            run_dir = sitting / f"study{int(trial.study)}-trial{int(trial.trial)}"
             done = subprocess.run(
                 [sys.executable, __file__, "--one", str(run_dir), *overrides], capture_output=True, text=True, check=True
             )
