@@ -25,6 +25,12 @@ class ConfigError(ValueError):
         super().__init__(f"{key}={show(value)}: {requirement}")
 
 
+class MissingExtra(ConfigError):
+    """An optimizer whose package comes with an optional extra that is not installed: fixed by a
+    pip install, unlike a setting the problem cannot take (a league refuses to start without it
+    rather than leave the optimizer out of its tables)."""
+
+
 class MemoryRefusal(ConfigError):
     """A config refused because what it needs does not fit in the memory there is (the memory
     guard, the network-size check): the same config is refused again on the same machine, so a

@@ -65,6 +65,7 @@ from pathlib import Path
 import pandas as pd
 
 from higbench.cards import league_optimizers
+from higbench.errors import MissingExtra
 from higbench.jobs import LAUNCH_OVERRIDES, Job, as_launcher, job_seconds, resolve, run_index, run_missing
 from higbench.jobs.ledger import FINAL_STATUSES
 from higbench.league import tables
@@ -479,7 +480,11 @@ def _main(argv=None) -> int:
         if not args.report_only:
             check_set(problem, optimizers)
     protocol = protocol_of(args, root, problems, optimizers, paper, trials, budgets, nodes)
-    refused = {p: {o: why for o in optimizers if (why := refusal(p, o, with_set=False))} for p in problems}
+    try:  # re-scoring needs no optimizer's package; training without one would drop it from the tables
+        refused = {p: {o: why for o in optimizers if (why := refusal(p, o, with_set=False, extras=args.report_only))}
+                   for p in problems}  # fmt: skip
+    except MissingExtra as exc:
+        fail(f"{exc} (or leave {exc.value} out of --optimizers)")
     if args.plan:
         planned = []
         Earlier.read([r for r in roots[1:] if safe_dir(r / tables.TABLES_DIR)])

@@ -201,12 +201,13 @@ def searchpath_of_set(items: list[str]) -> tuple[list[str], list[Path]]:
     return rest, folders
 
 
-def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
+def refusal(problem: str, optimizer: str, with_set: bool = True, extras: bool = True) -> str | None:
     """Why ``optimizer`` cannot run on ``problem`` (the CLI's one line: SIP without an inverse
     simulator, a package's missing extra), or None. ``with_set=False`` leaves the --set
-    overrides out: re-reading runs trained on a GPU needs none here."""
+    overrides out: re-reading runs trained on a GPU needs none here. ``extras=False``: a missing
+    extra raises ``MissingExtra`` instead: a league that trains must not quietly lose SOAP."""
     from higbench.config import validate
-    from higbench.errors import ConfigError
+    from higbench.errors import ConfigError, MissingExtra
     from higbench.jobs import compose, hydra_conf
     from higbench.preflight import composition_error
 
@@ -216,6 +217,10 @@ def refusal(problem: str, optimizer: str, with_set: bool = True) -> str | None:
         with hydra_conf():
             cfg = compose(tuple(overrides))
         validate(cfg)
+    except MissingExtra as exc:
+        if not extras:
+            raise
+        return str(exc)
     except ConfigError as exc:
         return str(exc)
     except Exception as exc:  # Hydra's composition errors (an unknown key in --set): the CLI's line

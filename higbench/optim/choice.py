@@ -17,7 +17,7 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from higbench.cards import CARD_KEY
-from higbench.errors import ConfigError
+from higbench.errors import ConfigError, MissingExtra
 from higbench.schema import locate
 
 # optimizer keys that are not constructor arguments (its card: higbench.cards)
@@ -82,7 +82,7 @@ def optimizer_class(opt: Any) -> type:
     except ImportError as exc:
         if opt.get("extra"):  # a third-party optimizer: its YAML names the optional extra that installs it
             why = f'{target} comes with the {opt["extra"]} extra: pip install -e ".[{opt["extra"]}]"'
-            raise ConfigError("optimizer", opt.get("name", target), why) from None
+            raise MissingExtra("optimizer", opt.get("name", target), why) from None
         raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None
     except AttributeError as exc:
         raise ConfigError("optimizer._target_", target, f"cannot import this optimizer class ({type(exc).__name__})") from None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -240,6 +241,28 @@ def test_a_launcher_setting_submitit_has_not_is_one_line_before_any_run(tmp_path
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "hydra.launcher.partiton=gpu: not a setting of the submitit_slurm launcher" in line
     assert not no_runs and not (tmp_path / "runs").exists()
+
+
+def test_a_missing_optimizer_extra_stops_a_training_league_before_any_run(tmp_path, no_runs, monkeypatch, capsys):
+    """Without pytorch-optimizer a league used to leave SOAP out with a line among its progress
+    and publish tables without it; it now refuses to train, naming the pip install."""
+    monkeypatch.setitem(sys.modules, "pytorch_optimizer", None)  # as if the extra were not installed
+    argv = ["--problems", "toy", "--optimizers", "adam,soap", "--paper", "", "--references", "",
+            "--trials", "1", "--studies", "1", "--seeds", "1", "--seconds", "1", "--root", str(tmp_path / "runs")]  # fmt: skip
+    assert driver.main(argv) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.endswith('optimizer=soap: pytorch_optimizer.SOAP comes with the optimizers extra: '
+                         'pip install -e ".[optimizers]" (or leave soap out of --optimizers)'), line  # fmt: skip
+    assert not no_runs and not (tmp_path / "runs").exists()
+
+
+def test_a_problem_an_optimizer_cannot_run_on_is_left_out_with_a_line(tmp_path, no_runs, capsys):
+    """The other kind of refusal stays one: SIP needs an inverse simulator, which the dipole has not."""
+    argv = ["--problems", "dipole", "--optimizers", "adam,sip", "--paper", "", "--references", "",
+            "--trials", "1", "--studies", "1", "--seeds", "1", "--seconds", "1", "--root", str(tmp_path / "runs")]  # fmt: skip
+    assert driver.main(argv) == 0
+    assert "[league] dipole: sip left out: optimizer=sip: problem dipole has no inverse simulator" in capsys.readouterr().err
+    assert {j.overrides["optimizer"] for jobs, _ in no_runs for j in jobs} == {"adam"}
 
 
 def test_runs_the_ledger_refused_for_good_are_named_not_promised_to_the_same_command(tmp_path, monkeypatch, capsys):
