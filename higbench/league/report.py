@@ -255,7 +255,7 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     try:
         targets, budgets, held_out = scoring_targets(runs, curves)
         text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
-        long = format_long_budget(runs)
+        long = format_long_budget(league.with_first_losses(runs, curves))
         outcomes = tuning_outcomes(runs, curves, targets)
         text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs),
                              *([outcomes] if outcomes else []), text, *([long] if long else [])])  # fmt: skip

@@ -322,7 +322,7 @@ def reach_table(runs: pd.DataFrame, curves: pd.DataFrame, targets: Mapping[str, 
 
 def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None):
     """(scored runs, seconds to each target per scored run, targets per task)."""
-    scored = league_runs(runs, spaces, tuning_seeds)
+    scored = with_first_losses(league_runs(runs, spaces, tuning_seeds), curves)
     targets = task_targets(scored) if len(scored) else {}
     return scored, reach_table(scored, curves, targets), targets
 
@@ -334,40 +334,48 @@ def final_loss_seeds(scored: pd.DataFrame, metric: str = TEST_METRIC) -> dict[st
     """{task: {setting: scored losses of its seeds}} (diverged: inf)."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for (task, setting), group in scored.groupby(["task", "league_setting"], sort=True):
-        out.setdefault(task, {})[setting] = stats.scored_loss(group[metric], group["status"])
+        out.setdefault(task, {})[setting] = stats.scored_column(group, metric)
     return out
 
 
-def first_losses(scored: pd.DataFrame, curves: pd.DataFrame) -> pd.Series:
-    """Each scored run's first evaluated test loss (NaN without a curve), indexed as ``scored``."""
-    key = "run" if "run" in curves and "run" in scored else "path"
-    if curves.empty or key not in curves or "test_loss" not in curves:
-        return pd.Series(math.nan, index=scored.index)
-    first = curves.groupby(key, observed=True)["test_loss"].first()
-    return scored[key].map(first).astype(float)
+def with_first_losses(runs: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """``runs`` with each run's first evaluated test and validation loss (``first_test_loss``,
+    ``first_val_loss``; NaN without a curve): the scoring reads a completed run that ended above
+    its first evaluation as a finite blow-up (``stats.scored_loss``), and a row whose seeds all
+    stayed there as a constant predictor (``stats.flag_row``)."""
+    key = "run" if "run" in curves and "run" in runs else "path"
+    firsts = {}
+    for column in ("test_loss", "val_loss"):
+        first = math.nan
+        if len(curves) and key in curves and key in runs and column in curves:
+            first = runs[key].map(curves.groupby(key, observed=True)[column].first()).astype(float)
+        firsts[f"first_{column}"] = first
+    return runs.assign(**firsts)
 
 
 def final_loss_table(
-    scored: pd.DataFrame,
-    metric: str = TEST_METRIC,
-    constant_loss: Mapping[str, float] | None = None,
-    first: pd.Series | None = None,
+    scored: pd.DataFrame, metric: str = TEST_METRIC, constant_loss: Mapping[str, float] | None = None
 ) -> pd.DataFrame:
     """Per task and setting (sorted by median, the leader first): the median of ``metric``, every
     seed, the order-statistics interval and its coverage, P(leader < X), the exact one-sided
     Mann-Whitney p-value, Holm-adjusted over the task's comparisons, the verdict, and a flag
     (``stats.flag_row``: diverged on every seed, or a constant predictor: at the task's
-    ``constant_loss``, or where ``first`` (``first_losses``) is given, no move from it)."""
+    ``constant_loss``, or, where the runs carry their first evaluation (``with_first_losses``), no
+    move from it). A seed that ended above its first evaluation is scored as diverged."""
+    first = scored.get(metric.replace("final_", "first_", 1))
     rows = []
     for task, by_setting in final_loss_seeds(scored, metric).items():
         for row in stats.compare_to_leader(by_setting):
             group = scored[(scored["task"] == task) & (scored["league_setting"] == row["setting"])]
-            moved_from = None if first is None or first[group.index].isna().any() else first[group.index]
+            moved_from = None if first is None else first[group.index]  # a NaN (no curve) is never "no move"
             flag = stats.flag_row(group[metric], group["status"], (constant_loss or {}).get(task), moved_from)
             interval = row.pop("interval")
             rows.append({"task": task, **row, "low": interval.low, "high": interval.high,
                          "coverage": interval.coverage, "n": interval.n, "flag": flag or ""})  # fmt: skip
     return pd.DataFrame(rows)
+
+
+DIVERGED_TEXT = "diverged, or ended above its first evaluation: inf, the worst"
 
 
 def _g(v: float) -> str:
@@ -487,7 +495,7 @@ def interval_table(runs: pd.DataFrame, reached: pd.DataFrame) -> pd.DataFrame:
     for (task, setting), group in runs.groupby(["task", "league_setting"]):
         row = {"task": task, "setting": setting, "seeds": len(group)}
         for metric in (TEST_METRIC, VALIDATION_METRIC):
-            values = stats.scored_loss(group.get(metric, pd.Series(math.nan, index=group.index)), group["status"])
+            values = stats.scored_column(group, metric) if metric in group else np.full(len(group), math.inf)
             interval = stats.median_interval(values)
             row[metric] = (float(np.median(values)), interval.low, interval.high)
             row["coverage"] = interval.coverage
@@ -544,8 +552,8 @@ def format_league(
         "(tuning, unfinished, or a second run of one identity)",
         hardware_line(scored),
         "",
-        "final test loss per task: median and every seed (diverged: inf, the worst)",
-        format_final_loss_table(final_loss_table(scored, first=first_losses(scored, curves))),
+        f"final test loss per task: median and every seed ({DIVERGED_TEXT})",
+        format_final_loss_table(final_loss_table(scored)),
     ]
     with pd.option_context("display.width", 250, "display.max_columns", None, "display.float_format", "{:.3f}".format):
         out += ["", "across tasks (rliable): IQM over (task, seed) of normalised scores (1: the task leader's median, "
@@ -595,7 +603,8 @@ def format_runs_csv(path: Path, constant_loss: Mapping[str, float] | None = None
         "(no curves: no time to target)",
         hardware_line(scored),
         "",
-        "final test loss per task: median and every seed (diverged: inf, the worst)",
+        "final test loss per task: median and every seed (diverged: inf, the worst; no curves, so a finite "
+        "blow-up scores its value)",
         format_final_loss_table(final_loss_table(scored, constant_loss=constant_loss)),
         "",
         "across tasks (rliable): IQM over (task, seed) of normalised scores (1: the task leader's median, 0: the "

@@ -18,7 +18,8 @@ COLUMNS = ("task", "setting", "seconds", "seeds", "median val", "median test", "
 
 def long_budget_table(runs: pd.DataFrame) -> pd.DataFrame:
     """Per task and setting ('hig' tuned, 'hig (paper)' shipped): the median training seconds,
-    the seeds, the median final validation and test loss (diverged: inf, the worst), and each
+    the seeds, the median final validation and test loss (diverged, or ended above the first
+    evaluation, given ``league.with_first_losses``' columns: inf, the worst), and each
     seed's final test loss and updates, in seed order; the lowest median validation loss first."""
     if runs.empty or "league_role" not in runs:
         return pd.DataFrame(columns=list(COLUMNS))
@@ -26,8 +27,7 @@ def long_budget_table(runs: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (task, name, role), group in long.groupby(["task", "optimizer.name", "league_role"], sort=True):
         group = group.sort_values("seed")
-        test = stats.scored_loss(group["final_test_loss"], group["status"])
-        val = stats.scored_loss(group["final_val_loss"], group["status"])
+        test, val = stats.scored_column(group, "final_test_loss"), stats.scored_column(group, "final_val_loss")
         rows.append({
             "task": task, "setting": name if role == LONG_ROLE else f"{name} (paper)",
             "seconds": float(np.median(group["train_time_s"].astype(float))), "seeds": len(group),

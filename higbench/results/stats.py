@@ -12,7 +12,8 @@ answers, and the aggregate against rliable 1.2.0's values on seeded random score
 (tests/results/test_league_stats.py; the oracle file comes from scripts/rliable_oracle.py).
 
 Lower is better everywhere (a loss, a time); a diverged run counts as +inf, the worst, whether
-it ended at NaN or at a finite blow-up (``scored_loss``).
+it ended at NaN or at a finite blow-up: a completed run whose final loss lies above its first
+evaluation's, worse than the network it started from (``scored_loss`` with ``first``).
 """
 
 from __future__ import annotations
@@ -27,17 +28,30 @@ from scipy import stats
 CONFIDENCE = 0.95
 ALPHA = 0.05  # family-wise error rate of a task's comparisons against its leader (Holm)
 BOOTSTRAP_REPS = 2000
+STALL_RTOL = 1e-2  # a final loss within 1% of the first evaluation did not move; above that, up: a blow-up
 
 
 # -- one setting on one task -----------------------------------------------------------------
 
 
-def scored_loss(loss: Sequence[float], status: Sequence[str]) -> np.ndarray:
+def scored_loss(loss: Sequence[float], status: Sequence[str], first: Sequence[float] | None = None) -> np.ndarray:
     """The loss a run is scored by: its final loss when it completed with a finite one, +inf
-    otherwise (status diverged, NaN or inf): divergence is scored one way, as the worst."""
+    otherwise (status diverged, NaN or inf): divergence is scored one way, as the worst. With
+    ``first`` (each run's first evaluated loss of the same kind; NaN: unknown), a completed run
+    that ended above it (by more than ``STALL_RTOL``, within which it did not move) blew up
+    without a NaN (LM at 1.2e3 from 0.88) and scores +inf too: no threshold per problem, only
+    "worse than where it started"."""
     x = np.asarray(loss, dtype=float)
     ok = (np.asarray(status) == "completed") & np.isfinite(x)
+    if first is not None:  # above it by more than flag_row's "did not move": a NaN first compares False
+        ok &= ~(x > np.asarray(first, dtype=float) * (1 + STALL_RTOL))
     return np.where(ok, x, math.inf)
+
+
+def scored_column(runs, metric: str) -> np.ndarray:
+    """``scored_loss`` of a runs frame's ``metric`` ('final_test_loss'), with the first evaluation
+    ('first_test_loss', from ``league.with_first_losses``) where the frame carries it."""
+    return scored_loss(runs[metric], runs["status"], runs.get(metric.replace("final_", "first_", 1)))
 
 
 @dataclass(frozen=True)
@@ -189,13 +203,13 @@ def flag_row(
     status: Sequence[str],
     constant_loss: float | None = None,
     first: Sequence[float] | None = None,
-    rtol: float = 1e-2,
+    rtol: float = STALL_RTOL,
 ) -> str | None:
     """Why a (task, setting) row must not be published as a result, or None:
     'diverged on every seed'; 'constant predictor' when every seed's final loss is within
     ``rtol`` of the task's constant-prediction loss, or did not move from its first evaluation
     (``first``: each seed's first evaluated loss, when curves exist)."""
-    loss = scored_loss(final, status)
+    loss = scored_loss(final, status, first)
     if len(loss) and np.isinf(loss).all():
         return "diverged on every seed"
     x = np.asarray(final, dtype=float)

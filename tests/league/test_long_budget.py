@@ -33,6 +33,14 @@ def test_the_table_shows_every_seed_and_the_medians_best_first():
     assert "long budget (--long)" in format_long_budget(runs)
 
 
+def test_a_long_run_that_ended_above_its_first_evaluation_counts_as_diverged():
+    runs = pd.DataFrame([_run("long", "lm", 0, 2e-6, 3e-6), _run("long", "lm", 1, 25.0, 26.0),
+                         _run("long", "lm", 2, 4e-6, 5e-6)])  # fmt: skip
+    firsts = runs.assign(first_val_loss=0.85, first_test_loss=0.87)  # league.with_first_losses' columns
+    assert long_budget_table(firsts).loc[0, "test per seed"] == "3e-06, inf, 5e-06"
+    assert long_budget_table(runs).loc[0, "test per seed"] == "3e-06, 26, 5e-06"  # no curves: the value
+
+
 def test_no_long_runs_no_table_and_the_roles_reach_the_tables():
     assert format_long_budget(pd.DataFrame([_run("confirm", "adam", 0, 1e-3, 1e-3)])) is None
     assert set(LONG_ROLES) <= set(ROLES)  # exported to the tables with their role

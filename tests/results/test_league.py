@@ -332,9 +332,25 @@ def test_a_row_whose_seeds_never_moved_from_the_first_evaluation_is_flagged():
     })  # fmt: skip
     curves = pd.DataFrame({"path": ["m0", "m0", "m1", "m1", "a0", "a0", "a1", "a1"],
                            "test_loss": [0.302, 0.300, 0.300, 0.301, 0.5, 0.01, 0.5, 0.02]})  # fmt: skip
-    table = league.final_loss_table(scored, first=league.first_losses(scored, curves)).set_index("setting")
+    table = league.final_loss_table(league.with_first_losses(scored, curves)).set_index("setting")
     assert "constant predictor" in table.loc["muon", "flag"] and table.loc["adam", "flag"] == ""
     assert league.final_loss_table(scored).set_index("setting").loc["muon", "flag"] == ""  # without curves: not known
+
+
+def test_a_seed_that_blew_up_without_a_nan_ranks_with_the_diverged_ones():
+    """Two LM seeds ended at 26 and 1.2e3 from first evaluations near 0.9: scored as diverged, so
+    against GN, which diverged on every seed, LM's blown-up seeds tie rather than win."""
+    finals = {"lm": [2e-6, 3e-6, 4e-6, 26.0, 1181.0], "gn": [math.nan] * 5}
+    rows = [{"task": "oscillator", "league_setting": name, "seed": seed, "path": f"{name}{seed}",
+             "status": "completed" if math.isfinite(v) else "diverged", "final_test_loss": v}
+            for name, values in finals.items() for seed, v in enumerate(values)]  # fmt: skip
+    scored = pd.DataFrame(rows)
+    curves = pd.DataFrame({"path": scored["path"], "test_loss": 0.9})
+    table = league.final_loss_table(league.with_first_losses(scored, curves)).set_index("setting")
+    assert list(table.loc["lm", "seeds"]) == [2e-6, 3e-6, 4e-6, math.inf, math.inf]
+    assert table.loc["gn", "p_leader_below"] == pytest.approx(0.8)  # 15 of 25 pairs won, 10 tied (counted half)
+    untouched = league.final_loss_table(scored).set_index("setting")  # without curves: the values, as before
+    assert list(untouched.loc["lm", "seeds"]) == finals["lm"] and untouched.loc["gn", "p_leader_below"] == 1.0
 
 
 @pytest.mark.slow  # draws the 11-panel figure

@@ -104,6 +104,19 @@ def test_a_finite_blow_up_and_a_nan_score_the_same():
     assert stats.scored_loss([math.nan], ["completed"]).tolist() == [math.inf]
 
 
+def test_a_completed_run_that_ended_above_its_first_evaluation_is_scored_as_diverged():
+    """LM on the oscillator completed at 1.2e3 from a first evaluation of 0.88: a blow-up
+    without a NaN. Within 1% of its start a run did not move (flag_row's constant predictor),
+    and without a first evaluation (NaN) nothing is known."""
+    final = [1181.0, 0.885, 0.89, 2e-6, 0.5]
+    first = [0.878, 0.878, 0.878, 0.85, math.nan]
+    assert stats.scored_loss(final, ["completed"] * 5, first).tolist() == [math.inf, 0.885, math.inf, 2e-6, 0.5]
+    assert stats.scored_loss(final, ["completed"] * 5).tolist() == final  # without first: the value, as before
+    runs = {"final_test_loss": final, "status": ["completed"] * 5, "first_test_loss": first}
+    assert stats.scored_column(runs, "final_test_loss").tolist() == [math.inf, 0.885, math.inf, 2e-6, 0.5]
+    assert stats.flag_row([30.0, 900.0], ["completed", "completed"], first=[0.9, 0.9]) == "diverged on every seed"
+
+
 # -- rows flagged before publishing ----------------------------------------------------------
 
 
