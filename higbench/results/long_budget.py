@@ -13,25 +13,32 @@ from higbench.results import stats
 
 LONG_ROLE, LONG_PAPER_ROLE = "long", "long-paper"  # league_role: a tuned setting; a shipped one
 LONG_ROLES = (LONG_ROLE, LONG_PAPER_ROLE)
-COLUMNS = ("task", "setting", "seconds", "seeds", "median val", "median test", "test per seed", "updates per seed")
+LEAGUE_ROLES = {LONG_ROLE: ("confirm",), LONG_PAPER_ROLE: ("paper", "default")}  # the same setting at the league's budget
+COLUMNS = ("task", "setting", "seconds", "seeds", "median val", "median test", "league median test", "test per seed",
+           "updates per seed")  # fmt: skip
 
 
 def long_budget_table(runs: pd.DataFrame) -> pd.DataFrame:
     """Per task and setting ('hig' tuned, 'hig (paper)' shipped): the median training seconds,
     the seeds, the median final validation and test loss (diverged, or ended above the first
     evaluation, given ``league.with_first_losses``' columns: inf, the worst), and each
-    seed's final test loss and updates, in seed order; the lowest median validation loss first."""
+    seed's final test loss and updates, in seed order; the lowest median validation loss first.
+    Beside them, the same setting's median final test loss at the league's budget (its
+    confirmation runs on the task; NaN where there are none): what the longer budget bought."""
     if runs.empty or "league_role" not in runs:
         return pd.DataFrame(columns=list(COLUMNS))
     long = runs[runs["league_role"].isin(LONG_ROLES) & runs["status"].isin(("completed", "diverged"))]
+    done = runs[runs["status"].isin(("completed", "diverged"))]
     rows = []
     for (task, name, role), group in long.groupby(["task", "optimizer.name", "league_role"], sort=True):
+        short = done[(done["task"] == task) & (done["optimizer.name"] == name) & done["league_role"].isin(LEAGUE_ROLES[role])]
         group = group.sort_values("seed")
         test, val = stats.scored_column(group, "final_test_loss"), stats.scored_column(group, "final_val_loss")
         rows.append({
             "task": task, "setting": name if role == LONG_ROLE else f"{name} (paper)",
             "seconds": float(np.median(group["train_time_s"].astype(float))), "seeds": len(group),
             "median val": float(np.median(val)), "median test": float(np.median(test)),
+            "league median test": float(np.median(stats.scored_column(short, "final_test_loss"))) if len(short) else np.nan,
             "test per seed": ", ".join(f"{v:.3g}" for v in test),
             "updates per seed": ", ".join(str(int(s)) for s in group["steps"]),
         })  # fmt: skip

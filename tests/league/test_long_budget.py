@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pandas as pd
+import pytest
 
 from higbench.results.league import ROLES
 from higbench.results.long_budget import LONG_ROLES, format_long_budget, long_budget_table
@@ -24,12 +25,20 @@ def test_the_table_shows_every_seed_and_the_medians_best_first():
         _run("long", "adam", 0, 5e-4, 6e-4), _run("long", "adam", 1, 4e-4, 5e-4), _run("long", "adam", 2, 6e-4, 7e-4),
         _run("confirm", "adam", 0, 1e-9, 1e-9),  # the league's own runs never enter the long table
         _run("long", "adam", 3, 1e-9, 1e-9, status="interrupted"),  # nor an unfinished one
+        _run("confirm", "hig", 0, 1e-4, 2e-4), _run("confirm", "hig", 1, 3e-4, 4e-4),  # hig at the league's budget
+        _run("paper", "hig", 0, 0.1, 0.1), _run("paper", "hig", 1, math.nan, math.nan, status="diverged"),
+        _run("paper", "hig", 2, 0.3, 0.3), _run("confirm", "hig", 0, 9.0, 9.0, task="oscillator coupling=2.0"),
     ])  # fmt: skip
     table = long_budget_table(runs)
     assert list(table["setting"]) == ["hig", "adam", "hig (paper)"]
     assert list(table["median val"]) == [2e-5, 5e-4, 2e-3]  # the diverged seed counts as the worst: inf
     assert table.loc[0, "test per seed"] == "4e-05, 2e-05, 3e-05" and table.loc[0, "updates per seed"] == "9000, 9100, 8900"
     assert table.loc[2, "test per seed"] == "0.001, inf, 0.002" and list(table["seeds"]) == [3, 3, 3]
+    # the same setting at the league's budget, on the same task only: tuned from confirm, shipped from paper
+    assert table.loc[0, "league median test"] == pytest.approx(3e-4) and table.loc[2, "league median test"] == 0.3
+    assert table.loc[1, "league median test"] == 1e-9  # adam's one confirmation run
+    no_league = long_budget_table(runs[runs["league_role"].isin(LONG_ROLES)])
+    assert no_league["league median test"].isna().all()  # no confirmation runs: NaN, not a crash
     assert "long budget (--long)" in format_long_budget(runs)
 
 
