@@ -197,14 +197,23 @@ def scoring_targets(runs: pd.DataFrame, curves: pd.DataFrame) -> tuple[dict, dic
 
 def tuning_counts(runs: pd.DataFrame) -> str:
     """The league's tuning trials in the tables, per problem and optimizer (studies x trials when
-    a tuning is whole; fewer while a piece is still under way)."""
+    a tuning is whole; fewer while a piece is still under way). Only finished trials (completed or
+    diverged) count as done; a trial a stopped sitting left unfinished is counted apart, as one the
+    next sitting resumes."""
+    from higbench.results.index import DONE_STATUSES
+
     tune = runs[runs["league_role"] == "tune"] if "league_role" in runs else runs.iloc[:0]
     if tune.empty:
         return "tuning: no league tuning trials in the tables yet"
+    finished = tune["status"].isin(DONE_STATUSES) if "status" in tune else pd.Series(True, index=tune.index)
     lines = ["tuning trials in the tables (per optimizer: trials done; studies x trials when whole):"]
-    for problem, group in tune.groupby("problem.name", sort=True):
+    for problem, group in tune[finished].groupby("problem.name", sort=True):
         counts = group.groupby("optimizer.name").size()
         lines.append(f"  {problem}: {len(group)} trials: " + ", ".join(f"{o} {n}" for o, n in counts.items()))
+    for problem, group in tune[~finished].groupby("problem.name", sort=True):
+        counts = group.groupby("optimizer.name").size()
+        lines.append(f"  {problem}: {len(group)} unfinished (a stopped sitting's; resumed by the next): "
+                     + ", ".join(f"{o} {n}" for o, n in counts.items()))
     return "\n".join(lines)
 
 

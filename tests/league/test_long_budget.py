@@ -63,6 +63,10 @@ def test_the_report_counts_the_tuning_trials_a_piece_has_made_per_optimizer():
                          "optimizer.name": ["adam", "adam", "hig", "lm", "hig", "adam", "adam"]})  # fmt: skip
     assert tuning_counts(runs).splitlines()[1:] == ["  dipole: 1 trials: lm 1", "  toy: 4 trials: adam 2, hig 2"]
     assert tuning_counts(runs.iloc[5:]) == "tuning: no league tuning trials in the tables yet"
+    unfinished = runs.assign(status=["completed", "diverged", "interrupted", "completed", "running", "completed", "completed"])
+    assert tuning_counts(unfinished).splitlines()[1:] == [
+        "  dipole: 1 trials: lm 1", "  toy: 2 trials: adam 2",
+        "  toy: 2 unfinished (a stopped sitting's; resumed by the next): hig 2"]
 
 
 def test_the_report_says_how_many_tuning_trials_reached_the_validation_target_and_the_fastest():
