@@ -118,7 +118,7 @@ from higbench.league.report import (  # noqa: F401  (re-exported)
     write_report,
 )
 from higbench.results import league
-from higbench.results.long_budget import LONG_ROLES
+from higbench.results.league import LONG_ROLES
 
 DEFAULT_OPTIMIZERS = league_optimizers()  # every optimizer whose card (conf/optimizer/) says league: true
 LAUNCHERS = ("basic", "joblib", "submitit_local", "submitit_slurm", "slurm")  # slurm: conf/hydra/launcher/slurm.yaml

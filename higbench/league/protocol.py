@@ -24,7 +24,7 @@ from hydra.core.override_parser.overrides_parser import OverridesParser
 from higbench.errors import override_value as fmt
 from higbench.jobs import Job
 from higbench.results import league
-from higbench.results.long_budget import LONG_PAPER_ROLE, LONG_ROLE
+from higbench.results.league import LONG_PAPER_ROLE, LONG_ROLE
 
 EVALUATIONS = 100  # per run: time-to-target ratios up to TAU_MAX = 4 are resolved (a target at 1/25 of the budget)
 SEARCHPATH_ENV = "HIGBENCH_SEARCHPATH"  # read by hydra_plugins/higbench_searchpath

@@ -212,8 +212,10 @@ def tuning_counts(runs: pd.DataFrame) -> str:
         lines.append(f"  {problem}: {len(group)} trials: " + ", ".join(f"{o} {n}" for o, n in counts.items()))
     for problem, group in tune[~finished].groupby("problem.name", sort=True):
         counts = group.groupby("optimizer.name").size()
-        lines.append(f"  {problem}: {len(group)} unfinished (a stopped sitting's; resumed by the next): "
-                     + ", ".join(f"{o} {n}" for o, n in counts.items()))
+        lines.append(
+            f"  {problem}: {len(group)} unfinished (a stopped sitting's; resumed by the next): "
+            + ", ".join(f"{o} {n}" for o, n in counts.items())
+        )
     return "\n".join(lines)
 
 

@@ -50,11 +50,12 @@ from higbench.results.algoperf import (  # noqa: F401  (re-exported: the league'
     time_to_target,
     validation_target,
 )
-from higbench.results.long_budget import LONG_ROLES
 from higbench.results.targets import of_runs
 
 TEST_METRIC = "final_test_loss"  # read once, for the table
 HIG = "hig"
+LONG_ROLE, LONG_PAPER_ROLE = "long", "long-paper"  # the long budget (results.long_budget): a tuned setting; a shipped one
+LONG_ROLES = (LONG_ROLE, LONG_PAPER_ROLE)
 ROLES = ("tune", "confirm", "paper", "default", "target-tune", "target", *LONG_ROLES)  # league_role, where the driver records it
 TARGET_ROLE = "target"  # a target-setting rerun: a reference optimizer's tuned setting at the target-setting budget
 SCORED_ROLES = ("confirm", "paper", "default")

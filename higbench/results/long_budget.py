@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 
 from higbench.results import stats
+from higbench.results.league import LONG_PAPER_ROLE, LONG_ROLE, LONG_ROLES, one_run_per_identity
 
-LONG_ROLE, LONG_PAPER_ROLE = "long", "long-paper"  # league_role: a tuned setting; a shipped one
-LONG_ROLES = (LONG_ROLE, LONG_PAPER_ROLE)
+__all__ = ["LONG_PAPER_ROLE", "LONG_ROLE", "LONG_ROLES", "format_long_budget", "long_budget_table"]
 LEAGUE_ROLES = {LONG_ROLE: ("confirm",), LONG_PAPER_ROLE: ("paper", "default")}  # the same setting at the league's budget
 COLUMNS = ("task", "setting", "seconds", "seeds", "median val", "median test", "league median test", "test per seed",
            "updates per seed")  # fmt: skip
@@ -27,11 +27,13 @@ def long_budget_table(runs: pd.DataFrame) -> pd.DataFrame:
     confirmation runs on the task; NaN where there are none): what the longer budget bought."""
     if runs.empty or "league_role" not in runs:
         return pd.DataFrame(columns=list(COLUMNS))
-    long = runs[runs["league_role"].isin(LONG_ROLES) & runs["status"].isin(("completed", "diverged"))]
     done = runs[runs["status"].isin(("completed", "diverged"))]
+    long = one_run_per_identity(done[done["league_role"].isin(LONG_ROLES)])
     rows = []
     for (task, name, role), group in long.groupby(["task", "optimizer.name", "league_role"], sort=True):
-        short = done[(done["task"] == task) & (done["optimizer.name"] == name) & done["league_role"].isin(LEAGUE_ROLES[role])]
+        short = one_run_per_identity(
+            done[(done["task"] == task) & (done["optimizer.name"] == name) & done["league_role"].isin(LEAGUE_ROLES[role])]
+        )
         group = group.sort_values("seed")
         test, val = stats.scored_column(group, "final_test_loss"), stats.scored_column(group, "final_val_loss")
         rows.append({

@@ -50,6 +50,18 @@ def test_a_long_run_that_ended_above_its_first_evaluation_counts_as_diverged():
     assert long_budget_table(runs).loc[0, "test per seed"] == "3e-06, 26, 5e-06"  # no curves: the value
 
 
+def test_a_run_trained_twice_under_one_identity_counts_once_in_both_columns():
+    """Two sittings into one root can train a job twice; the copy is not an extra seed (the
+    first by ``run`` is kept, as in the league's scores)."""
+    rows = [_run("long", "hig", s, 1e-5 * (s + 1), 1e-5 * (s + 1)) | {"config_id": f"L{s}", "run": f"a/{s}"} for s in range(3)]
+    rows += [_run("long", "hig", 2, 9.0, 9.0) | {"config_id": "L2", "run": "b/2"}]  # seed 2 again, later
+    rows += [_run("confirm", "hig", s, 1e-3, v) | {"config_id": f"C{s}", "run": f"a/c{s}"} for s, v in ((0, 1e-3), (1, 2e-3))]
+    rows += [_run("confirm", "hig", 1, 1e-3, 7.0) | {"config_id": "C1", "run": "b/c1"}]  # a copy: not a third seed
+    table = long_budget_table(pd.DataFrame(rows))
+    assert table.loc[0, "seeds"] == 3 and table.loc[0, "test per seed"] == "1e-05, 2e-05, 3e-05"
+    assert table.loc[0, "league median test"] == pytest.approx(1.5e-3)  # median of 2 seeds, not of 3 rows
+
+
 def test_no_long_runs_no_table_and_the_roles_reach_the_tables():
     assert format_long_budget(pd.DataFrame([_run("confirm", "adam", 0, 1e-3, 1e-3)])) is None
     assert set(LONG_ROLES) <= set(ROLES)  # exported to the tables with their role
@@ -65,8 +77,10 @@ def test_the_report_counts_the_tuning_trials_a_piece_has_made_per_optimizer():
     assert tuning_counts(runs.iloc[5:]) == "tuning: no league tuning trials in the tables yet"
     unfinished = runs.assign(status=["completed", "diverged", "interrupted", "completed", "running", "completed", "completed"])
     assert tuning_counts(unfinished).splitlines()[1:] == [
-        "  dipole: 1 trials: lm 1", "  toy: 2 trials: adam 2",
-        "  toy: 2 unfinished (a stopped sitting's; resumed by the next): hig 2"]
+        "  dipole: 1 trials: lm 1",
+        "  toy: 2 trials: adam 2",
+        "  toy: 2 unfinished (a stopped sitting's; resumed by the next): hig 2",
+    ]
 
 
 def test_the_report_says_how_many_tuning_trials_reached_the_validation_target_and_the_fastest():
