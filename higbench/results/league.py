@@ -321,9 +321,44 @@ def reach_table(runs: pd.DataFrame, curves: pd.DataFrame, targets: Mapping[str, 
     return pd.DataFrame(rows, columns=["task", "setting", "seed", "target", "seconds"])
 
 
+def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
+    """Per problem whose league tuning is in the tables and whose confirmation is not whole yet: what
+    is still missing. Whole: every tuned optimizer has confirmation runs on each of the problem's
+    tasks, and every confirmed or shipped setting as many seeds as the most any has. A sitting
+    stopped mid-confirmation leaves some settings run and others not; a leader among those would
+    be a leader among the settings that happened to run first, so such a problem is not scored."""
+    from higbench.results.index import DONE_STATUSES
+
+    if "league_role" not in runs or runs.empty:
+        return {}
+    done = runs[runs["status"].isin(DONE_STATUSES)]
+    out = {}
+    for problem, group in done.groupby("problem.name", sort=True):
+        tuned = set(group.loc[group["league_role"] == "tune", "optimizer.name"])
+        scored = one_run_per_identity(group[group["league_role"].isin(SCORED_ROLES)])
+        if not tuned or scored.empty:
+            continue
+        tasks = scored.apply(task_label, axis=1)
+        missing = sorted(o for o in tuned for t in set(tasks) if not ((tasks == t) & (scored["optimizer.name"] == o)).any())
+        seeds = scored.groupby([tasks, scored["optimizer.name"], scored["league_role"]]).size()
+        short = seeds[seeds < seeds.max()]
+        if missing or len(short):
+            parts = [f"not yet run: {', '.join(dict.fromkeys(missing))}"] if missing else []
+            parts += (
+                [f"{len(short)} of {len(seeds)} (task, setting) pairs at fewer than {seeds.max()} seeds"] if len(short) else []
+            )
+            out[str(problem)] = "; ".join(parts)
+    return out
+
+
 def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None):
-    """(scored runs, seconds to each target per scored run, targets per task)."""
-    scored = with_first_losses(league_runs(runs, spaces, tuning_seeds), curves)
+    """(scored runs, seconds to each target per scored run, targets per task); a problem whose
+    confirmation is under way (``confirmation_under_way``) is left out of all three."""
+    scored = league_runs(runs, spaces, tuning_seeds)
+    under_way = confirmation_under_way(runs)
+    if under_way and "problem.name" in scored:
+        scored = scored[~scored["problem.name"].astype(str).isin(under_way)]
+    scored = with_first_losses(scored, curves)
     targets = task_targets(scored) if len(scored) else {}
     return scored, reach_table(scored, curves, targets), targets
 
@@ -545,12 +580,15 @@ def format_league(
     or LM is many evaluations, so updates are not equal work)."""
     scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds)
     left_out = len(runs) - len(scored)
+    under_way = [f"{p} ({why})" for p, why in confirmation_under_way(runs).items()]
+    under_way_line = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
     if scored.empty:
         return f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out (tuning, unfinished)"
     out = [
         f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings, "
         f"{seeds_text(scored)} per task and setting); {left_out} run(s) left out "
-        "(tuning, unfinished, or a second run of one identity)",
+        f"(tuning, unfinished, a second run of one identity{', or of a problem still confirming' if under_way else ''})",
+        *under_way_line,
         hardware_line(scored),
         "",
         f"final test loss per task: median and every seed ({DIVERGED_TEXT})",

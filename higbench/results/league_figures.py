@@ -44,7 +44,7 @@ def setting_colours(table: pd.DataFrame) -> dict[str, str]:
 
 def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str] | None = None) -> Path:
     """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
-    log scale; diverged: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
+    log scale; diverged, or ended above its first evaluation: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
     median, leaders (up to five, one colour each in every panel) and HIG in colour, the rest grey.
     ``table``: ``final_loss_table``; ``colours``: ``setting_colours`` of it unless given."""
     import matplotlib
@@ -70,7 +70,9 @@ def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str]
             ok = np.isfinite(seeds) & (seeds > 0)
             ax.scatter(np.full(ok.sum(), i), seeds[ok], s=14, color=c, zorder=3)
             for where, marker, level in ((~np.isfinite(seeds), "x", top), (np.isfinite(seeds) & (seeds <= 0), "v", bottom)):
-                if where.any():  # diverged at the top edge; a loss <= 0 (float rounding) at the bottom
+                if (
+                    where.any()
+                ):  # diverged (NaN or ended above its start) at the top edge; a loss <= 0 (float rounding) at the bottom
                     ax.scatter(np.full(where.sum(), i), np.full(where.sum(), level), marker=marker, s=20, color=c, zorder=3)
             if math.isfinite(r["median"]) and r["median"] > 0:
                 ax.hlines(r["median"], i - 0.3, i + 0.3, color=c, lw=2, zorder=4)
@@ -81,7 +83,9 @@ def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str]
         ax.set_title(f"{task} (leader by median: {rows['setting'][0]})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     for row_axes in axes:
-        row_axes[0].set_ylabel("final test loss (dots: seeds; bar: median;\nx: diverged; v: <= 0, rounding)", fontsize=8)
+        row_axes[0].set_ylabel(
+            "final test loss (dots: seeds; bar: median;\nx: diverged or ended above its start; v: <= 0, rounding)", fontsize=8
+        )
     fig.tight_layout()
     out.mkdir(parents=True, exist_ok=True)
     path = out / "final_losses.png"

@@ -150,6 +150,21 @@ def test_league_role_names_paper_and_default_and_leaves_tuning_out():
     assert sorted(scored["league_setting"]) == ["adam (default)", "hig", "hig (paper)"]
 
 
+def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_scores():
+    """Known answer: adam and hig tuned on the toy; hig confirmed on 2 seeds, adam on 1, sgd (not
+    tuned here) on 2; a stopped sitting. Whole once adam has its second seed."""
+    opts = ["adam", "hig", "adam", "hig", "hig", "sgd", "sgd"]
+    runs = _runs(seed=[1000, 1000, 0, 0, 1, 0, 1], **{"optimizer.name": opts},
+                 league_role=["tune", "tune", "confirm", "confirm", "confirm", "default", "default"])  # fmt: skip
+    assert league.confirmation_under_way(runs) == {"toy": "1 of 3 (task, setting) pairs at fewer than 2 seeds"}
+    assert league.league_frames(runs, pd.DataFrame(columns=["path", "test_loss", "val_loss"]), {})[0].empty
+    no_adam = runs[runs["optimizer.name"] != "adam"].copy()
+    no_adam.loc[len(runs)] = runs.iloc[0]  # adam tuned, never confirmed
+    assert league.confirmation_under_way(no_adam) == {"toy": "not yet run: adam"}
+    whole = pd.concat([runs, _runs(seed=[1], **{"optimizer.name": ["adam"]}, league_role=["confirm"], config_id=["c9"])])
+    assert league.confirmation_under_way(whole) == {}
+
+
 def test_a_task_that_mixes_hardware_is_split_into_one_table_per_class():
     runs = _runs(seed=[0, 0, 0], **{"optimizer.name": ["hig", "adam", "sgd"]}, hardware=["GPU", "CPU", "CPU"])
     scored = league.league_runs(runs, {})
