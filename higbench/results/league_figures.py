@@ -44,8 +44,9 @@ def setting_colours(table: pd.DataFrame) -> dict[str, str]:
 
 def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str] | None = None) -> Path:
     """final_losses.png: per task (a panel), every seed's final test loss per setting (a dot each,
-    log scale; diverged, or ended above its first evaluation: x at the top edge; <= 0: v at the bottom), the median as a bar; settings sorted by
-    median, leaders (up to five, one colour each in every panel) and HIG in colour, the rest grey.
+    log scale; diverged, or ended above its first evaluation: x at the top edge; <= 0: v at the
+    bottom), the median as a bar; settings sorted by median, leaders (up to five, one colour each in
+    every panel) and HIG in colour, the rest grey.
     ``table``: ``final_loss_table``; ``colours``: ``setting_colours`` of it unless given."""
     import matplotlib
 
