@@ -343,7 +343,7 @@ def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
         seeds = scored.groupby([tasks, scored["optimizer.name"], scored["league_role"]]).size()
         short = seeds[seeds < seeds.max()]
         if missing or len(short):
-            parts = [f"not yet run: {', '.join(dict.fromkeys(missing))}"] if missing else []
+            parts = [f"not yet run on every task: {', '.join(dict.fromkeys(missing))}"] if missing else []
             parts += (
                 [f"{len(short)} of {len(seeds)} (task, setting) pairs at fewer than {seeds.max()} seeds"] if len(short) else []
             )

@@ -160,7 +160,7 @@ def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_
     assert league.league_frames(runs, pd.DataFrame(columns=["path", "test_loss", "val_loss"]), {})[0].empty
     no_adam = runs[runs["optimizer.name"] != "adam"].copy()
     no_adam.loc[len(runs)] = runs.iloc[0]  # adam tuned, never confirmed
-    assert league.confirmation_under_way(no_adam) == {"toy": "not yet run: adam"}
+    assert league.confirmation_under_way(no_adam) == {"toy": "not yet run on every task: adam"}
     whole = pd.concat([runs, _runs(seed=[1], **{"optimizer.name": ["adam"]}, league_role=["confirm"], config_id=["c9"])])
     assert league.confirmation_under_way(whole) == {}
 
