@@ -583,7 +583,8 @@ def format_league(
     under_way = [f"{p} ({why})" for p, why in confirmation_under_way(runs).items()]
     under_way_line = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
     if scored.empty:
-        return f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out (tuning, unfinished)"
+        return "\n".join([f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out "
+                          "(tuning, unfinished)", *under_way_line])  # fmt: skip
     out = [
         f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings, "
         f"{seeds_text(scored)} per task and setting); {left_out} run(s) left out "

@@ -157,7 +157,9 @@ def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_
     runs = _runs(seed=[1000, 1000, 0, 0, 1, 0, 1], **{"optimizer.name": opts},
                  league_role=["tune", "tune", "confirm", "confirm", "confirm", "default", "default"])  # fmt: skip
     assert league.confirmation_under_way(runs) == {"toy": "1 of 3 (task, setting) pairs at fewer than 2 seeds"}
-    assert league.league_frames(runs, pd.DataFrame(columns=["path", "test_loss", "val_loss"]), {})[0].empty
+    no_curves = pd.DataFrame(columns=["path", "test_loss", "val_loss"])
+    assert league.league_frames(runs, no_curves, {})[0].empty
+    assert "not scored until its confirmation is whole: toy (1 of 3" in league.format_league(runs, no_curves, {})
     no_adam = runs[runs["optimizer.name"] != "adam"].copy()
     no_adam.loc[len(runs)] = runs.iloc[0]  # adam tuned, never confirmed
     assert league.confirmation_under_way(no_adam) == {"toy": "not yet run on every task: adam"}
