@@ -351,11 +351,13 @@ def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
     return out
 
 
-def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None):
+def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None,
+                  under_way: Mapping[str, str] | None = None):  # fmt: skip
     """(scored runs, seconds to each target per scored run, targets per task); a problem whose
-    confirmation is under way (``confirmation_under_way``) is left out of all three."""
+    confirmation is under way (``under_way``, else ``confirmation_under_way(runs)``) is left out
+    of all three."""
     scored = league_runs(runs, spaces, tuning_seeds)
-    under_way = confirmation_under_way(runs)
+    under_way = confirmation_under_way(runs) if under_way is None else under_way
     if under_way and "problem.name" in scored:
         scored = scored[~scored["problem.name"].astype(str).isin(under_way)]
     scored = with_first_losses(scored, curves)
@@ -489,6 +491,21 @@ def aggregate_table(scored: pd.DataFrame, metric: str = TEST_METRIC, reference: 
     return pd.DataFrame(rows).sort_values("iqm", ascending=False, kind="stable").reset_index(drop=True)
 
 
+def per_problem_aggregates(scored: pd.DataFrame) -> list[str]:
+    """The aggregate of ``aggregate_table`` over each problem's own tasks (the problem and its
+    held-out variants), one table per problem, when more than one problem is scored: what the
+    league says about one problem, re-computable beside what it says across all of them."""
+    problems = scored["problem.name"].astype(str) if "problem.name" in scored else pd.Series(dtype=str)
+    if problems.nunique() < 2:
+        return []
+    out = []
+    for problem in sorted(problems.unique()):
+        of_problem = scored[problems == problem]
+        tasks = ", ".join(sorted(of_problem["task"].unique()))
+        out += ["", f"across {problem}'s tasks alone ({tasks}): as above", aggregate_table(of_problem).to_string(index=False)]
+    return out
+
+
 # -- the decade targets' profile (time to the problem.targets on the test loss) ----------------
 
 
@@ -578,9 +595,10 @@ def format_league(
     (``algoperf_table``; ``held_out``: problem -> its variant tasks, the gates), and the time to
     the problems' test-loss targets (equal wall clock; no equal-updates view: an update of L-BFGS
     or LM is many evaluations, so updates are not equal work)."""
-    scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds)
+    still_confirming = confirmation_under_way(runs)
+    scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds, still_confirming)
     left_out = len(runs) - len(scored)
-    under_way = [f"{p} ({why})" for p, why in confirmation_under_way(runs).items()]
+    under_way = [f"{p} ({why})" for p, why in still_confirming.items()]
     under_way_line = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
     if scored.empty:
         return "\n".join([f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out "
@@ -600,6 +618,7 @@ def format_league(
                 "0: the task's worst finite median or diverged), percentile stratified bootstrap (nominal 95%; "
                 "not exact at few seeds); P(hig < X) averaged over the tasks both ran"]  # fmt: skip
         out.append(aggregate_table(scored).to_string(index=False))
+        out += per_problem_aggregates(scored)
         if validation_targets and budgets:
             playing, waiting = problems_in_play(scored, validation_targets, held_out)
             tasks = [t for t in validation_targets if t in playing or any(t in (held_out or {}).get(p, ()) for p in playing)]

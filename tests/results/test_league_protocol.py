@@ -167,6 +167,25 @@ def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_
     assert league.confirmation_under_way(whole) == {}
 
 
+def test_each_problem_gets_its_own_aggregate_beside_the_one_across_all():
+    """Known answer: a leads every seed on p, b on q; across both they tie (IQM 0.5 each), on each
+    problem alone the leader scores 1 and the other 0. One problem alone: no second table."""
+    scored = pd.DataFrame({
+        "problem.name": ["p"] * 8 + ["q"] * 8, "task": ["p"] * 8 + ["q"] * 8,
+        "league_setting": (["a"] * 4 + ["b"] * 4) * 2, "seed": [0, 1, 2, 3] * 4, "status": ["completed"] * 16,
+        "final_test_loss": [1e-3] * 4 + [1e-1] * 4 + [1e-1] * 4 + [1e-3] * 4,
+    })  # fmt: skip
+    overall = league.aggregate_table(scored, reference="a").set_index("setting")["iqm"]
+    assert overall["a"] == pytest.approx(0.5) and overall["b"] == pytest.approx(0.5)
+    text = "\n".join(league.per_problem_aggregates(scored))
+    p_part, q_part = text.split("across q's tasks alone")
+    assert "across p's tasks alone (p)" in p_part
+    iqm = {(part, line.split()[0]): float(line.split()[2]) for part, body in (("p", p_part), ("q", q_part))
+           for line in body.splitlines() if line.split()[:1] in (["a"], ["b"])}  # fmt: skip
+    assert iqm == {("p", "a"): 1.0, ("p", "b"): 0.0, ("q", "a"): 0.0, ("q", "b"): 1.0}
+    assert league.per_problem_aggregates(scored[scored["problem.name"] == "p"]) == []
+
+
 def test_a_task_that_mixes_hardware_is_split_into_one_table_per_class():
     runs = _runs(seed=[0, 0, 0], **{"optimizer.name": ["hig", "adam", "sgd"]}, hardware=["GPU", "CPU", "CPU"])
     scored = league.league_runs(runs, {})
