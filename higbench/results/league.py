@@ -58,7 +58,8 @@ LONG_ROLE, LONG_PAPER_ROLE = "long", "long-paper"  # the long budget (results.lo
 LONG_ROLES = (LONG_ROLE, LONG_PAPER_ROLE)
 ROLES = ("tune", "confirm", "paper", "default", "target-tune", "target", *LONG_ROLES)  # league_role, where the driver records it
 TARGET_ROLE = "target"  # a target-setting rerun: a reference optimizer's tuned setting at the target-setting budget
-SCORED_ROLES = ("confirm", "paper", "default")
+SHIPPED_ROLES = ("paper", "default")  # an optimizer at its shipped settings: the paper's, else the defaults
+SCORED_ROLES = ("confirm", *SHIPPED_ROLES)
 TUNE_ROLES = ("tune", "target-tune")  # a league tuning trial; a reference's trial in the target setting
 TUNING_SEED_BASE = 1000  # tuning seeds are 1000 + study; confirmation seeds stay below
 MAX_STUDIES = 1000
@@ -228,7 +229,7 @@ def setting_label(row: pd.Series, spaces: Mapping[str, Mapping]) -> str:
     key of its search space is '(paper)'."""
     name = str(row["optimizer.name"])
     role = row.get("league_role")
-    if isinstance(role, str) and role in ("paper", "default"):
+    if isinstance(role, str) and role in SHIPPED_ROLES:
         return f"{name} ({role})"
     if isinstance(role, str) and role == "confirm":
         return name
@@ -324,14 +325,18 @@ def reach_table(runs: pd.DataFrame, curves: pd.DataFrame, targets: Mapping[str, 
 def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
     """Per problem whose league tuning is in the tables and whose confirmation is not whole yet: what
     is still missing. Whole: every tuned optimizer has confirmation runs on each of the problem's
-    tasks, and every confirmed or shipped setting as many seeds as the most any has. A sitting
-    stopped mid-confirmation leaves some settings run and others not; a leader among those would
-    be a leader among the settings that happened to run first, so such a problem is not scored."""
+    tasks; every optimizer run at its shipped settings on some problem of the tables (the driver's
+    ``--paper``, the same for every problem of a league) and tuned on this one has shipped runs on
+    each of its tasks; and every confirmed or shipped setting as many seeds as the most any has.
+    A sitting stopped mid-confirmation leaves some settings run and others not (the driver runs
+    the tuned settings first, the shipped ones last); a leader among those would be a leader
+    among the settings that happened to run first, so such a problem is not scored."""
     from higbench.results.index import DONE_STATUSES
 
     if "league_role" not in runs or runs.empty:
         return {}
     done = runs[runs["status"].isin(DONE_STATUSES)]
+    shipped_anywhere = set(done.loc[done["league_role"].isin(SHIPPED_ROLES), "optimizer.name"])
     out = {}
     for problem, group in done.groupby("problem.name", sort=True):
         tuned = set(group.loc[group["league_role"] == "tune", "optimizer.name"])
@@ -339,16 +344,26 @@ def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
         if not tuned or scored.empty:
             continue
         tasks = scored.apply(task_label, axis=1)
-        missing = sorted(o for o in tuned for t in set(tasks) if not ((tasks == t) & (scored["optimizer.name"] == o)).any())
+        shipped = scored["league_role"].isin(SHIPPED_ROLES)
+        missing = _not_on_every_task(tuned, scored[~shipped], tasks[~shipped], set(tasks))
+        missing_shipped = _not_on_every_task(tuned & shipped_anywhere, scored[shipped], tasks[shipped], set(tasks))
         seeds = scored.groupby([tasks, scored["optimizer.name"], scored["league_role"]]).size()
         short = seeds[seeds < seeds.max()]
-        if missing or len(short):
-            parts = [f"not yet run on every task: {', '.join(dict.fromkeys(missing))}"] if missing else []
+        if missing or missing_shipped or len(short):
+            parts = [f"not yet run on every task: {', '.join(missing)}"] if missing else []
+            if missing_shipped:
+                parts.append(f"not yet run at its shipped settings on every task: {', '.join(missing_shipped)}")
             parts += (
                 [f"{len(short)} of {len(seeds)} (task, setting) pairs at fewer than {seeds.max()} seeds"] if len(short) else []
             )
             out[str(problem)] = "; ".join(parts)
     return out
+
+
+def _not_on_every_task(optimizers: set[str], runs: pd.DataFrame, tasks: pd.Series, every_task: set[str]) -> list[str]:
+    """The ``optimizers`` (sorted) without a row in ``runs`` (labelled ``tasks``) on some task of ``every_task``."""
+    ran = set(zip(tasks, runs["optimizer.name"]))
+    return [o for o in sorted(optimizers) if any((t, o) not in ran for t in every_task)]
 
 
 def league_frames(runs: pd.DataFrame, curves: pd.DataFrame, spaces: Mapping[str, Mapping], tuning_seeds=None,

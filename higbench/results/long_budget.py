@@ -10,10 +10,10 @@ import numpy as np
 import pandas as pd
 
 from higbench.results import stats
-from higbench.results.league import LONG_PAPER_ROLE, LONG_ROLE, LONG_ROLES, one_run_per_identity
+from higbench.results.league import LONG_PAPER_ROLE, LONG_ROLE, LONG_ROLES, SHIPPED_ROLES, one_run_per_identity
 
 __all__ = ["LONG_PAPER_ROLE", "LONG_ROLE", "LONG_ROLES", "format_long_budget", "long_budget_table"]
-LEAGUE_ROLES = {LONG_ROLE: ("confirm",), LONG_PAPER_ROLE: ("paper", "default")}  # the same setting at the league's budget
+LEAGUE_ROLES = {LONG_ROLE: ("confirm",), LONG_PAPER_ROLE: SHIPPED_ROLES}  # the same setting at the league's budget
 COLUMNS = ("task", "setting", "seconds", "seeds", "median val", "median test", "league median test", "test per seed",
            "updates per seed")  # fmt: skip
 

@@ -165,6 +165,15 @@ def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_
     assert league.confirmation_under_way(no_adam) == {"toy": "not yet run on every task: adam"}
     whole = pd.concat([runs, _runs(seed=[1], **{"optimizer.name": ["adam"]}, league_role=["confirm"], config_id=["c9"])])
     assert league.confirmation_under_way(whole) == {}
+    # the shipped settings run last: once hig ran at the paper's settings on another problem, a
+    # problem that tuned hig is whole only with hig (paper) too (sgd's default rows: not tuned here)
+    elsewhere = _runs(seed=[0, 1], **{"optimizer.name": ["hig"] * 2}, league_role=["paper"] * 2,
+                      config_id=["o0", "o1"], path=["o0", "o1"], **{"problem.name": ["osc"] * 2})  # fmt: skip
+    two = pd.concat([whole, elsewhere], ignore_index=True)
+    assert league.confirmation_under_way(two) == {"toy": "not yet run at its shipped settings on every task: hig"}
+    shipped = _runs(seed=[0, 1], **{"optimizer.name": ["hig"] * 2}, league_role=["paper"] * 2, config_id=["t0", "t1"],
+                    path=["t0", "t1"])  # fmt: skip
+    assert league.confirmation_under_way(pd.concat([two, shipped], ignore_index=True)) == {}
 
 
 def test_each_problem_gets_its_own_aggregate_beside_the_one_across_all():
