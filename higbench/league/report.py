@@ -265,12 +265,13 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     spaces = all_spaces()
     try:
         targets, budgets, held_out = scoring_targets(runs, curves)
-        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out)
+        frames = league.league_frames(runs, curves, spaces, tuning_seeds)
+        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out, frames)
         long = format_long_budget(league.with_first_losses(runs, curves))
         outcomes = tuning_outcomes(runs, curves, targets)
         text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs),
                              *([outcomes] if outcomes else []), text, *([long] if long else [])])  # fmt: skip
-        scored, reached, _ = league.league_frames(runs, curves, spaces, tuning_seeds)
+        scored, reached, _ = frames
     except ValueError as exc:
         fail(str(exc))
     manifest["machine"] = machine(runs)

@@ -603,15 +603,17 @@ def format_league(
     validation_targets: Mapping[str, float] | None = None,
     budgets: Mapping[str, float] | None = None,
     held_out: Mapping[str, Sequence[str]] | None = None,
+    frames: tuple[pd.DataFrame, pd.DataFrame, dict] | None = None,
 ) -> str:
     """The league as text: per task the final test loss (median, every seed, order-statistics
     interval, tests against the leader), flagged rows, the aggregate across tasks, AlgoPerf's
     score where target-setting runs gave ``validation_targets`` and ``budgets`` per task
     (``algoperf_table``; ``held_out``: problem -> its variant tasks, the gates), and the time to
     the problems' test-loss targets (equal wall clock; no equal-updates view: an update of L-BFGS
-    or LM is many evaluations, so updates are not equal work)."""
+    or LM is many evaluations, so updates are not equal work). ``frames``: ``league_frames``'s,
+    when the caller has them already."""
     still_confirming = confirmation_under_way(runs)
-    scored, reached, targets = league_frames(runs, curves, spaces, tuning_seeds, still_confirming)
+    scored, reached, targets = frames or league_frames(runs, curves, spaces, tuning_seeds, still_confirming)
     left_out = len(runs) - len(scored)
     under_way = [f"{p} ({why})" for p, why in still_confirming.items()]
     under_way_line = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
