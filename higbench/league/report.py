@@ -265,8 +265,9 @@ def report(roots: list[Path], out: Path, manifest: dict, tuning_seeds) -> str:
     spaces = all_spaces()
     try:
         targets, budgets, held_out = scoring_targets(runs, curves)
-        frames = league.league_frames(runs, curves, spaces, tuning_seeds)
-        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out, frames)
+        under_way = league.confirmation_under_way(runs)
+        frames = league.league_frames(runs, curves, spaces, tuning_seeds, under_way)
+        text = league.format_league(runs, curves, spaces, tuning_seeds, targets, budgets, held_out, frames, under_way)
         long = format_long_budget(league.with_first_losses(runs, curves))
         outcomes = tuning_outcomes(runs, curves, targets)
         text = "\n\n".join([league.format_targets(found_targets(runs, curves)), tuning_counts(runs),

@@ -604,15 +604,16 @@ def format_league(
     budgets: Mapping[str, float] | None = None,
     held_out: Mapping[str, Sequence[str]] | None = None,
     frames: tuple[pd.DataFrame, pd.DataFrame, dict] | None = None,
+    under_way: Mapping[str, str] | None = None,
 ) -> str:
     """The league as text: per task the final test loss (median, every seed, order-statistics
     interval, tests against the leader), flagged rows, the aggregate across tasks, AlgoPerf's
     score where target-setting runs gave ``validation_targets`` and ``budgets`` per task
     (``algoperf_table``; ``held_out``: problem -> its variant tasks, the gates), and the time to
     the problems' test-loss targets (equal wall clock; no equal-updates view: an update of L-BFGS
-    or LM is many evaluations, so updates are not equal work). ``frames``: ``league_frames``'s,
-    when the caller has them already."""
-    still_confirming = confirmation_under_way(runs)
+    or LM is many evaluations, so updates are not equal work). ``frames`` and ``under_way``:
+    ``league_frames``'s and ``confirmation_under_way``'s, when the caller has them already."""
+    still_confirming = confirmation_under_way(runs) if under_way is None else under_way
     scored, reached, targets = frames or league_frames(runs, curves, spaces, tuning_seeds, still_confirming)
     left_out = len(runs) - len(scored)
     under_way = [f"{p} ({why})" for p, why in still_confirming.items()]

@@ -71,9 +71,8 @@ def plot_final_losses(table: pd.DataFrame, out: Path, colours: Mapping[str, str]
             ok = np.isfinite(seeds) & (seeds > 0)
             ax.scatter(np.full(ok.sum(), i), seeds[ok], s=14, color=c, zorder=3)
             for where, marker, level in ((~np.isfinite(seeds), "x", top), (np.isfinite(seeds) & (seeds <= 0), "v", bottom)):
-                if (
-                    where.any()
-                ):  # diverged (NaN or ended above its start) at the top edge; a loss <= 0 (float rounding) at the bottom
+                # diverged (NaN, or ended above its start) at the top edge; a loss <= 0 (float rounding) at the bottom
+                if where.any():
                     ax.scatter(np.full(where.sum(), i), np.full(where.sum(), level), marker=marker, s=20, color=c, zorder=3)
             if math.isfinite(r["median"]) and r["median"] > 0:
                 ax.hlines(r["median"], i - 0.3, i + 0.3, color=c, lw=2, zorder=4)
