@@ -13,7 +13,9 @@ default: the problem's shipped settings where it has none of the paper's; target
 target: the target setting's reference trials and reruns),
 ``league_job`` (``tune/toy/adam/0/3``: role, problem, optimizer, study, trial; confirmation
 jobs name their variant), ``study`` and ``trial`` (tuning runs), ``task``, ``hardware``
-(``tables.hardware``) and ``env.load_1min``. ``curves.csv.gz``: one row per (run,
+(``tables.hardware``) and ``env.load_1min``; ``env.hostname``, ``env.boot_time`` and
+``env.cpu_model`` say which machine of that class (``MACHINE_COLUMNS``: tables written before
+runs recorded them lack them, and read them as empty). ``curves.csv.gz``: one row per (run,
 evaluation): ``run``, ``step``, ``wall_time``, ``train_loss``, ``val_loss`` (where the run file
 has it) and ``test_loss``. Floats at full precision; gzip.
 
@@ -44,8 +46,10 @@ RUN_COLUMNS = (
     "run", "identity", "league_role", "league_job", "study", "trial", "seed", "problem.name", "task", "optimizer.name",
     "overrides", "setting_config", "config_id", "status", "final_val_loss", "final_test_loss", "steps", "train_time_s",
     "hardware", "env.cpu_share", "env.load_1min", "env.device", "env.device_name", "env.cpu_count", "env.torch_threads",
-    "env.git_revision", "started", "finished", "problem.targets",
+    "env.git_revision", "started", "finished", "problem.targets", "env.hostname", "env.boot_time", "env.cpu_model",
 )  # fmt: skip
+# which machine trained a run: tables written before runs recorded it lack these columns (read as empty)
+MACHINE_COLUMNS = ("env.hostname", "env.boot_time", "env.cpu_model")
 CURVE_COLUMNS = ("run", "step", "wall_time", "train_loss", "val_loss", "test_loss")
 
 
@@ -245,12 +249,16 @@ def _read_table(path: Path, columns: Iterable[str]) -> pd.DataFrame | None:
 def read_root(root: Path, missing_ok: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The tables of one root as ``load_runs`` frames (``path`` = ROOT/run); empty when absent."""
     root = Path(root)
-    runs = _read_table(root / TABLES_DIR / RUNS_TABLE, RUN_COLUMNS) if safe_dir(root / TABLES_DIR) else None
+    required = [c for c in RUN_COLUMNS if c not in MACHINE_COLUMNS]
+    runs = _read_table(root / TABLES_DIR / RUNS_TABLE, required) if safe_dir(root / TABLES_DIR) else None
     curves = _read_table(root / TABLES_DIR / CURVES_TABLE, CURVE_COLUMNS) if runs is not None else None
     if runs is None or curves is None:
         if not missing_ok:
             raise FileNotFoundError(f"{root}: no league tables ({TABLES_DIR}/{RUNS_TABLE}); export them with a league run first")
         return pd.DataFrame(columns=[*RUN_COLUMNS, "path", "root"]), pd.DataFrame(columns=[*CURVE_COLUMNS, "path"])
+    for column in MACHINE_COLUMNS:
+        if column not in runs:
+            runs[column] = None
     prefix = str(root)
     runs["path"] = prefix + "/" + runs["run"].astype(str)
     runs["root"] = prefix

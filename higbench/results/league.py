@@ -586,13 +586,32 @@ def seeds_text(scored: pd.DataFrame) -> str:
     return f"{low} seeds" if low == high else f"{low}-{high} seeds"
 
 
+def machine_of(runs: pd.DataFrame) -> pd.Series:
+    """Per run, which machine trained it: 'host, booted TIME' from its env, '' where the run did
+    not record it (files written before runs named their machine)."""
+
+    def text(name: str) -> pd.Series:
+        return runs[name].fillna("").astype(str) if name in runs else pd.Series("", index=runs.index)
+
+    boot = text("env.boot_time")
+    return (text("env.hostname") + ", booted " + boot).where(boot != "", "")
+
+
 def hardware_line(scored: pd.DataFrame) -> str:
+    """Each task's hardware class; where its scored runs name their machines and came from more
+    than one, how many (one class of hardware, a cluster's nodes or a replaced machine, can
+    differ in speed, and then equal seconds are not equal work); how many runs did not name one."""
     if "hardware" not in scored:
         return "hardware: not recorded in these runs (one hardware class per task cannot be checked)"
-    per_task = scored.groupby("task")["hardware"].first()
-    return "hardware, one class per task (a task that mixed classes is split, named [hardware]): " + "; ".join(
-        f"{t}: {h}" for t, h in per_task.items()
-    )
+    machines = machine_of(scored)
+    parts = []
+    for task, group in scored.groupby("task"):
+        named = machines[group.index]
+        count = named[named != ""].nunique()
+        parts.append(f"{task}: {group['hardware'].iloc[0]}" + (f" on {count} machines" if count > 1 else ""))
+    unnamed = int((machines == "").sum())
+    return ("hardware, one class per task (a task that mixed classes is split, named [hardware]): " + "; ".join(parts)
+            + (f"; machine not recorded by {unnamed} of {len(scored)} scored runs" if unnamed else ""))  # fmt: skip
 
 
 def format_league(

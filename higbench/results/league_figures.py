@@ -98,7 +98,8 @@ def plot_profile(reached: pd.DataFrame, colours: Mapping[str, str], out: Path, t
     """profile.png: rho(tau) in seconds to the problems' targets (equal wall clock; no updates
     view), in the colours of ``final_losses.png`` (``setting_colours``): the leaders by final
     loss and HIG in colour, the rest grey. Coloured lines are drawn widest first, so one lying on
-    another shows as a stripe inside it, and the legend gives each one's rho at ``tau_max``."""
+    another shows as a stripe inside it, and the legend (beside the axes, highest first) gives each
+    one's rho at ``tau_max``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -107,7 +108,7 @@ def plot_profile(reached: pd.DataFrame, colours: Mapping[str, str], out: Path, t
     out.mkdir(parents=True, exist_ok=True)
     taus = np.linspace(1.0, tau_max, 61)
     rho = performance_profile(profile_times(reached), taus)
-    fig, ax = plt.subplots(figsize=(6.5, 4.4))
+    fig, ax = plt.subplots(figsize=(8.2, 4.4))
     coloured = [n for n in rho.columns if colours.get(n, "0.7") != "0.7"]
     greys = [n for n in rho.columns if n not in coloured]
     for name in greys:
@@ -121,7 +122,11 @@ def plot_profile(reached: pd.DataFrame, colours: Mapping[str, str], out: Path, t
     ax.set_title(f"equal wall clock (grey: {len(greys)} other settings, {never} of them at 0 throughout)", fontsize=10)
     ax.set_ylim(-0.03, 1.03)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
+    # outside the axes, so it hides no line; ordered by rho at tau_max, so it reads as the ranking
+    handles, labels = ax.get_legend_handles_labels()
+    order = sorted(range(len(labels)), key=lambda k: -rho[coloured[k]].iloc[-1])
+    ax.legend([handles[k] for k in order], [labels[k] for k in order], fontsize=7, loc="upper left",
+              bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # fmt: skip
     fig.tight_layout()
     path = out / "profile.png"
     fig.savefig(path, dpi=120)

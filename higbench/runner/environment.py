@@ -34,6 +34,8 @@ def environment(device: torch.device, parallel_jobs: int = 1) -> dict:
         "python_version": sys.version.split()[0],
         "platform": platform.platform(),
         "hostname": socket.gethostname(),
+        "boot_time": boot_time(),  # with the host, which machine: one class of hardware can differ in speed
+        "cpu_model": cpu_model(),
         "git_revision": git_revision(),
         "torch_threads": torch.get_num_threads(),
         "cpu_count": os.cpu_count() or 0,
@@ -45,6 +47,23 @@ def environment(device: torch.device, parallel_jobs: int = 1) -> dict:
         "parallel_jobs": int(parallel_jobs),  # jobs of its sweep sharing the machine (the plan's)
     }
     return env
+
+
+def boot_time() -> str:
+    """When this machine booted (UTC, to the second): a replaced or rebooted machine gets a new one."""
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(psutil.boot_time()))
+
+
+def cpu_model() -> str:
+    """The CPU's model name (/proc/cpuinfo where there is one), else what platform says."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 _PROCESS = psutil.Process()

@@ -75,6 +75,15 @@ def test_tables_hold_the_contract_columns_and_the_load(tmp_path):
     assert 0.37 * 3 in set(curves["wall_time"])  # full precision
 
 
+def test_tables_written_before_runs_named_their_machine_read_with_those_columns_empty(tmp_path):
+    tables.export(tmp_path, league_root(tmp_path, [0]))
+    path = tmp_path / "tables" / "runs.csv.gz"
+    older = pd.read_csv(path).drop(columns=list(tables.MACHINE_COLUMNS))
+    older.to_csv(path, index=False, compression="gzip")
+    runs, _ = tables.read_root(tmp_path)
+    assert len(runs) == 2 and runs[list(tables.MACHINE_COLUMNS)].isna().all().all()
+
+
 def test_a_root_without_its_run_files_rescores_the_same_from_its_tables(tmp_path):
     jobs = league_root(tmp_path, [0, 1, 2])
     from_files = score_files(tmp_path)

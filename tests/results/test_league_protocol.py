@@ -202,6 +202,19 @@ def test_a_task_that_mixes_hardware_is_split_into_one_table_per_class():
     assert "one class per task" in league.hardware_line(scored)
 
 
+def test_the_hardware_line_counts_the_machines_of_one_class_that_trained_a_task():
+    scored = pd.DataFrame({
+        "task": ["a", "a", "a", "b", "b"], "hardware": ["CPU, 2 cores"] * 5,
+        "env.hostname": ["n1", "n1", "n2", "n1", None], "env.boot_time": ["t1", "t1", "t2", "t1", None],
+    })  # fmt: skip
+    line = league.hardware_line(scored)
+    assert "a: CPU, 2 cores on 2 machines;" in line  # n1 and n2: equal seconds need not be equal work
+    assert "b: CPU, 2 cores;" in line  # one named machine, one run that named none
+    assert line.endswith("machine not recorded by 1 of 5 scored runs")
+    old = scored.drop(columns=["env.hostname", "env.boot_time"])  # tables written before runs named their machine
+    assert league.hardware_line(old).endswith("a: CPU, 2 cores; b: CPU, 2 cores; machine not recorded by 5 of 5 scored runs")
+
+
 # -- AlgoPerf's score: targets, budgets, gates -------------------------------------------------
 
 
