@@ -109,6 +109,7 @@ from higbench.league.report import (  # noqa: F401  (re-exported)
     PROTOCOL_KEYS,
     calibration,
     check_out,
+    speed_change,
     found_targets,
     hardware,
     machine,
@@ -552,6 +553,8 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
                       "protocol": protocol, "searchpath": [str(f) for f in search_folders()],
                       "tuning_seeds": tuning_seeds, "confirmation_seeds": seeds, "evaluations_per_run": EVALUATIONS,
                       "problems": {}, "calibration": [] if args.report_only else [calibration()]}  # fmt: skip
+    if not args.report_only and (change := speed_change(manifest["calibration"][0], recorded_calibrations(roots, out))):
+        print(f"[league] {change}", file=sys.stderr)
     quiet = any(scope is None and key == "progress" and str(value).lower() == "false" for scope, key, value in EXTRA)
     all_jobs: list[tuple[str, Job]] = []
     plans = {}

@@ -111,6 +111,34 @@ def recorded_calibrations(roots: list[Path], out: Path) -> list[dict]:
     return found
 
 
+SPEED_CHANGE = 1.25  # one machine's sittings varied by up to 1.2x from their median in the CPU league
+LATEST = 5  # calibrations compared with: the latest few, so that one noisy sitting neither hides nor raises a change
+
+
+def speed_change(now: dict, earlier: list[dict]) -> str | None:
+    """One line when this sitting's calibration (``now``) is more than ``SPEED_CHANGE`` times
+    faster or slower than the median of the latest ``LATEST`` recorded under the roots
+    (``earlier``), else None: the sign that the machine changed between sittings (the CPU
+    league's second machine trained 1.5-3.3x faster than its first, same class, same code), so
+    that a task trained across them compares times at unequal speed."""
+
+    def matmul(entry: dict) -> float:
+        value = entry.get("matmul_50x256_s")
+        return float(value) if isinstance(value, int | float) and not isinstance(value, bool) and value > 0 else math.nan
+
+    latest = sorted((str(e.get("when", "")), matmul(e)) for e in earlier if math.isfinite(matmul(e)))[-LATEST:]
+    if not latest or not math.isfinite(matmul(now)):
+        return None
+    median = float(np.median([seconds for _, seconds in latest]))
+    ratio = matmul(now) / median
+    if 1 / SPEED_CHANGE <= ratio <= SPEED_CHANGE:
+        return None
+    return (f"this machine's calibration ({1e3 * matmul(now):.1f} ms) is {ratio:.2f}x the median of the latest {len(latest)} "
+            f"recorded under the roots ({1e3 * median:.1f} ms, the last at {latest[-1][0]}): another machine, or the same "
+            "under other load; a task trained across both compares times at unequal speed (league.txt's hardware line "
+            "counts the machines that name themselves)")  # fmt: skip
+
+
 # -- outputs ----------------------------------------------------------------------------------
 
 

@@ -70,6 +70,19 @@ def test_foreign_manifests_are_skipped_with_a_line_naming_each(tmp_path, capsys)
     assert "a.json: its calibration is not a list" in err and "b.json: nested too deeply" in err
 
 
+def test_a_sitting_on_a_machine_of_another_speed_is_named_against_the_last_calibration():
+    def at(when, seconds):
+        return {"when": when, "matmul_50x256_s": seconds}
+
+    # the CPU league's first machine (19-27 ms between its sittings), then the second (16.4 ms)
+    first = [0.0199, 0.0250, 0.0192, 0.0239, 0.0262, 0.0210]
+    earlier = [at(f"2026-11-30T0{i}:00:00+0000", s) for i, s in enumerate(first)] + [{"matmul_50x256_s": "x"}]
+    line = driver.speed_change(at("2026-11-30T06:00:00+0000", 0.0164), earlier)  # against 25.0, 19.2, 23.9, 26.2, 21.0
+    assert line and "(16.4 ms) is 0.69x the median of the latest 5 recorded under the roots (23.9 ms, the last at" in line
+    assert driver.speed_change(at("now", 0.0192), earlier) is None  # 0.80x: within one machine's spread
+    assert driver.speed_change(at("now", 0.0164), []) is None and driver.speed_change({}, earlier) is None
+
+
 def test_a_seed_that_is_not_a_number_leaves_its_run_out_of_the_table_with_a_line(tmp_path, capsys):
     from test_league_tables import league_root
 
