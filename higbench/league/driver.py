@@ -109,13 +109,13 @@ from higbench.league.report import (  # noqa: F401  (re-exported)
     PROTOCOL_KEYS,
     calibration,
     check_out,
-    speed_change,
     found_targets,
     hardware,
     machine,
     recorded_calibrations,
     report,
     scoring_targets,
+    speed_change,
     write_report,
 )
 from higbench.results import league
