@@ -8,6 +8,7 @@ sys.path.insert(0, str(ROOT / "scripts"))
 import probe_oscillator_draws  # noqa: E402
 import probe_poisson_data  # noqa: E402
 import probe_runs  # noqa: E402
+import probe_target_machine  # noqa: E402
 
 sys.path.remove(str(ROOT / "scripts"))
 
@@ -79,3 +80,13 @@ def test_the_oscillator_draws_probe_runs_the_paper_hour_at_each_batch_size():
     updates = {r["batch_size"]: r["budget.max_updates"] for r in runs}
     assert updates[128] == 24657 and round(updates[32] / updates[128], 2) == 1.68  # 3600 s / 0.146 s; 0.146 / 0.087
     assert all(r["budget.seconds"] is None for r in runs)
+
+
+def test_the_target_probe_reruns_each_published_rerun_with_its_seed_and_seconds():
+    import pandas as pd
+
+    reruns = pd.DataFrame({"overrides": ["progress=false threads=4 problem=toy optimizer=adam seed=3 budget.seconds=10.0 "
+                                         "eval_every=0.1 optimizer.lr=0.0354 batch_size=256"]})  # fmt: skip
+    (job,) = probe_target_machine.jobs(reruns)
+    assert job == ["threads=1", "progress=false", "problem=toy", "optimizer=adam", "seed=3", "budget.seconds=10.0",
+                   "eval_every=0.1", "optimizer.lr=0.0354", "batch_size=256"]  # fmt: skip
