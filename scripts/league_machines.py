@@ -132,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         parser.error(f"--machine-change={args.machine_change!r}: not an ISO time")
     change = change.tz_localize("UTC") if change.tzinfo is None else change.tz_convert("UTC")
+    if not (args.root / "tables").is_dir():
+        parser.error(f"root={args.root}: no league tables there (tables/runs.csv.gz); give a league root")
     text = report(args.root, change, args.every_setting)
     if args.out:
         args.out.write_text(text)

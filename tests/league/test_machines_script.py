@@ -51,3 +51,13 @@ def test_calibrations_are_read_from_the_manifests_once_each_with_their_side(tmp_
     (tmp_path / "manifests" / "b.json").write_text(json.dumps({"calibration": [late]}))  # a sitting's start, copied again
     table = league_machines.calibrations(tmp_path, CHANGE)
     assert list(table["side"]) == ["before", "after"] and list(table["matmul_ms"]) == [24.0, 16.0]
+
+
+def test_a_root_without_tables_or_a_bad_time_is_one_line_before_any_work(tmp_path, capsys):
+    import pytest
+
+    for argv, says in (([str(tmp_path), "--machine-change", "2026-11-30T04:32"], "no league tables there"),
+                       ([str(tmp_path), "--machine-change", "yesterday"], "not an ISO time")):  # fmt: skip
+        with pytest.raises(SystemExit) as stop:
+            league_machines.main(argv)
+        assert stop.value.code == 2 and says in capsys.readouterr().err
