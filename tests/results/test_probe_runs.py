@@ -5,6 +5,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
+import probe_league_device  # noqa: E402
 import probe_oscillator_draws  # noqa: E402
 import probe_poisson_data  # noqa: E402
 import probe_runs  # noqa: E402
@@ -90,3 +91,29 @@ def test_the_target_probe_reruns_each_published_rerun_with_its_seed_and_seconds(
     (job,) = probe_target_machine.jobs(reruns)
     assert job == ["threads=1", "progress=false", "problem=toy", "optimizer=adam", "seed=3", "budget.seconds=10.0",
                    "eval_every=0.1", "optimizer.lr=0.0354", "batch_size=256"]  # fmt: skip
+
+
+def test_the_device_probe_chooses_one_point_of_one_study_and_reruns_it_at_the_leagues_budget():
+    """The tables number trials within a study, so trial 0 of study 0 and trial 0 of study 1 are two
+    points: the choice (fastest to the target) is one of them, and its CPU figures are that point's."""
+    import pandas as pd
+
+    def trial(study, lr, seconds_to_target):
+        return {"path": f"s{study}-{lr}", "run": f"s{study}-{lr}", "trial": 0, "study": study, "status": "completed",
+                "league_job": f"tune/poisson/adam/{study}/0", "optimizer.name": "adam", "final_val_loss": 1.0,
+                "steps": 100 * (study + 1), "train_time_s": 10.0,
+                "overrides": f"progress=false threads=1 problem=poisson optimizer=adam seed={1000 + study} "
+                             f"budget.seconds=10.0 eval_every=0.1 optimizer.lr={lr}"}, seconds_to_target  # fmt: skip
+
+    rows, reach = zip(trial(0, 0.1, 6.0), trial(1, 0.01, 3.0), strict=True)
+    tune = pd.DataFrame(rows)
+    curves = pd.DataFrame([{"path": r["path"], "run": r["run"], "wall_time": t, "step": t, "val_loss": loss}
+                           for r, at in zip(rows, reach, strict=True) for t, loss in ((0.0, 9.0), (at, 1.0))])  # fmt: skip
+    overrides, rule, cpu = probe_league_device.chosen(tune, curves, "adam", target=2.0)
+    assert overrides == ["problem=poisson", "optimizer=adam", "optimizer.lr=0.01"] and "time to the validation target" in rule
+    assert list(cpu["study"]) == [1]  # the other study's trial 0 is another point
+    figures = probe_league_device.cpu_figures({"cpu": cpu.assign(curve=[curves[curves["path"] == "s1-0.01"]])}, 2.0, 10.0)
+    assert figures == {"cpu_updates_per_s": 20.0, "cpu_time_to_target_s": 3.0}
+    job = probe_league_device.job_overrides({"overrides": overrides}, seed=4, budget=58.0, extra=["device=cuda"])
+    assert job == ["threads=1", "progress=false", "problem=poisson", "optimizer=adam", "optimizer.lr=0.01", "seed=4",
+                   "budget.seconds=58", "eval_every=0.58", "device=cuda"]  # fmt: skip
