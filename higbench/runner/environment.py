@@ -72,17 +72,28 @@ _PROCESS = psutil.Process()
 class CpuUse:
     """How much of its cores a run had since it started: the process's CPU seconds over wall
     seconds times its threads (about 1 alone on its cores; lower when other work shared them),
-    and the machine's load averages when it finished. A timing is only as good as these."""
+    and the machine's load averages when it finished. A timing is only as good as these.
 
-    def __init__(self, threads: int):
+    A resumed run counts every segment up to its checkpoint (``earlier``, from ``totals``): a
+    run slowed for most of its budget and resumed for its last minute on an idle core would
+    otherwise record the last minute's share alone."""
+
+    def __init__(self, threads: int, earlier: dict | None = None):
         self.threads = max(1, threads)
         self.cpu0, self.wall0 = _cpu_seconds(), _wall_seconds()
+        self.earlier = earlier or {"cpu_seconds": 0.0, "core_seconds": 0.0, "segments": 0}
+
+    def totals(self) -> dict:
+        """CPU seconds, core seconds (wall seconds times threads) and segments so far, this one included."""
+        core = (_wall_seconds() - self.wall0) * self.threads
+        return {"cpu_seconds": self.earlier["cpu_seconds"] + _cpu_seconds() - self.cpu0,
+                "core_seconds": self.earlier["core_seconds"] + core, "segments": self.earlier["segments"] + 1}  # fmt: skip
 
     def summary(self) -> dict:
-        wall = _wall_seconds() - self.wall0
-        share = (_cpu_seconds() - self.cpu0) / (wall * self.threads) if wall > 0 else float("nan")
+        total = self.totals()
+        share = total["cpu_seconds"] / total["core_seconds"] if total["core_seconds"] > 0 else float("nan")
         load = " ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else ""
-        return {"cpu_share": round(share, 3), "load_at_finish": load}
+        return {"cpu_share": round(share, 3), "load_at_finish": load, "cpu_segments": total["segments"]}
 
 
 def _cpu_seconds() -> float:

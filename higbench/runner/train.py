@@ -381,7 +381,7 @@ class TrainingRun:
         self.test = problem.test_set()
         self.val = problem.val_set()  # its loss is the curve val_loss (what tuning reads)
         self.memory = MemoryMonitor(device)
-        self.cpu = CpuUse(torch.get_num_threads())
+        self.cpu = CpuUse(torch.get_num_threads(), earlier=state.get("cpu_use") if state is not None else None)
         self.shuffle = torch.Generator().manual_seed(run.seed)
         self.budget_s = run.budget.seconds if run.budget.seconds is not None else math.inf
         self.max_updates = run.budget.max_updates if run.budget.max_updates is not None else math.inf
@@ -465,6 +465,7 @@ class TrainingRun:
                 "cuda_rng": torch.cuda.get_rng_state(self.device) if self.device.type == "cuda" else None,
                 "rows": writer.row_counts(),
                 "peak_rss_mb": self.memory.peak_rss_mb,
+                "cpu_use": self.cpu.totals(),  # a resumed run's CPU share counts this segment too
                 "run_id": writer.run_id,
             },
         )

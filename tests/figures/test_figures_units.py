@@ -565,6 +565,24 @@ def test_a_run_file_records_what_the_run_had_of_its_cores(monkeypatch):
     assert len(use.summary()["load_at_finish"].split()) == 3
 
 
+def test_a_resumed_runs_cpu_share_counts_its_earlier_segments(monkeypatch):
+    """A run at share 0.6 for 540 s, killed, then resumed alone for its last 60 s records
+    (0.6 * 540 + 60) / 600 = 0.64, not the last segment's 1.0. (Clocks replaced.)"""
+    from higbench.runner import environment
+
+    clock = {"cpu": 0.0, "wall": 0.0}
+    monkeypatch.setattr(environment, "_cpu_seconds", lambda: clock["cpu"])
+    monkeypatch.setattr(environment, "_wall_seconds", lambda: clock["wall"])
+    first = environment.CpuUse(threads=1)
+    clock["cpu"], clock["wall"] = 0.6 * 540, 540.0
+    saved = first.totals()  # what the checkpoint carries
+    assert saved == {"cpu_seconds": 324.0, "core_seconds": 540.0, "segments": 1}
+    clock["cpu"], clock["wall"] = 1000.0, 2000.0  # another process: its clocks start anywhere
+    resumed = environment.CpuUse(threads=1, earlier=saved)
+    clock["cpu"], clock["wall"] = 1060.0, 2060.0
+    assert resumed.summary()["cpu_share"] == 0.64 and resumed.summary()["cpu_segments"] == 2
+
+
 def test_long_curves_are_thinned_to_what_a_panel_can_show_keeping_the_start_end_and_lowest():
     """A 3,000 s Adam run has ~54,000 evaluations: drawn and written as ~1,000 (the data files stay
     small), evenly spread and log-spaced, with the first, the last and the lowest kept."""

@@ -57,3 +57,6 @@ def test_interrupted_and_resumed_equals_uninterrupted(optimizer, tmp_path, monke
     a, b = load_weights(tmp_path / "a.h5"), load_weights(tmp_path / "b.h5")
     assert all(np.array_equal(a[k], b[k]) for k in a)
     np.testing.assert_array_equal(load_run(tmp_path / "a.h5")[1]["test_loss"], load_run(tmp_path / "b.h5")[1]["test_loss"])
+    # the CPU share of the resumed run counts both of its segments (the checkpoint carries the first's)
+    assert load_run(tmp_path / "a.h5")[0]["env"]["cpu_segments"] == 1
+    assert load_run(tmp_path / "b.h5")[0]["env"]["cpu_segments"] == 2
