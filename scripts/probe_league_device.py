@@ -42,6 +42,8 @@ def published(problem: str) -> tuple[pd.DataFrame, pd.DataFrame, float, float]:
     """The problem's tuning trials and their curves, its validation target and its budget per run."""
     runs, curves = tables.read([PUBLISHED])
     runs = runs[runs["problem.name"] == problem]
+    if not (runs["league_role"] == "target").any():
+        raise SystemExit(f"--problem {problem}: the published league has no target setting of it")
     target = float(
         league.targets_from_reruns(runs[runs["league_role"] == "target"], curves).set_index("task").loc[problem, "target"]
     )
@@ -134,7 +136,7 @@ def report(args, table: dict, target: float, budget: float, league_budget: float
     return pd.DataFrame(rows)
 
 
-def figure(args, result: pd.DataFrame, target: float, path) -> None:
+def figure(args, table: dict, result: pd.DataFrame, target: float, path) -> None:
     """Validation loss against training clock, one line per run, the published target dashed."""
     import matplotlib
 
@@ -142,9 +144,9 @@ def figure(args, result: pd.DataFrame, target: float, path) -> None:
     import matplotlib.pyplot as plt
 
     here, curves = probe_runs.runs_under(args.root)
-    label = dict(zip(here["path"], [label_of(r, settings_cache) for _, r in here.iterrows()], strict=True))
+    label = dict(zip(here["path"], [label_of(r, table) for _, r in here.iterrows()], strict=True))
     fig, ax = plt.subplots(figsize=(6.4, 4))
-    colors = dict(zip(settings_cache, plt.cm.tab10.colors, strict=False))
+    colors = dict(zip(table, plt.cm.tab10.colors, strict=False))
     for run_path, curve in curves.groupby("path"):
         seed = int(here.loc[here["path"] == run_path, "seed"].iloc[0])
         ax.plot(curve["wall_time"], curve["val_loss"], color=colors.get(label[run_path], "grey"), lw=1.2,
@@ -156,9 +158,6 @@ def figure(args, result: pd.DataFrame, target: float, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-settings_cache: dict = {}
 
 
 def main(argv=None) -> None:
@@ -173,7 +172,6 @@ def main(argv=None) -> None:
     tune, curves, target, budget = published(args.problem)
     league_budget, budget = budget, args.seconds or budget
     table = settings(args, tune, curves, target)
-    settings_cache.update(table)
     for label, setting in table.items():
         print(f"{label}: {' '.join(setting['overrides'])} ({setting['rule']})", file=sys.stderr)
     skipped = [] if args.report_only else train(args, table, budget)
@@ -182,7 +180,7 @@ def main(argv=None) -> None:
     name = f"league_device_{args.problem}" + (f"_{budget:g}s" if args.seconds else "")
     result.to_csv(args.out / f"{name}.csv", index=False)
     if len(result):
-        figure(args, result, target, args.out / f"{name}.png")
+        figure(args, table, result, target, args.out / f"{name}.png")
     with pd.option_context("display.width", 250, "display.max_colwidth", 60):
         print(result.drop(columns=["overrides"]).round(4).to_string(index=False))
     if skipped:
