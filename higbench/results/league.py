@@ -329,7 +329,7 @@ def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
     shipped_anywhere = set(done.loc[done["league_role"].isin(SHIPPED_ROLES), "optimizer.name"])
     out = {}
     for problem, group in done.groupby("problem.name", sort=True):
-        tuned = set(group.loc[group["league_role"] == "tune", "optimizer.name"])
+        tuned = set(group.loc[group["league_role"] == "tune", "optimizer.name"]) - set(_without_a_setting(group))
         scored = one_run_per_identity(group[group["league_role"].isin(SCORED_ROLES)])
         if not tuned or scored.empty:
             continue
@@ -348,6 +348,28 @@ def confirmation_under_way(runs: pd.DataFrame) -> dict[str, str]:
             )
             out[str(problem)] = "; ".join(parts)
     return out
+
+
+def _without_a_setting(runs: pd.DataFrame) -> list[str]:
+    """The optimizers (sorted) tuned in ``runs`` (one problem's) from whose trials the driver chose
+    nothing (``best_trial`` is None: every trial diverged or failed on some tuning seed), so they
+    have no setting to confirm. Tables without the validation loss: none."""
+    tune = runs[runs["league_role"] == "tune"]
+    if VALIDATION_METRIC not in tune or tune.empty:
+        return []
+    trials = tune.assign(trial=tune["league_job"] if "league_job" in tune else tune["path"])
+    return sorted(o for o, group in trials.groupby("optimizer.name") if best_trial(group) is None)
+
+
+def without_a_setting(runs: pd.DataFrame) -> dict[str, list[str]]:
+    """Per problem, the optimizers its tuning chose no setting for (``_without_a_setting``)."""
+    from higbench.results.index import DONE_STATUSES
+
+    if "league_role" not in runs or runs.empty:
+        return {}
+    done = runs[runs["status"].isin(DONE_STATUSES)]
+    found = {str(p): _without_a_setting(g) for p, g in done.groupby("problem.name", sort=True)}
+    return {p: names for p, names in found.items() if names}
 
 
 def _not_on_every_task(optimizers: set[str], runs: pd.DataFrame, tasks: pd.Series, every_task: set[str]) -> list[str]:
@@ -598,15 +620,18 @@ def format_league(
     scored, reached, targets = frames or league_frames(runs, curves, spaces, tuning_seeds, still_confirming)
     left_out = len(runs) - len(scored)
     under_way = [f"{p} ({why})" for p, why in still_confirming.items()]
-    under_way_line = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
+    confirmation_lines = ["not scored until its confirmation is whole: " + "; ".join(under_way)] if under_way else []
+    unset = without_a_setting(runs)
+    confirmation_lines += (["no setting to confirm (every tuning trial diverged or failed): "
+                        + "; ".join(f"{p}: {', '.join(names)}" for p, names in unset.items())] if unset else [])  # fmt: skip
     if scored.empty:
         return "\n".join([f"no scored runs (done, confirmation or shipped settings); {left_out} run(s) left out "
-                          "(tuning, unfinished)", *under_way_line])  # fmt: skip
+                          "(tuning, unfinished)", *confirmation_lines])  # fmt: skip
     out = [
         f"{len(scored)} scored runs ({scored['task'].nunique()} tasks, {scored['league_setting'].nunique()} settings, "
         f"{seeds_text(scored)} per task and setting); {left_out} run(s) left out "
         f"(tuning, unfinished, a second run of one identity{', or of a problem still confirming' if under_way else ''})",
-        *under_way_line,
+        *confirmation_lines,
         hardware_line(scored),
         "",
         f"final test loss per task: median and every seed ({DIVERGED_TEXT})",

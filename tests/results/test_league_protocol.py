@@ -176,6 +176,25 @@ def test_a_problem_whose_confirmation_is_under_way_is_named_and_left_out_of_the_
     assert league.confirmation_under_way(pd.concat([two, shipped], ignore_index=True)) == {}
 
 
+def test_an_optimizer_whose_every_tuning_trial_diverged_has_nothing_to_confirm_and_is_named():
+    """Known answer: sgd's two trials on the toy diverged (the driver chose no setting, so it ran
+    no confirmation); hig's tuned setting is confirmed on 2 seeds. The toy is whole and scored,
+    and the report names sgd. A trial that finished, even badly, is a setting: not named."""
+    runs = _runs(seed=[1000, 1000, 1000, 0, 1], **{"optimizer.name": ["sgd", "sgd", "hig", "hig", "hig"]},
+                 league_role=["tune", "tune", "tune", "confirm", "confirm"], final_val_loss=[math.nan, math.inf, 0.1, 0.1, 0.1],
+                 status=["diverged", "diverged", "completed", "completed", "completed"],
+                 league_job=["tune/toy/sgd/0/0", "tune/toy/sgd/0/1", "tune/toy/hig/0/0", "", ""])  # fmt: skip
+    assert league.without_a_setting(runs) == {"toy": ["sgd"]}
+    assert league.confirmation_under_way(runs) == {}
+    no_curves = pd.DataFrame(columns=["path", "test_loss", "val_loss"])
+    text = league.format_league(runs, no_curves, {})
+    assert "no setting to confirm (every tuning trial diverged or failed): toy: sgd" in text
+    assert "not scored until" not in text
+    finished = runs.assign(status=["completed", "diverged", *runs["status"][2:]], final_val_loss=[50.0, math.inf, 0.1, 0.1, 0.1])
+    assert league.without_a_setting(finished) == {}
+    assert league.confirmation_under_way(finished) == {"toy": "not yet run on every task: sgd"}
+
+
 def test_each_problem_gets_its_own_aggregate_beside_the_one_across_all():
     """Known answer: a leads every seed on p, b on q; across both they tie (IQM 0.5 each), on each
     problem alone the leader scores 1 and the other 0. One problem alone: no second table."""
