@@ -23,7 +23,7 @@ def machine_of(runs: pd.DataFrame) -> pd.Series:
     not record it (files written before runs named their machine)."""
 
     def text(name: str) -> pd.Series:
-        return runs[name].fillna("").astype(str) if name in runs else pd.Series("", index=runs.index)
+        return runs[name].astype(object).fillna("").astype(str) if name in runs else pd.Series("", index=runs.index)
 
     boot = text("env.boot_time")
     return (text("env.hostname") + ", booted " + boot).where(boot != "", "")

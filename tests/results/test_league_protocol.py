@@ -5,6 +5,7 @@ their authors advise, and the scored runs one per identity on one hardware class
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -232,6 +233,11 @@ def test_the_hardware_line_counts_the_machines_of_one_class_that_trained_a_task(
     assert line.endswith("machine not recorded by 1 of 5 scored runs")
     old = scored.drop(columns=["env.hostname", "env.boot_time"])  # tables written before runs named their machine
     assert league.hardware_line(old).endswith("a: CPU, 2 cores; b: CPU, 2 cores; machine not recorded by 5 of 5 scored runs")
+    # tables merged from older runs hold the machine columns as all-NaN floats: read as unnamed, no warning
+    unnamed = scored.assign(**{"env.hostname": float("nan"), "env.boot_time": float("nan")})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert league.hardware_line(unnamed).endswith("machine not recorded by 5 of 5 scored runs")
 
 
 # -- AlgoPerf's score: targets, budgets, gates -------------------------------------------------
