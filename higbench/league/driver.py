@@ -245,6 +245,12 @@ class Runner:
                 hint = "the same command continues them, reusing every run already done"
             fail_stop(f"league: {len(left)} {phase} run(s) not done ({hint})")
 
+    def forgo(self, jobs: list[Job]) -> None:
+        """Takes planned runs that will not be made out of the count: the confirmation and long
+        runs of an optimizer whose tuning chose no setting (every trial diverged)."""
+        self.progress.total -= len(jobs)
+        self.left_seconds -= sum(job_seconds(j) for j in jobs)
+
     def count(self, jobs: list[Job], left: list[Job]) -> None:
         self.done += len(jobs) - len(left)
         self.left_seconds -= sum(float(j.overrides.get("budget.seconds") or 0) for j in jobs)
@@ -586,7 +592,8 @@ def run_league(args, roots, out, problems, optimizers, paper, trials, budgets, n
     try:
         for problem in problems if reading_runs else []:
             entry = manifest["problems"][problem] = {}  # filled as the phases go: a stopped sitting keeps what it found
-            league_problem(args, problem, plans[problem], budgets, nodes[problem], paper, refused[problem], seeds, phase, entry)
+            league_problem(args, problem, plans[problem], budgets, nodes[problem], paper, refused[problem], seeds, phase,
+                           entry, runner.forgo)  # fmt: skip
     except (KeyboardInterrupt, SystemExit) as exc:  # SIGINT, SIGTERM (``stop_on_sigterm``), a phase not done
         stopped = exc
         manifest["stopped"] = str(exc) or type(exc).__name__
@@ -625,10 +632,12 @@ def planned_jobs(args, problem: str, plan, paper, seeds, node: dict, setting: bo
     return jobs + long_budget_jobs(args, long_budgets(args), problem, usable, paper, {o: {} for o in usable}, seeds)
 
 
-def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase, entry: dict) -> None:
+def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, refused: dict, seeds, phase, entry: dict,
+                   forgo=lambda jobs: None) -> None:  # fmt: skip
     """One problem's phases (``phase`` runs each): target setting, tuning, confirmation, the long
     budget. Fills its manifest ``entry`` as each phase ends (the chosen settings before their
-    confirmation runs), so a sitting stopped in confirmation records what tuning chose."""
+    confirmation runs), so a sitting stopped in confirmation records what tuning chose. ``forgo``
+    hears of the planned runs of an optimizer whose tuning chose nothing (the progress count)."""
     seconds, n, variants, usable = plan
     references, longs = references_of(args), long_budgets(args)
     given = problem in budgets or None in budgets  # --seconds: the user's budget, not the target setting's
@@ -653,6 +662,9 @@ def league_problem(args, problem: str, plan, budgets: dict, node: dict, paper, r
                   "chosen_by": {o: pick[1] for o, pick in picks.items()}, "left_out": refused, "long": None})  # fmt: skip
     confirm = [j for o in usable if chosen[o] is not None
                for j in confirmation_jobs(problem, o, chosen[o], seeds, seconds, variants)]  # fmt: skip
+    unset = {o: {} for o in usable if chosen[o] is None}
+    forgo([j for o in unset for j in confirmation_jobs(problem, o, {}, seeds, seconds, variants)]
+          + long_budget_jobs(args, longs, problem, list(unset), [], unset, seeds))  # fmt: skip
     confirm += [j for o in paper if o in usable for j in confirmation_jobs(problem, o, None, seeds, seconds, variants)]
     phase([(j.sweep.split("/")[0], j) for j in confirm], f"{problem} confirmation")
     long = long_budget_jobs(args, longs, problem, usable, paper, chosen, seeds)
